@@ -1,0 +1,82 @@
+"""The one internal frame of clothlab and the conversions into it (DESIGN.md principle 1).
+
+Fabric frame: z is the surface normal, y the warp direction, x = y x z completes a right-handed frame
+(so x points along the weft).  Directions are unit vectors pointing *away* from the surface (towards the
+light for ``wi``, towards the sensor for ``wo``).
+
+Spherical angles in clothlab's convention: theta is measured from +z, phi counter-clockwise (seen from
+above, +z towards the viewer) from +x, i.e. phi = 0 points along the weft and phi = 90 deg along the warp.
+Loaders convert a file's own azimuth convention with :func:`azimuth_to_clothlab` once, at loading.
+
+Yarn frames (Irawan & Marschner 2012, sec. 5.2): a warp yarn is described in the fabric frame itself
+(y along the yarn); a weft yarn in the same frame rotated by +90 deg about z, so that its local y is the
+fabric x.  :func:`to_yarn_frame` applies that rotation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Azimuth zero directions a file may declare and their clothlab azimuth (degrees).
+AZIMUTH_ZERO = {"weft": 0.0, "x": 0.0, "warp": 90.0, "y": 90.0}
+AZIMUTH_SENSE = ("ccw", "cw")
+
+
+def spherical_to_vector(theta, phi, *, degrees: bool = True) -> np.ndarray:
+    """Unit vectors (..., 3) from polar angle ``theta`` and azimuth ``phi`` (clothlab convention)."""
+    theta = np.asarray(theta, dtype=np.float64)
+    phi = np.asarray(phi, dtype=np.float64)
+    if degrees:
+        theta = np.deg2rad(theta)
+        phi = np.deg2rad(phi)
+    st = np.sin(theta)
+    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+def vector_to_spherical(w, *, degrees: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(theta, phi) of direction vectors (..., 3); phi in [0, 360) deg (or [0, 2 pi))."""
+    w = np.asarray(w, dtype=np.float64)
+    norm = np.linalg.norm(w, axis=-1)
+    theta = np.arccos(np.clip(w[..., 2] / norm, -1.0, 1.0))
+    phi = np.mod(np.arctan2(w[..., 1], w[..., 0]), 2.0 * np.pi)
+    if degrees:
+        return np.rad2deg(theta), np.rad2deg(phi)
+    return theta, phi
+
+
+def azimuth_to_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees: bool = True):
+    """Convert azimuths measured from ``zero`` ('weft'|'x'|'warp'|'y') in ``sense`` ('ccw'|'cw')."""
+    if zero not in AZIMUTH_ZERO:
+        raise ValueError(f"azimuth zero must be one of {sorted(AZIMUTH_ZERO)}, got {zero!r}")
+    if sense not in AZIMUTH_SENSE:
+        raise ValueError(f"azimuth sense must be one of {AZIMUTH_SENSE}, got {sense!r}")
+    phi = np.asarray(phi, dtype=np.float64)
+    full = 360.0 if degrees else 2.0 * np.pi
+    offset = AZIMUTH_ZERO[zero] if degrees else np.deg2rad(AZIMUTH_ZERO[zero])
+    signed = phi if sense == "ccw" else -phi
+    return np.mod(signed + offset, full)
+
+
+def azimuth_from_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees: bool = True):
+    """Inverse of :func:`azimuth_to_clothlab`."""
+    if zero not in AZIMUTH_ZERO:
+        raise ValueError(f"azimuth zero must be one of {sorted(AZIMUTH_ZERO)}, got {zero!r}")
+    if sense not in AZIMUTH_SENSE:
+        raise ValueError(f"azimuth sense must be one of {AZIMUTH_SENSE}, got {sense!r}")
+    phi = np.asarray(phi, dtype=np.float64)
+    full = 360.0 if degrees else 2.0 * np.pi
+    offset = AZIMUTH_ZERO[zero] if degrees else np.deg2rad(AZIMUTH_ZERO[zero])
+    shifted = phi - offset
+    return np.mod(shifted if sense == "ccw" else -shifted, full)
+
+
+def to_yarn_frame(w: np.ndarray, kind: str) -> np.ndarray:
+    """Express fabric-frame directions (..., 3) in the local frame of a ``'warp'`` or ``'weft'`` yarn.
+
+    Weft: local (x', y', z') = (-y, x, z), the fabric frame rotated by +90 deg about z.
+    """
+    if kind == "warp":
+        return w
+    if kind == "weft":
+        return np.stack([-w[..., 1], w[..., 0], w[..., 2]], axis=-1)
+    raise ValueError(f"yarn kind must be 'warp' or 'weft', got {kind!r}")
