@@ -1,0 +1,202 @@
+"""The Irawan-Marschner reflectance model of woven cloth (Irawan & Marschner 2012, sec. 7.1 and 7.3).
+
+    f_r(wi, wo) = kd / pi + sum_j ks_j S_j(wi, wo),     S_j = f_c(wi, wo) I_j(wi, wo) / a_j
+
+for the segment types j = warp, weft.  I_j is the yarn integral of eq. 10 (:mod:`.yarn`), f_c the phase
+function of eq. 7 (:mod:`.phase`).  Components, not totals (DESIGN.md principle 3): the model returns
+``diffuse`` (= 1/pi, a Lambertian of unit albedo), ``specular_warp`` and ``specular_weft``; the per-channel
+coefficients kd, ks_warp, ks_weft are linear and solved outside.
+
+Normalisation (decided here; the paper absorbs all constants into k_s): a_j is the mean hemispherical
+albedo of f_c I_j,  a_j = (1/pi) int int f_c I_j cos(theta_i) cos(theta_o) dwi dwo,  computed
+deterministically with a fixed scrambled Sobol point set in the cosine-weighted (mu^2, phi) coordinates of
+both directions (:func:`specular_albedo`).  With it, kd and ks_j are albedos: ks_j is the mean specular
+albedo that segment type j adds to the fabric (its area share is part of it, so the published renderer's
+warpArea/weftArea balancing is absorbed into ks_j).  ``normalised=False`` gives the raw f_c I_j, used inside
+fits (the scale only rescales ks) and converted once at the end.
+
+Decisions on what the paper leaves open (irawan-presets.md):
+- staple path for |psi| >= PSI_FILAMENT_THRESHOLD (1e-3 rad = 0.057 deg), filament path below; the staple
+  integral tends to the filament one as psi -> 0, and the test suite measures the jump at the threshold.
+- eq. 3: the +arccos(D) root only (the one with n.h >= 0), visible when |v| < pi/2.
+- phase lobe evaluated at -wi.wo; Seeliger's law without the 1/(4 pi) constant (absorbed by a_j).
+- filament smoothing (eq. 9): R(u) on the full arc; the cubic smoothstep fades the last delta*umax.
+- a segment with w sin(umax) >= l (sec. 5.3) gets L = 0 (R = 0) and a GeometryWarning naming it.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from clothlab.errors import GeometryWarning, ParameterError
+from clothlab.frames import to_yarn_frame
+from clothlab.models.irawan.parameters import IRAWAN_PARAMS, apply_parameters, weave_parameters
+from clothlab.models.irawan.phase import phase_function
+from clothlab.models.irawan.quadrature import RULES
+from clothlab.models.irawan.yarn import yarn_integral
+from clothlab.weave import YARN_KINDS, Weave
+
+PSI_FILAMENT_THRESHOLD = 1e-3  # radians
+ALBEDO_SAMPLES = 2**16
+ALBEDO_SEED = 20120101
+COMPONENTS = ("diffuse", "specular_warp", "specular_weft")
+
+
+@dataclass(frozen=True)
+class Quadrature:
+    """A quadrature choice: ``rule`` in RULES and ``nodes`` (per piece for support / adaptive)."""
+
+    rule: str = "trapezoid"
+    nodes: int = 11
+
+    def __post_init__(self):
+        if self.rule not in RULES:
+            raise ParameterError(f"unknown quadrature rule {self.rule!r}; choose one of {', '.join(RULES)}",
+                                 field="model.quadrature.rule")
+        minimum = 2 if self.rule == "trapezoid" else 1
+        if int(self.nodes) != self.nodes or not minimum <= self.nodes <= 1000:
+            raise ParameterError(f"quadrature nodes must be an integer in [{minimum}, 1000], got {self.nodes!r}",
+                                 field="model.quadrature.nodes")
+
+
+def geometry_warnings(params: dict, fabric: str = "") -> list[str]:
+    """Messages for segment types whose rectangle cannot hold the segment (sec. 5.3: w sin umax < l)."""
+    out = []
+    for kind in YARN_KINDS:
+        w, l, umax = params[f"{kind}.w"], params[f"{kind}.l"], params[f"{kind}.umax"]
+        if w * np.sin(np.deg2rad(umax)) >= l:
+            out.append(
+                f"{fabric + ' ' if fabric else ''}{kind}: w sin(umax) = {w:g} * sin({umax:g} deg) = "
+                f"{w * np.sin(np.deg2rad(umax)):.4g} >= l = {l:g} violates the segment-fitting constraint of "
+                f"sec. 5.3; the spine radius is clamped to its limit R = 0"
+            )
+    return out
+
+
+def yarn_specular(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
+    """Raw f_c I_j for segment type ``kind`` at fabric-frame directions (N, 3); params in declared units."""
+    lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
+    integral = yarn_integral(
+        lw, lo,
+        psi=np.deg2rad(params[f"{kind}.psi"]), umax=np.deg2rad(params[f"{kind}.umax"]),
+        kappa=params[f"{kind}.kappa"], w=params[f"{kind}.w"], l=params[f"{kind}.l"],
+        delta=params["delta"], rule=quadrature.rule, n=int(quadrature.nodes),
+        psi_threshold=PSI_FILAMENT_THRESHOLD,
+    )
+    return phase_function(wi, wo, params["alpha"], params["beta"]) * integral
+
+
+@lru_cache(maxsize=1)
+def _albedo_directions(samples: int) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.stats import qmc
+
+    xi = qmc.Sobol(d=4, scramble=True, rng=np.random.default_rng(ALBEDO_SEED)).random(samples)
+
+    def cosine_hemisphere(a, b):
+        r = np.sqrt(a)
+        phi = 2.0 * np.pi * b
+        return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(1.0 - a, 0.0))], axis=1)
+
+    return cosine_hemisphere(xi[:, 0], xi[:, 1]), cosine_hemisphere(xi[:, 2], xi[:, 3])
+
+
+def specular_albedo(params: dict, kind: str, quadrature: Quadrature, samples: int = ALBEDO_SAMPLES) -> float:
+    """a_j = (1/pi) int int f_c I_j cos cos dwi dwo (deterministic Sobol estimate; see module docstring)."""
+    key = (kind, quadrature, samples) + tuple(
+        params[k] for k in ("alpha", "beta", "delta", f"{kind}.psi", f"{kind}.umax", f"{kind}.kappa",
+                            f"{kind}.w", f"{kind}.l"))
+    return _specular_albedo_cached(key, samples)
+
+
+@lru_cache(maxsize=256)
+def _specular_albedo_cached(key, samples):
+    kind, quadrature = key[0], key[1]
+    names = ("alpha", "beta", "delta", f"{kind}.psi", f"{kind}.umax", f"{kind}.kappa", f"{kind}.w", f"{kind}.l")
+    params = dict(zip(names, key[3:], strict=True))
+    wi, wo = _albedo_directions(samples)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        values = yarn_specular(wi, wo, params, kind, quadrature)
+    # E[f] under cosine-weighted sampling of both directions times pi^2, divided by pi.
+    return float(np.pi * values.mean())
+
+
+class IrawanModel:
+    """Irawan-Marschner reflectance model of one weave (the pure model: no I/O, no state but the weave)."""
+
+    kind = "irawan"
+    params = IRAWAN_PARAMS
+    component_names = COMPONENTS
+
+    def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
+        self.weave = weave
+        self.quadrature = quadrature or Quadrature()
+
+    def default_parameters(self) -> dict[str, float]:
+        return weave_parameters(self.weave)
+
+    def resolve(self, params: dict | None) -> dict[str, float]:
+        """The weave's parameters overridden by ``params``, validated against the declarations."""
+        full = self.default_parameters()
+        if params:
+            full.update(IRAWAN_PARAMS.validate(params))
+        return full
+
+    def with_parameters(self, params: dict) -> Weave:
+        return apply_parameters(self.weave, self.resolve(params))
+
+    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                   warn: bool = True) -> dict[str, np.ndarray]:
+        """BRDF components (1/sr) at fabric-frame directions wi, wo (N, 3).
+
+        ``need``: the component names wanted (others are not computed; DESIGN.md principle 5).
+        Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0 (reflection only).
+        """
+        p = self.resolve(params)
+        wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
+        wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+        need = COMPONENTS if need is None else tuple(need)
+        if warn:
+            for message in geometry_warnings(p, self.weave.name):
+                warnings.warn(message, GeometryWarning, stacklevel=2)
+        out = {}
+        front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+        if "diffuse" in need:
+            out["diffuse"] = np.where(front, 1.0 / np.pi, 0.0)
+        for kind in YARN_KINDS:
+            name = f"specular_{kind}"
+            if name not in need:
+                continue
+            value = yarn_specular(wi, wo, p, kind, self.quadrature)
+            if normalised:
+                albedo = specular_albedo(p, kind, self.quadrature)
+                value = value / albedo if albedo > 0.0 else np.zeros_like(value)
+            out[name] = value
+        return out
+
+    def evaluate(self, wi, wo, coefficients: dict, params: dict | None = None) -> np.ndarray:
+        """f_r (N, C) = sum_k coefficients[k] * component_k; coefficients map 'kd', 'ks_warp', 'ks_weft'
+        (or component names) to (C,) arrays."""
+        comps = self.components(wi, wo, params)
+        return combine(comps, coefficients)
+
+
+COEFFICIENT_OF = {"diffuse": "kd", "specular_warp": "ks_warp", "specular_weft": "ks_weft"}
+
+
+def combine(components: dict, coefficients: dict) -> np.ndarray:
+    """sum_k c_k (C,) x component_k (N,) -> (N, C)."""
+    total = None
+    for name, comp in components.items():
+        coef = coefficients.get(COEFFICIENT_OF.get(name, name), coefficients.get(name))
+        if coef is None:
+            continue
+        term = comp[:, None] * np.atleast_1d(np.asarray(coef, dtype=np.float64))[None, :]
+        total = term if total is None else total + term
+    if total is None:
+        raise ValueError("no coefficient matches any component")
+    return total

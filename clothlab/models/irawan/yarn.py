@@ -1,0 +1,173 @@
+"""The specular integral of one yarn segment type (Irawan & Marschner 2012, eqs. 1-10, Algorithms 1-2).
+
+Both functions return the geometric part  I(wi, wo) = integral G A  of eq. 10; the phase function f_c
+(eq. 7) depends on wi.wo only, so it factors out of the integral and is applied by the caller.
+Directions are (N, 3) unit vectors in the *yarn* frame (z normal, y along the yarn), both with z > 0.
+Angles in radians; w and l in any common length unit (only w / l matters after normalisation).
+
+Staple yarns (psi != 0) integrate over u (eq. 1, Algorithm 1).  With h the unit half vector and
+B = h_y sin u + h_z cos u, eq. 3 gives v = atan2(-B, h_x) + arccos(D), D = (h_y cos u - h_z sin u) cot psi
+/ sqrt(h_x^2 + B^2); only the +arccos root has n.h >= 0 (sec. 6.3), and it is evaluated without
+trigonometric calls via cos v = (h_x D + B sqrt(1-D^2)) / rho, sin v = (h_x sqrt(1-D^2) - B D) / rho.
+Since c_i + c_r = |wi + wo| (n.h), the product of eq. 5 and Seeliger's law (eq. 8) is the bounded
+
+    G_v A = a (R(u) + a cos v) c_i c_r / (|sin psi| (c_i + c_r)^2),
+
+finite where n.h -> 0 although eq. 5 alone is not.  Zero unless |D| <= 1 and |v| < pi/2 (Algorithm 1).
+
+Filament yarns (psi = 0) integrate over v (eq. 2, Algorithm 2).  Eq. 4 gives u = atan(h_y / h_z), the root in
+(-pi/2, pi/2); |(t x h)_x| = sqrt(h_y^2 + h_z^2), so with eqs. 6, 8, 9
+
+    G_u A_s = a (R(u) + a cos v) c_i c_r / ((c_i + c_r) |wi + wo| sqrt(h_y^2 + h_z^2)) (1 - s(...)).
+
+The staple integrand's specular support is closed-form: |D| <= 1 <=> |cos(u + gamma)| <= |sin psi| / rho
+with rho = sqrt(h_y^2 + h_z^2), gamma = atan2(h_z, h_y); the visibility cut |v| = pi/2 happens where
+cos(u -/+ psi + gamma) = 0.  The ``support`` rule splits the integral at these points (numerics.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clothlab.models.irawan.quadrature import (
+    ADAPTIVE_MAX_NODES,
+    ADAPTIVE_RTOL,
+    compact_breaks,
+    interval_rule,
+    piecewise_rule,
+)
+from clothlab.models.irawan.spine import spine_radius
+
+CHUNK = 2048  # directions per block: keeps the (N, nodes) temporaries in cache
+
+
+def half_vectors(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit half vectors (N, 3) and |wi + wo| (N,); a degenerate pair (wo = -wi) gets length 0."""
+    s = wi + wo
+    length = np.sqrt(np.einsum("nk,nk->n", s, s))
+    h = s / np.where(length > 0.0, length, 1.0)[:, None]
+    return h, length
+
+
+def smoothstep(x):
+    """Cubic smoothstep s(x) = 3x^2 - 2x^3 on [0, 1], 0 below and 1 above (eq. 9)."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def staple_integrand(wi, wo, h, u, psi, umax, kappa, w, l):
+    """G_v A at nodes u (N, K) for directions (N, 3) (eqs. 3, 5, 8); zero where no visible reflection."""
+    hx, hy, hz = (h[:, k, None] for k in range(3))
+    su, cu = np.sin(u), np.cos(u)
+    b = hy * su + hz * cu
+    rho = np.sqrt(hx * hx + b * b)
+    rho_safe = np.where(rho > 0.0, rho, 1.0)
+    d = (hy * cu - hz * su) * (np.cos(psi) / np.sin(psi)) / rho_safe
+    in_support = (np.abs(d) <= 1.0) & (rho > 0.0)
+    root = np.sqrt(np.maximum(1.0 - d * d, 0.0))
+    cos_v = (hx * d + b * root) / rho_safe
+    sin_v = (hx * root - b * d) / rho_safe
+    ci = wi[:, 0, None] * sin_v + (wi[:, 1, None] * su + wi[:, 2, None] * cu) * cos_v
+    cr = wo[:, 0, None] * sin_v + (wo[:, 1, None] * su + wo[:, 2, None] * cu) * cos_v
+    ci = np.maximum(ci, 0.0)
+    cr = np.maximum(cr, 0.0)
+    total = ci + cr
+    a = 0.5 * w
+    radius = spine_radius(u, umax, kappa, w, l)
+    ok = in_support & (cos_v > 0.0) & (total > 0.0)
+    value = a * (radius + a * cos_v) * ci * cr / (abs(np.sin(psi)) * np.where(ok, total * total, 1.0))
+    return np.where(ok, value, 0.0)
+
+
+def filament_integrand(wi, wo, h, hlen, v, umax, kappa, w, l, delta):
+    """G_u A_s at nodes v (N, K) for directions (N, 3) (eqs. 4, 6, 8, 9)."""
+    hy, hz = h[:, 1, None], h[:, 2, None]
+    u = np.arctan(hy / np.where(hz > 0.0, hz, 1.0))
+    rho_yz = np.sqrt(hy * hy + hz * hz)
+    fade = np.where(np.abs(u) < umax, 1.0, 0.0)
+    if delta > 0.0:
+        fade = fade * (1.0 - smoothstep((np.abs(u) - (1.0 - delta) * umax) / (delta * umax)))
+    su, cu = np.sin(u), np.cos(u)
+    sv, cv = np.sin(v), np.cos(v)
+    ci = np.maximum(wi[:, 0, None] * sv + (wi[:, 1, None] * su + wi[:, 2, None] * cu) * cv, 0.0)
+    cr = np.maximum(wo[:, 0, None] * sv + (wo[:, 1, None] * su + wo[:, 2, None] * cu) * cv, 0.0)
+    total = ci + cr
+    a = 0.5 * w
+    radius = spine_radius(u, umax, kappa, w, l)
+    ok = (hz > 0.0) & (total > 0.0) & (hlen[:, None] > 0.0) & (rho_yz > 0.0) & (fade > 0.0)
+    denom = np.where(ok, total * hlen[:, None] * rho_yz, 1.0)
+    return np.where(ok, a * (radius + a * cv) * ci * cr * fade / denom, 0.0)
+
+
+def _staple_breaks(h, psi, umax):
+    """Breakpoints (N, P+1) of the staple integrand over [-umax, umax]: support ends and |v| = pi/2."""
+    hy, hz = h[:, 1], h[:, 2]
+    rho = np.sqrt(hy * hy + hz * hz)
+    gamma = np.arctan2(hz, hy)
+    c0 = np.arccos(np.minimum(abs(np.sin(psi)) / np.where(rho > 0, rho, 1.0), 1.0))
+    k = np.pi * np.arange(-2, 3)
+    base = np.stack([-gamma + c0, -gamma - c0, psi - gamma + 0.5 * np.pi, -psi - gamma + 0.5 * np.pi], axis=1)
+    candidates = (base[:, :, None] + k).reshape(len(h), -1)
+    return compact_breaks(-umax, umax, candidates)
+
+
+def _filament_breaks(wi, wo, h):
+    """Breakpoints (N, 4) over [-pi/2, pi/2]: where c_i or c_r of eq. 8 cross zero."""
+    hy, hz = h[:, 1], h[:, 2]
+    u = np.arctan(hy / np.where(hz > 0.0, hz, 1.0))
+    cols = []
+    for d in (wi, wo):
+        c = d[:, 1] * np.sin(u) + d[:, 2] * np.cos(u)
+        v = np.arctan2(-c, d[:, 0])
+        v = np.where(v > 0.5 * np.pi, v - np.pi, v)
+        v = np.where(v <= -0.5 * np.pi, v + np.pi, v)
+        cols.append(v)
+    return compact_breaks(-0.5 * np.pi, 0.5 * np.pi, np.stack(cols, axis=1))
+
+
+def _integrate_block(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
+    h, hlen = half_vectors(wi, wo)
+
+    def integrand(rows, nodes):
+        if staple:
+            return staple_integrand(wi[rows], wo[rows], h[rows], nodes, psi, umax, kappa, w, l)
+        return filament_integrand(wi[rows], wo[rows], h[rows], hlen[rows], nodes, umax, kappa, w, l, delta)
+
+    every = slice(None)
+    if rule in ("trapezoid", "gauss"):
+        lo, hi = (-umax, umax) if staple else (-0.5 * np.pi, 0.5 * np.pi)
+        nodes, weights = interval_rule(rule, n, lo, hi)
+        return integrand(every, np.broadcast_to(nodes, (len(wi), n))) @ weights
+    breaks = _staple_breaks(h, psi, umax) if staple else _filament_breaks(wi, wo, h)
+    nodes, weights = piecewise_rule(breaks, n)
+    value = np.einsum("nk,nk->n", integrand(every, nodes), weights)
+    if rule == "support":
+        return value
+    if rule != "adaptive":
+        raise ValueError(f"unknown quadrature rule {rule!r}")
+    todo = np.arange(len(wi))
+    while n < ADAPTIVE_MAX_NODES and todo.size:
+        n *= 2
+        nodes, weights = piecewise_rule(breaks[todo], n)
+        new = np.einsum("nk,nk->n", integrand(todo, nodes), weights)
+        changed = np.abs(new - value[todo]) > ADAPTIVE_RTOL * np.abs(new)
+        value[todo] = new
+        todo = todo[changed]
+    return value
+
+
+def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid", n=11, psi_threshold=1e-3):
+    """I(wi, wo) = integral of G A (eq. 10) for one segment type; (N,) for (N, 3) yarn-frame directions.
+
+    Staple path when |psi| >= psi_threshold (radians), filament path otherwise (sec. 6.2).
+    """
+    wi = np.ascontiguousarray(wi, dtype=np.float64)
+    wo = np.ascontiguousarray(wo, dtype=np.float64)
+    out = np.zeros(len(wi))
+    front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+    idx = np.flatnonzero(front)
+    staple = abs(psi) >= psi_threshold
+    for start in range(0, idx.size, CHUNK):
+        sel = idx[start:start + CHUNK]
+        out[sel] = _integrate_block(wi[sel], wo[sel], rule, n, staple, psi, umax, kappa, w, l, delta)
+    return out
