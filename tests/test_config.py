@@ -1,0 +1,406 @@
+"""fabric.yaml loading and validation: values, defaults, paths, hash, and errors naming line and field."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from clothlab.config import apply_overrides, config_from_dict, load_config
+from clothlab.errors import ConfigError
+
+FULL = """\
+name: polyester-lining
+measurement:
+  path: ../measurements/polyester-lining/brdf.csv
+  format: astm
+  options: {angle_unit: rad}
+model:
+  kind: irawan
+  weave: weaves/lining.wv
+  quadrature: {rule: gauss, nodes: 15}
+  params: {warp.umax: 22, beta: 4.0}
+fit:
+  free: [warp.umax, weft.umax, warp.kappa, weft.kappa, alpha, beta]
+  bounds: {warp.umax: [5, 60]}
+  metric: log
+  optimizer: {global: G_MLSL_LDS, local: LN_SBPLX, max_evals: 1234, seed: 7, max_time: 30}
+  posterior: {walkers: 40, steps: 500, max_steps: 9000}
+  cv_folds: 4
+report: {percentiles: [95, 50, 80]}
+output: {fits: ../out/fits, reports: ../out/reports}
+"""
+
+MINIMAL = """\
+name: lining
+measurement: {path: ../measurements/polyester-lining/brdf.csv}
+model:
+  weave: weaves/lining.wv
+"""
+
+
+def project(root: Path, text: str) -> Path:
+    """A project tree: configs/fabric.yaml, the measurement and weave files it refers to."""
+    (root / "measurements/polyester-lining").mkdir(parents=True, exist_ok=True)
+    (root / "measurements/polyester-lining/brdf.csv").write_text("theta_i,phi_i,theta_o,phi_o,value\n")
+    (root / "configs/weaves").mkdir(parents=True, exist_ok=True)
+    (root / "configs/weaves/lining.wv").write_text("# weave\n")
+    path = root / "configs/fabric.yaml"
+    path.write_text(text)
+    return path
+
+
+def line_of(text: str, snippet: str) -> int:
+    """1-based line of the (unique) line containing ``snippet``, counted independently of the loader."""
+    hits = [i + 1 for i, line in enumerate(text.splitlines()) if snippet in line]
+    assert len(hits) == 1, (snippet, hits)
+    return hits[0]
+
+
+def edit(text: str, old: str, new: str) -> str:
+    assert text.count(old) == 1, old
+    return text.replace(old, new)
+
+
+def fails(tmp_path: Path, text: str) -> ConfigError:
+    with pytest.raises(ConfigError) as info:
+        load_config(project(tmp_path, text))
+    return info.value
+
+
+# ---------------------------------------------------------------------------------------------------------
+# valid configurations
+
+
+def test_full_config_values_and_resolved_paths(tmp_path):
+    config = load_config(project(tmp_path, FULL))
+    assert config.name == "polyester-lining"
+    assert config.base_dir == tmp_path / "configs"
+    assert config.measurement.path == tmp_path / "measurements/polyester-lining/brdf.csv"
+    assert (config.measurement.format, config.measurement.options) == ("astm", {"angle_unit": "rad"})
+    assert config.model.kind == "irawan"
+    assert config.model.weave_path == tmp_path / "configs/weaves/lining.wv"
+    assert config.model.weave_preset is None
+    assert (config.model.quadrature.rule, config.model.quadrature.nodes) == ("gauss", 15)
+    assert config.model.params == {"warp.umax": 22.0, "beta": 4.0}
+    fit = config.fit
+    assert fit.free == ("warp.umax", "weft.umax", "warp.kappa", "weft.kappa", "alpha", "beta")
+    assert fit.bounds == {"warp.umax": (5.0, 60.0)}
+    assert fit.metric == "log"
+    opt = fit.optimizer
+    assert (opt.global_algorithm, opt.local_algorithm, opt.max_evals, opt.seed, opt.max_time) == (
+        "G_MLSL_LDS", "LN_SBPLX", 1234, 7, 30.0)
+    assert (fit.posterior.walkers, fit.posterior.steps, fit.posterior.max_steps) == (40, 500, 9000)
+    assert fit.cv_folds == 4
+    assert config.report.percentiles == (50.0, 80.0, 95.0)
+    assert config.output.fits == tmp_path / "out/fits"
+    assert config.output.reports == tmp_path / "out/reports"
+    assert config.raw["fit"]["optimizer"]["max_evals"] == 1234
+
+
+def test_minimal_config_defaults(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    config = load_config(project(tmp_path, MINIMAL))
+    assert config.measurement.format == "auto" and config.measurement.options == {}
+    assert config.model.kind == "irawan" and config.model.params == {}
+    assert (config.model.quadrature.rule, config.model.quadrature.nodes) == ("trapezoid", 11)
+    assert config.fit.free == ("warp.umax", "weft.umax", "warp.kappa", "weft.kappa", "alpha", "beta")
+    assert config.fit.metric == "relative" and config.fit.posterior is None and config.fit.cv_folds == 0
+    opt = config.fit.optimizer
+    assert (opt.global_algorithm, opt.local_algorithm, opt.max_evals, opt.seed, opt.max_time) == (
+        "GN_CRS2_LM", "LN_BOBYQA", 4000, 1, None)
+    assert config.report.percentiles == (50.0, 80.0, 95.0)
+    assert config.output.fits == tmp_path / "fits" and config.output.reports == tmp_path / "reports"
+
+
+def test_posterior_true_false_and_defaults(tmp_path):
+    text = MINIMAL + "fit:\n  free: [warp.umax, alpha]\n"
+    on = load_config(project(tmp_path, text + "  posterior: true\n")).fit.posterior
+    assert (on.walkers, on.steps, on.max_steps) == (32, 4000, 20000)
+    long = load_config(project(tmp_path, text + "  posterior: {steps: 30000}\n")).fit.posterior
+    assert long.max_steps == 30000  # the default cap never lies below the steps asked for
+    assert load_config(project(tmp_path, text + "  posterior: false\n")).fit.posterior is None
+    err = fails(tmp_path, text.replace("[warp.umax, alpha]", "[]") + "  posterior: true\n")
+    assert err.field == "fit.posterior" and "at least one parameter" in str(err)
+
+
+def test_kang_params_are_passed_through(tmp_path):
+    text = edit(MINIMAL, "  weave: weaves/lining.wv\n", "  kind: kang\n  params: {roughness: 0.3, n: [1, 2]}\n")
+    config = load_config(project(tmp_path, text + "fit: {free: [roughness]}\n"))
+    assert config.model.kind == "kang" and config.model.weave is None
+    assert config.model.params == {"roughness": 0.3, "n": [1, 2]}
+    assert config.fit.free == ("roughness",)
+
+
+def test_config_from_dict_resolves_against_base_dir(tmp_path):
+    project(tmp_path, MINIMAL)
+    d = {"name": "x", "measurement": {"path": "measurements/polyester-lining/brdf.csv"},
+         "model": {"weave": "configs/weaves/lining.wv", "params": {"alpha": 0.1}}}
+    config = config_from_dict(d, base_dir=tmp_path)
+    assert config.measurement.path == tmp_path / "measurements/polyester-lining/brdf.csv"
+    assert config.model.params == {"alpha": 0.1} and config.path is None
+    d["model"]["params"]["alpha"] = -1
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(d, source="api", base_dir=tmp_path)
+    err = info.value
+    assert err.field == "model.params.alpha" and err.line is None and err.path == "api"
+    assert "-1" in str(err)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the hash
+
+
+def test_hash_ignores_location_and_spelling_but_not_settings(tmp_path):
+    a = load_config(project(tmp_path / "a", FULL))
+    # the same project elsewhere, with the same values spelled differently (block style, 22.0, reordered)
+    respelled = edit(FULL, "  params: {warp.umax: 22, beta: 4.0}\n", "  params:\n    beta: 4\n    warp.umax: 22.0\n")
+    respelled = edit(respelled, "output: {fits: ../out/fits, reports: ../out/reports}\n", "")
+    b = load_config(project(tmp_path / "elsewhere" / "b", respelled))
+    assert a.hash == b.hash
+    assert len(a.hash) == 64 and int(a.hash, 16) >= 0
+    assert str(tmp_path) not in str(a.canonical())
+    # a copied tree gives the same hash too
+    shutil.copytree(tmp_path / "a", tmp_path / "copy")
+    assert load_config(tmp_path / "copy/configs/fabric.yaml").hash == a.hash
+    changed = load_config(project(tmp_path / "c", edit(FULL, "seed: 7", "seed: 8")))
+    assert changed.hash != a.hash
+    assert apply_overrides(a, seed=8).hash == changed.hash
+
+
+# ---------------------------------------------------------------------------------------------------------
+# errors: each names the file, the line and the field, and shows the value found
+
+
+def test_yaml_syntax_error_line(tmp_path):
+    text = edit(FULL, "  metric: log\n", "  metric: log: x\n")
+    err = fails(tmp_path, text)
+    assert err.line == line_of(text, "metric: log: x")
+    assert "YAML" in str(err) and err.path.endswith("fabric.yaml")
+
+
+def test_unclosed_flow_sequence_reports_a_line(tmp_path):
+    text = edit(FULL, "[warp.umax, weft.umax, warp.kappa, weft.kappa, alpha, beta]", "[warp.umax, beta")
+    err = fails(tmp_path, text)
+    assert err.line is not None and err.line >= line_of(text, "free: [warp.umax, beta")
+
+
+@pytest.mark.parametrize("text, line", [("- a\n- b\n", 1), ("\n\njust text\n", 3), ("", None)])
+def test_not_a_mapping(tmp_path, text, line):
+    err = fails(tmp_path, text)
+    assert err.line == line and "mapping" in str(err)
+
+
+def test_unknown_key_suggests_the_closest(tmp_path):
+    text = edit(FULL, "  metric: log\n", "  metrik: log\n")
+    err = fails(tmp_path, text)
+    assert err.line == line_of(text, "metrik")
+    assert err.field == "fit.metrik" and "'metrik'" in str(err) and "did you mean 'metric'" in str(err)
+
+
+def test_unknown_top_level_key(tmp_path):
+    text = FULL + "reprot: {}\n"
+    err = fails(tmp_path, text)
+    assert err.line == line_of(text, "reprot") and "did you mean 'report'" in str(err)
+
+
+def test_duplicate_key(tmp_path):
+    text = edit(FULL, "  metric: log\n", "  metric: log\n  metric: relative\n")
+    err = fails(tmp_path, text)
+    assert err.line == line_of(text, "metric: relative") and err.field == "fit.metric"
+    assert "duplicate" in str(err)
+
+
+def test_missing_required_keys(tmp_path):
+    text = edit(FULL, "  path: ../measurements/polyester-lining/brdf.csv\n", "")
+    err = fails(tmp_path, text)
+    assert err.field == "measurement.path" and err.line == line_of(text, "measurement:")
+    assert "missing required key 'path'" in str(err)
+    err = fails(tmp_path, edit(FULL, "name: polyester-lining\n", ""))
+    assert err.field == "name" and err.line is None
+    text = edit(FULL, "  weave: weaves/lining.wv\n", "")
+    err = fails(tmp_path, text)
+    assert err.field == "model.weave" and err.line == line_of(text, "model:")
+
+
+@pytest.mark.parametrize("old, new, field, shown", [
+    ("nodes: 15", "nodes: eleven", "model.quadrature.nodes", "'eleven'"),
+    ("nodes: 15", "nodes: 15.0", "model.quadrature.nodes", "15.0"),
+    ("max_evals: 1234", "max_evals: true", "fit.optimizer.max_evals", "True"),
+    ("beta: 4.0}", "beta: four}", "model.params.beta", "'four'"),
+    ("cv_folds: 4", "cv_folds: [4]", "fit.cv_folds", "[4]"),
+    ("name: polyester-lining", "name: 2024", "name", "2024"),
+    ("  free: [warp.umax", "  free: {warp.umax: 1}\n  #", "fit.free", "{'warp.umax': 1}"),
+    ("report: {percentiles: [95, 50, 80]}", "report: {percentiles: [95, fifty]}", "report.percentiles[1]",
+     "'fifty'"),
+])
+def test_wrong_type(tmp_path, old, new, field, shown):
+    text = edit(FULL, old, new)
+    err = fails(tmp_path, text)
+    assert err.field == field
+    assert err.line == line_of(text, new.splitlines()[0])
+    assert shown in str(err) and field in str(err)
+
+
+def test_invalid_name(tmp_path):
+    text = edit(FULL, "name: polyester-lining", "name: my fabric/1")
+    err = fails(tmp_path, text)
+    assert err.field == "name" and err.line == 1 and "'my fabric/1'" in str(err)
+
+
+def test_out_of_range_start_value(tmp_path):
+    text = edit(FULL, "  params: {warp.umax: 22, beta: 4.0}\n", "  params:\n    beta: 4.0\n    warp.umax: 95\n")
+    err = fails(tmp_path, text)
+    assert err.line == line_of(text, "warp.umax: 95")
+    assert err.field == "model.params.warp.umax" and "95" in str(err) and "physical range" in str(err)
+
+
+@pytest.mark.parametrize("old, new, field", [
+    ("params: {warp.umax: 22,", "params: {warp.umaks: 22,", "model.params.warp.umaks"),
+    ("free: [warp.umax, weft.umax,", "free: [warp.umax, weft.umx,", "fit.free[1]"),
+    ("bounds: {warp.umax: [5, 60]}", "bounds: {wrap.umax: [5, 60]}", "fit.bounds.wrap.umax"),
+])
+def test_unknown_parameter_name(tmp_path, old, new, field):
+    text = edit(FULL, old, new)
+    err = fails(tmp_path, text)
+    assert err.field == field and err.line == line_of(text, new)
+    bad = field.rsplit(".", 1)[-1] if "[" not in field else "weft.umx"
+    assert bad in str(err) and "unknown parameter" in str(err) and "did you mean" in str(err)
+
+
+@pytest.mark.parametrize("bounds, field, expect", [
+    ("[0, 60]", "fit.bounds.warp.umax[0]", "physical range"),      # umax lives in the open (0, 90)
+    ("[5, 120]", "fit.bounds.warp.umax[1]", "120"),
+    ("[60, 5]", "fit.bounds.warp.umax", "[60, 5]"),
+    ("[30, 30]", "fit.bounds.warp.umax", "[30, 30]"),
+    ("[5]", "fit.bounds.warp.umax", "[5]"),
+    ("[25, 60]", "fit.bounds.warp.umax", "22"),                   # the start value lies outside
+])
+def test_bad_bounds(tmp_path, bounds, field, expect):
+    text = edit(FULL, "bounds: {warp.umax: [5, 60]}", f"bounds:\n    warp.umax: {bounds}")
+    err = fails(tmp_path, text)
+    assert err.field == field and err.line == line_of(text, f"warp.umax: {bounds}")
+    assert expect in str(err)
+
+
+def test_bounds_for_a_fixed_parameter(tmp_path):
+    text = edit(FULL, "bounds: {warp.umax: [5, 60]}", "bounds: {warp.psi: [-10, 10]}")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.bounds.warp.psi" and "not in fit.free" in str(err)
+
+
+def test_unknown_preset(tmp_path):
+    good = load_config(project(tmp_path, edit(FULL, "weaves/lining.wv", "preset:polyester-lining")))
+    assert good.model.weave_preset == "polyester-lining" and good.model.weave_path is None
+    # spellings clothlab.presets accepts name the same preset (and give the same hash)
+    other = load_config(project(tmp_path, edit(FULL, "weaves/lining.wv", "preset:Polyester_Lining")))
+    assert other.model.weave == "preset:polyester-lining" and other.hash == good.hash
+    text = edit(FULL, "weaves/lining.wv", "preset:polyester-linin")
+    err = fails(tmp_path, text)
+    assert err.field == "model.weave" and err.line == line_of(text, "preset:")
+    assert "'polyester-linin'" in str(err) and "did you mean 'polyester-lining'" in str(err)
+
+
+def test_missing_measurement_and_weave_files_name_the_resolved_path(tmp_path):
+    text = edit(FULL, "polyester-lining/brdf.csv", "polyester-lining/brdf2.csv")
+    err = fails(tmp_path, text)
+    assert err.field == "measurement.path" and err.line == line_of(text, "brdf2.csv")
+    assert str(tmp_path / "measurements/polyester-lining/brdf2.csv") in str(err)
+    text = edit(FULL, "weaves/lining.wv", "weaves/linen.wv")
+    err = fails(tmp_path, text)
+    assert err.field == "model.weave" and err.line == line_of(text, "linen.wv")
+    assert str(tmp_path / "configs/weaves/linen.wv") in str(err)
+
+
+@pytest.mark.parametrize("old, new, field, bad", [
+    ("metric: log", "metric: cuberoot", "fit.metric", "cuberoot"),
+    ("rule: gauss", "rule: simpson", "model.quadrature.rule", "simpson"),
+    ("global: G_MLSL_LDS", "global: GN_CRS2", "fit.optimizer.global", "GN_CRS2"),
+    ("local: LN_SBPLX", "local: LN_BOBYQ", "fit.optimizer.local", "LN_BOBYQ"),
+    ("local: LN_SBPLX", "local: GN_CRS2_LM", "fit.optimizer.local", "GN_CRS2_LM"),
+    ("format: astm", "format: csv", "measurement.format", "csv"),
+    ("kind: irawan", "kind: marschner", "model.kind", "marschner"),
+])
+def test_unknown_choice(tmp_path, old, new, field, bad):
+    text = edit(FULL, old, new)
+    err = fails(tmp_path, text)
+    assert err.field == field and err.line == line_of(text, new) and f"'{bad}'" in str(err)
+    assert "expected one of" in str(err)
+
+
+def test_optimizer_needs_an_algorithm(tmp_path):
+    text = edit(FULL, "global: G_MLSL_LDS, local: LN_SBPLX", "global: null, local: null")
+    err = fails(tmp_path, text)
+    assert err.line == line_of(text, "optimizer:") and "both null" in str(err)
+    text = edit(FULL, "local: LN_SBPLX", "local: null")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.optimizer.local" and "G_MLSL_LDS" in str(err)
+    only_local = load_config(project(tmp_path, edit(FULL, "global: G_MLSL_LDS", "global: null")))
+    assert only_local.fit.optimizer.global_algorithm is None
+
+
+@pytest.mark.parametrize("value", ["0", "-5"])
+def test_max_evals_must_be_positive(tmp_path, value):
+    text = edit(FULL, "max_evals: 1234", f"max_evals: {value}")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.optimizer.max_evals" and err.line == line_of(text, "optimizer:")
+    assert value in str(err) and ">= 1" in str(err)
+
+
+def test_walkers_at_least_twice_the_free_parameters(tmp_path):
+    text = edit(FULL, "walkers: 40", "walkers: 11")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.posterior.walkers" and err.line == line_of(text, "walkers: 11")
+    assert "11" in str(err) and "12" in str(err)  # 6 free parameters need 12 walkers
+    assert load_config(project(tmp_path, edit(FULL, "walkers: 40", "walkers: 12"))).fit.posterior.walkers == 12
+
+
+@pytest.mark.parametrize("old, new, field", [
+    ("max_steps: 9000", "max_steps: 400", "fit.posterior.max_steps"),
+    ("cv_folds: 4", "cv_folds: 1", "fit.cv_folds"),
+    ("max_time: 30", "max_time: 0", "fit.optimizer.max_time"),
+    ("seed: 7", "seed: -1", "fit.optimizer.seed"),
+    ("[95, 50, 80]", "[95, 50, 101]", "report.percentiles[2]"),
+    ("[95, 50, 80]", "[95, 50, 95]", "report.percentiles[2]"),
+    ("nodes: 15", "nodes: 1", "model.quadrature.nodes"),
+    ("nodes: 15", "nodes: 1001", "model.quadrature.nodes"),
+])
+def test_out_of_range_settings(tmp_path, old, new, field):
+    text = edit(FULL, old, new)
+    err = fails(tmp_path, text)
+    assert err.field == field and err.line == line_of(text, new)
+    assert new.split()[-1].strip("[]") in str(err)
+
+
+def test_block_style_lines_point_at_the_value(tmp_path):
+    text = edit(FULL, "  optimizer: {global: G_MLSL_LDS, local: LN_SBPLX, max_evals: 1234, seed: 7, max_time: 30}\n",
+                "  optimizer:\n    global: G_MLSL_LDS\n    local: LN_SBPLX\n    max_evals:\n      -3\n")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.optimizer.max_evals" and err.line == line_of(text, "-3")
+
+
+def test_missing_config_file(tmp_path):
+    with pytest.raises(ConfigError) as info:
+        load_config(tmp_path / "nope.yaml")
+    assert "nope.yaml" in str(info.value)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# command-line overrides
+
+
+def test_overrides_apply_and_validate(tmp_path):
+    config = load_config(project(tmp_path, FULL))
+    new = apply_overrides(config, rule="adaptive", nodes="21", max_evals=50, seed=3)
+    assert (new.model.quadrature.rule, new.model.quadrature.nodes) == ("adaptive", 21)
+    assert (new.fit.optimizer.max_evals, new.fit.optimizer.seed) == (50, 3)
+    assert new.fit.optimizer.global_algorithm == "G_MLSL_LDS" and new.model.params == config.model.params
+    assert config.model.quadrature.nodes == 15  # the original is unchanged
+    assert new.hash != config.hash and apply_overrides(config).hash == config.hash
+    for kwargs, field, shown in [({"nodes": 5000}, "--nodes", "5000"), ({"nodes": "many"}, "--nodes", "many"),
+                                 ({"rule": "simpson"}, "--rule", "simpson"),
+                                 ({"max_evals": 0}, "--max-evals", "0"), ({"seed": -2}, "--seed", "-2")]:
+        with pytest.raises(ConfigError) as info:
+            apply_overrides(config, **kwargs)
+        assert info.value.field == field and info.value.line is None and shown in str(info.value)
