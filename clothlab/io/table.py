@@ -1,0 +1,559 @@
+"""clothlab's own measurement table: a CSV with a YAML header, round-trip exact.
+
+Layout (``/work/shared/reference/formats.md``, "clothlab's own table")::
+
+    # clothlab-table: 1
+    # angle_unit: deg            # deg | rad
+    # quantity: brdf             # brdf [1/sr] | reflectance_factor [= pi BRDF] | cosine_weighted [= BRDF cos theta_i]
+    # azimuth_zero: weft         # weft | warp (also x | y): where phi = 0 points
+    # azimuth_sense: ccw         # ccw | cw, seen from above the fabric
+    # channels: [R, G, B]
+    # provenance: {instrument: ..., reference_standard: Spectralon, sample_name: ...}
+    theta_i,phi_i,theta_o,phi_o,R,G,B,sigma_R,sigma_G,sigma_B
+    30.0,0.0,30.0,180.0,0.12,0.10,0.08,0.01,0.01,0.01
+
+The header is the block of ``#`` lines at the top of the file: with the leading ``#`` (and one space) removed
+it is a YAML mapping (YAML comments and multi-line values allowed).  It may instead live in a sidecar
+``<file>.yaml`` (e.g. ``brdf.csv.yaml``) or ``<stem>.yaml`` (``brdf.yaml``) with the same keys; if both
+the file and a sidecar declare a key they must agree (a conflict is an error), keys found in only one are
+taken from it.  All keys but ``provenance`` are required, so no convention is ever guessed.
+
+Columns may come in any order: the four angles, one column per channel, and optionally ``sigma_<channel>``
+(one-standard-deviation uncertainty, same quantity and unit as the value) for all channels or none.
+Blank lines are ignored; ``#`` lines are only allowed in the header block.
+
+Loading converts once into clothlab's form (:class:`~clothlab.measurement.Measurement`): degrees, azimuth via
+:func:`clothlab.frames.azimuth_to_clothlab`, BRDF in 1/sr (reflectance_factor / pi, cosine_weighted /
+cos theta_i; sigma the same).  When a file's conventions differ from clothlab's own (deg, brdf, weft, ccw),
+they are recorded in ``provenance['source_header']``.  Polar angles must lie in [0, 90] deg (90 included).
+
+The row validation and conversion helpers here (:class:`RawRows`, :func:`rows_to_measurement`,
+:func:`check_unique_directions`) are shared by the ASTM and pab-opto loaders.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from clothlab.atomic import atomic_write_text
+from clothlab.errors import ConfigError, InputError, ResultExistsError
+from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_from_clothlab, azimuth_to_clothlab
+from clothlab.measurement import Measurement
+
+TABLE_VERSION = 1
+ANGLE_COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
+ANGLE_UNITS = ("deg", "rad")
+#: Quantities a table may hold and what each is relative to the BRDF f_r (1/sr).
+QUANTITIES = {
+    "brdf": "BRDF f_r in 1/sr",
+    "reflectance_factor": "pi * f_r (Spectralon-relative reflectance factor)",
+    "cosine_weighted": "f_r * cos(theta_i)",
+}
+#: Internal quantity of pab-opto files: DSF = BSDF * cos(theta_o).
+DSF = "dsf"
+_COSINE_COLUMN = {"cosine_weighted": "theta_i", DSF: "theta_o"}
+_QUANTITY_NOUN = {"brdf": "BRDF", "reflectance_factor": "reflectance factor",
+                  "cosine_weighted": "cosine-weighted BRDF", DSF: "DSF"}
+SIGMA_PREFIX = "sigma_"
+CLOTHLAB_CONVENTIONS = {"angle_unit": "deg", "quantity": "brdf", "azimuth_zero": "weft", "azimuth_sense": "ccw"}
+HEADER_KEYS = ("clothlab-table", "angle_unit", "quantity", "azimuth_zero", "azimuth_sense", "channels",
+               "provenance")
+_REQUIRED_KEYS = HEADER_KEYS[:-1]
+_ALLOWED = {
+    "angle_unit": ANGLE_UNITS,
+    "quantity": tuple(QUANTITIES),
+    "azimuth_zero": tuple(AZIMUTH_ZERO),
+    "azimuth_sense": AZIMUTH_SENSE,
+}
+_TOP_KEY = re.compile(r"^(?![-?] )([^\s:#'\"\[\]{},][^:]*?)\s*:(\s|$)")
+_CHANNEL_NAME = re.compile(r"^[^\s,#'\"]+$")
+
+
+# --------------------------------------------------------------------------------------------------------
+# Shared by all measurement loaders: validated rows in a file's own conventions -> Measurement
+# --------------------------------------------------------------------------------------------------------
+
+@dataclass
+class RawRows:
+    """Numbers as read from a file, before conversion.
+
+    angles : (N, 4) theta_i, phi_i, theta_o, phi_o in the file's unit and azimuth convention.
+    values, sigma : (N, C) in the file's quantity.   lines : (N,) 1-based line of each row in ``path``.
+    angle_names : how the file names the four angle columns (for messages).
+    """
+
+    path: str
+    lines: np.ndarray
+    angles: np.ndarray
+    values: np.ndarray
+    channels: tuple[str, ...]
+    sigma: np.ndarray | None = None
+    angle_names: tuple[str, ...] = ANGLE_COLUMNS
+
+
+def read_text_lines(path) -> list[str]:
+    """The lines of a UTF-8 text file ('\\n' or '\\r\\n' endings), or InputError naming the bad line."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError("file not found", path=path)
+    if path.is_dir():
+        raise InputError("is a directory, expected a file", path=path)
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(f"not UTF-8 text (byte {data[exc.start]:#04x} at offset {exc.start})",
+                         path=path, line=line) from None
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return [line[:-1] if line.endswith("\r") else line for line in lines]
+
+
+def parse_number(text: str, *, path, line: int, column: str) -> float:
+    """A float from one field, or InputError naming file, line and column."""
+    text = text.strip()
+    if not text:
+        raise InputError("empty field; expected a number", path=path, line=line, field=column)
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(f"value {text!r} is not a number", path=path, line=line, field=column) from None
+
+
+def _first(mask: np.ndarray) -> tuple[int, int] | None:
+    """(row, column) of the first True entry of a 2-D mask in row-major order, or None."""
+    hits = np.argwhere(mask)
+    return None if len(hits) == 0 else (int(hits[0, 0]), int(hits[0, 1]))
+
+
+def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
+    """Validate rows in their file units: finite numbers, 0 <= theta <= 90 deg, values >= 0, sigma > 0."""
+    names = raw.angle_names
+    columns = (*names, *raw.channels)
+    numbers = np.concatenate([raw.angles, raw.values], axis=1)
+    bad = _first(~np.isfinite(numbers))
+    if bad is not None:
+        row, col = bad
+        raise InputError(f"value {numbers[row, col]!r} is not finite; expected a finite number",
+                         path=raw.path, line=int(raw.lines[row]), field=columns[col])
+    right_angle = 90.0 if angle_unit == "deg" else math.pi / 2
+    thetas = raw.angles[:, [0, 2]]
+    bad = _first((thetas < 0.0) | (thetas > right_angle))
+    if bad is not None:
+        row, col = bad
+        raise InputError(
+            f"value {thetas[row, col]!r} is outside [0, {right_angle!r}] {angle_unit}; a polar angle is "
+            f"measured from the surface normal and clothlab handles reflection only",
+            path=raw.path, line=int(raw.lines[row]), field=names[2 * col])
+    bad = _first(raw.values < 0.0)
+    if bad is not None:
+        row, col = bad
+        raise InputError(
+            f"value {raw.values[row, col]!r} is negative; {_QUANTITY_NOUN[quantity]} values must be >= 0",
+            path=raw.path, line=int(raw.lines[row]), field=raw.channels[col])
+    if quantity in _COSINE_COLUMN:
+        index = ANGLE_COLUMNS.index(_COSINE_COLUMN[quantity])
+        theta = raw.angles[:, index] if angle_unit == "rad" else np.deg2rad(raw.angles[:, index])
+        grazing = np.flatnonzero(np.cos(theta) < 1e-12)
+        if len(grazing):
+            row = int(grazing[0])
+            raise InputError(
+                f"value {raw.angles[row, index]!r} gives cos({names[index]}) = 0, where a "
+                f"{_QUANTITY_NOUN[quantity]} value cannot be converted to a BRDF; drop grazing rows",
+                path=raw.path, line=int(raw.lines[row]), field=names[index])
+    if raw.sigma is not None:
+        sigma_names = [SIGMA_PREFIX + c for c in raw.channels]
+        bad = _first(~np.isfinite(raw.sigma))
+        if bad is not None:
+            row, col = bad
+            raise InputError(f"value {raw.sigma[row, col]!r} is not finite; expected a finite number",
+                             path=raw.path, line=int(raw.lines[row]), field=sigma_names[col])
+        bad = _first(raw.sigma <= 0.0)
+        if bad is not None:
+            row, col = bad
+            raise InputError(
+                f"value {raw.sigma[row, col]!r} is not positive; an uncertainty (one standard deviation) "
+                f"must be > 0", path=raw.path, line=int(raw.lines[row]), field=sigma_names[col])
+
+
+def convert_rows(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: str, azimuth_sense: str,
+                 azimuth_offset: float = 0.0):
+    """Rows in clothlab's convention: (theta_i, phi_i, theta_o, phi_o) in degrees, values and sigma in 1/sr.
+
+    ``azimuth_offset`` (file units) is added to both azimuths before :func:`azimuth_to_clothlab`.
+    """
+    angles = raw.angles if angle_unit == "deg" else np.rad2deg(raw.angles)
+    theta_i = np.minimum(angles[:, 0], 90.0)
+    theta_o = np.minimum(angles[:, 2], 90.0)
+    offset = azimuth_offset if angle_unit == "deg" else math.degrees(azimuth_offset)
+
+    def azimuth(phi):
+        return azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
+
+    values, sigma = raw.values, raw.sigma
+    if quantity == "reflectance_factor":
+        values = values / np.pi
+        sigma = None if sigma is None else sigma / np.pi
+    elif quantity in _COSINE_COLUMN:
+        theta = theta_i if _COSINE_COLUMN[quantity] == "theta_i" else theta_o
+        cos = np.cos(np.deg2rad(theta))[:, None]
+        values = values / cos
+        sigma = None if sigma is None else sigma / cos
+    return theta_i, azimuth(angles[:, 1]), theta_o, azimuth(angles[:, 3]), values, sigma
+
+
+def check_unique_directions(theta_i, phi_i, theta_o, phi_o, locations) -> None:
+    """InputError for the first repeated (theta_i, phi_i, theta_o, phi_o) (clothlab convention).
+
+    locations : sequence of (path, line) per row, for the message.
+    """
+    seen: dict[tuple[float, float, float, float], int] = {}
+    for row, key in enumerate(zip(theta_i.tolist(), phi_i.tolist(), theta_o.tolist(), phi_o.tolist(),
+                                  strict=True)):
+        first = seen.setdefault(key, row)
+        if first != row:
+            path, line = locations[row]
+            first_path, first_line = locations[first]
+            where = f"line {first_line}" if first_path == path else f"{first_path}:{first_line}"
+            raise InputError(
+                f"duplicate row: the same (theta_i, phi_i, theta_o, phi_o) = {key} (clothlab convention, "
+                f"degrees) as {where}; average repeated measurements before loading",
+                path=path, line=line, field="theta_i,phi_i,theta_o,phi_o")
+
+
+def rows_to_measurement(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: str,
+                        azimuth_sense: str, provenance: dict, source=None) -> Measurement:
+    """Validate ``raw`` (:func:`check_rows`, duplicates) and convert it to a :class:`Measurement`."""
+    check_rows(raw, angle_unit=angle_unit, quantity=quantity)
+    theta_i, phi_i, theta_o, phi_o, values, sigma = convert_rows(
+        raw, angle_unit=angle_unit, quantity=quantity, azimuth_zero=azimuth_zero, azimuth_sense=azimuth_sense)
+    check_unique_directions(theta_i, phi_i, theta_o, phi_o, [(raw.path, int(n)) for n in raw.lines])
+    return Measurement(theta_i, phi_i, theta_o, phi_o, values, raw.channels, sigma, provenance,
+                       None if source is None else str(source))
+
+
+def conventions_provenance(conventions: dict) -> dict:
+    """``{'source_header': conventions}`` when they differ from clothlab's own, else ``{}``."""
+    if all(conventions.get(k) == v for k, v in CLOTHLAB_CONVENTIONS.items()):
+        return {}
+    return {"source_header": {k: conventions[k] for k in CLOTHLAB_CONVENTIONS}}
+
+
+def check_choice(name: str, value, *, error=ConfigError, **where) -> None:
+    """``error`` unless ``value`` is one of the allowed keywords of ``name`` (angle_unit, quantity, ...)."""
+    allowed = _ALLOWED[name]
+    if not isinstance(value, str) or value not in allowed:
+        raise error(f"unknown {name.replace('_', ' ')} {value!r}; expected one of {' | '.join(allowed)}",
+                    field=name, **where)
+
+
+# --------------------------------------------------------------------------------------------------------
+# The clothlab table
+# --------------------------------------------------------------------------------------------------------
+
+@dataclass
+class _Header:
+    """Header mapping and, per key, where it was declared (path, line)."""
+
+    values: dict
+    where: dict
+
+
+def _parse_yaml_header(text_lines: list[str], first_line: int, path) -> _Header:
+    """YAML mapping from header lines (already without their '#'); ``first_line`` is the file line of [0]."""
+    text = "\n".join(text_lines)
+    try:
+        data = yaml.safe_load(text) if text.strip() else {}
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        line = first_line + mark.line if mark is not None else None
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise InputError(f"header is not valid YAML ({problem})", path=path, line=line) from None
+    except (ValueError, TypeError, RecursionError) as exc:  # e.g. an impossible date
+        raise InputError(f"header is not valid YAML ({exc})", path=path) from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise InputError("header must be 'key: value' lines (a YAML mapping)", path=path, line=first_line)
+    where: dict = {}
+    for offset, content in enumerate(text_lines):
+        match = _TOP_KEY.match(content)
+        if match:
+            key = match.group(1).strip()
+            if key in where:
+                raise InputError(f"header key {key!r} is declared twice (first on line {where[key][1]})",
+                                 path=path, line=first_line + offset, field=key)
+            where[key] = (str(path), first_line + offset)
+    for key in data:
+        where.setdefault(str(key), (str(path), None))
+    return _Header({str(k): v for k, v in data.items()}, where)
+
+
+def _sidecar_of(path: Path) -> Path | None:
+    """The sidecar header of a table: ``<file>.yaml`` or ``<stem>.yaml``; InputError if both exist."""
+    candidates = [path.with_name(path.name + ".yaml")]
+    if path.suffix and path.suffix != ".yaml":
+        candidates.append(path.with_suffix(".yaml"))
+    found = [c for c in candidates if c.is_file()]
+    if len(found) > 1:
+        raise InputError(f"two sidecar headers {found[0].name} and {found[1].name}; keep one", path=path)
+    return found[0] if found else None
+
+
+def _merge_headers(in_file: _Header | None, sidecar: _Header | None, path) -> _Header:
+    if in_file is None and sidecar is None:
+        raise InputError(
+            "no clothlab-table header: expected '# clothlab-table: 1' and the other header lines at the top "
+            f"of the file, or a sidecar {Path(path).name}.yaml", path=path, line=1)
+    if in_file is None or sidecar is None:
+        return in_file or sidecar
+    values, where = dict(sidecar.values), dict(sidecar.where)
+    for key, value in in_file.values.items():
+        if key in values and values[key] != value:
+            side_path, side_line = sidecar.where[key]
+            raise InputError(
+                f"header key {key!r} is {value!r} here but {values[key]!r} in the sidecar "
+                f"{side_path}{'' if side_line is None else ':' + str(side_line)}; make them agree or delete one",
+                path=path, line=in_file.where[key][1], field=key)
+        values[key] = value
+        where[key] = in_file.where[key]
+    return _Header(values, where)
+
+
+def _validate_header(header: _Header, path) -> dict:
+    """Checked header: conventions, channels (tuple of str) and provenance (dict)."""
+    def at(key):
+        key_path, line = header.where.get(key, (str(path), None))
+        return {"path": key_path, "line": line}
+
+    for key in header.values:
+        if key not in HEADER_KEYS:
+            raise InputError(f"unknown header key {key!r}; expected one of {', '.join(HEADER_KEYS)}",
+                             field=key, **at(key))
+    for key in _REQUIRED_KEYS:
+        if key not in header.values:
+            hint = f" ({' | '.join(_ALLOWED[key])})" if key in _ALLOWED else ""
+            raise InputError(f"header key {key!r}{hint} is missing; clothlab never guesses a file's conventions",
+                             path=path, field=key)
+    values = header.values
+    version = values["clothlab-table"]
+    if version != TABLE_VERSION or isinstance(version, bool):
+        raise InputError(f"unsupported clothlab-table version {version!r}; this clothlab reads version "
+                         f"{TABLE_VERSION}", field="clothlab-table", **at("clothlab-table"))
+    for key in _ALLOWED:
+        check_choice(key, values[key], error=InputError, **at(key))
+    channels = values["channels"]
+    if isinstance(channels, str):
+        channels = [channels]
+    if not isinstance(channels, list) or not channels:
+        raise InputError(f"channels must be a non-empty list of names like [R, G, B], got {channels!r}",
+                         field="channels", **at("channels"))
+    names = []
+    for name in channels:
+        if isinstance(name, int) and not isinstance(name, bool):
+            name = str(name)
+        if (not isinstance(name, str) or not _CHANNEL_NAME.match(name) or name in ANGLE_COLUMNS
+                or name.startswith(SIGMA_PREFIX)):
+            raise InputError(
+                f"bad channel name {name!r}: expected a name without spaces, commas or quotes that is not an "
+                f"angle column and does not start with '{SIGMA_PREFIX}'", field="channels", **at("channels"))
+        if name in names:
+            raise InputError(f"channel {name!r} is listed twice", field="channels", **at("channels"))
+        names.append(name)
+    provenance = values.get("provenance")
+    if provenance is None:
+        provenance = {}
+    if not isinstance(provenance, dict):
+        raise InputError(f"provenance must be a mapping (key: value), got {provenance!r}",
+                         field="provenance", **at("provenance"))
+    checked = {key: values[key] for key in _ALLOWED}
+    checked.update(channels=tuple(names), provenance=provenance)
+    return checked
+
+
+def _split_header(lines: list[str]) -> tuple[list[str], int]:
+    """Header lines without '#' (and one following space) and the index of the first non-header line."""
+    header = []
+    index = 0
+    while index < len(lines) and lines[index].startswith("#"):
+        content = lines[index][1:]
+        header.append(content[1:] if content.startswith(" ") else content)
+        index += 1
+    return header, index
+
+
+def _read_columns(line: str, lineno: int, path, channels: tuple[str, ...]) -> tuple[list[str], bool]:
+    """Column names of the table and whether sigma columns are present; validates names."""
+    names = [name.strip() for name in line.split(",")]
+    expected = [*ANGLE_COLUMNS, *channels]
+    sigma_names = [SIGMA_PREFIX + c for c in channels]
+    listing = ", ".join(expected) + f" and optionally {', '.join(sigma_names)}"
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise InputError(f"column {name!r} appears twice", path=path, line=lineno, field=name)
+        seen.add(name)
+        if name not in expected and name not in sigma_names:
+            raise InputError(f"unknown column {name!r}; expected {listing}", path=path, line=lineno,
+                             field=name or "(empty)")
+    for name in expected:
+        if name not in seen:
+            raise InputError(f"required column {name!r} is missing; expected {listing}", path=path,
+                             line=lineno, field=name)
+    given = [name for name in sigma_names if name in seen]
+    if given and len(given) != len(sigma_names):
+        missing = next(name for name in sigma_names if name not in seen)
+        raise InputError(f"column {missing!r} is missing: sigma columns must be given for all channels or none",
+                         path=path, line=lineno, field=missing)
+    return names, bool(given)
+
+
+def _parse_table_lines(lines: list[str], path, sidecar: _Header | None) -> Measurement:
+    """The whole table parser, on lines of text (``path`` for messages only)."""
+    header_lines, start = _split_header(lines)
+    in_file = _parse_yaml_header(header_lines, 1, path) if header_lines else None
+    header = _validate_header(_merge_headers(in_file, sidecar, path), path)
+    channels = header["channels"]
+
+    rows = [(i + 1, line) for i, line in enumerate(lines[start:], start) if line.strip()]
+    for lineno, line in rows:
+        if line.lstrip().startswith("#"):
+            raise InputError("'#' lines belong to the header block at the top of the file, before any "
+                             "other line", path=path, line=lineno)
+    if not rows:
+        raise InputError("empty table: no column names line and no data rows", path=path,
+                         line=max(len(lines), 1))
+    column_line, column_text = rows[0]
+    names, has_sigma = _read_columns(column_text, column_line, path, channels)
+    data = rows[1:]
+    if not data:
+        raise InputError("empty table: no data rows after the column names", path=path, line=column_line)
+
+    table = np.empty((len(data), len(names)), dtype=np.float64)
+    for r, (lineno, line) in enumerate(data):
+        fields = line.split(",")
+        if len(fields) != len(names):
+            field = names[len(fields)] if len(fields) < len(names) else None
+            raise InputError(f"row has {len(fields)} fields, expected {len(names)} ({','.join(names)})",
+                             path=path, line=lineno, field=field)
+        for c, text in enumerate(fields):
+            table[r, c] = parse_number(text, path=path, line=lineno, column=names[c])
+
+    index = {name: c for c, name in enumerate(names)}
+    raw = RawRows(
+        path=str(path),
+        lines=np.array([lineno for lineno, _ in data]),
+        angles=table[:, [index[name] for name in ANGLE_COLUMNS]],
+        values=table[:, [index[name] for name in channels]],
+        channels=channels,
+        sigma=table[:, [index[SIGMA_PREFIX + c] for c in channels]] if has_sigma else None,
+    )
+    conventions = {key: header[key] for key in _ALLOWED}
+    provenance = {**header["provenance"], **conventions_provenance(conventions)}
+    return rows_to_measurement(raw, **conventions, provenance=provenance, source=path)
+
+
+def read_table(path) -> Measurement:
+    """Load a clothlab table (CSV + YAML header or sidecar) into clothlab's convention.
+
+    Every problem raises :class:`InputError` naming file, line and column.
+    """
+    path = Path(path)
+    lines = read_text_lines(path)
+    sidecar_path = _sidecar_of(path)
+    sidecar = None
+    if sidecar_path is not None:
+        sidecar = _parse_yaml_header(read_text_lines(sidecar_path), 1, sidecar_path)
+    return _parse_table_lines(lines, path, sidecar)
+
+
+def _plain(value, where: str = "provenance"):
+    """Provenance as plain YAML data (numpy scalars/arrays and tuples become Python numbers and lists)."""
+    if isinstance(value, dict):
+        return {k: _plain(v, f"{where}.{k}") for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v, where) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist(), where)
+    if isinstance(value, np.generic):
+        return value.item()
+    if value is None or isinstance(value, str | int | float | bool):
+        return value
+    try:
+        yaml.safe_dump(value)
+    except yaml.YAMLError:
+        raise TypeError(f"{where} holds a {type(value).__name__}, which a table header cannot store") from None
+    return value
+
+
+def _header_text(header: dict) -> list[str]:
+    """'# '-prefixed YAML lines of the header (block mapping; innermost lists and mappings inline)."""
+    dumped = yaml.safe_dump(header, sort_keys=False, allow_unicode=True, width=2**31, default_flow_style=None)
+    return [f"# {line}".rstrip() for line in dumped.rstrip("\n").split("\n")]
+
+
+def format_table(m: Measurement, *, quantity: str = "brdf", angle_unit: str = "deg",
+                 azimuth_zero: str = "weft", azimuth_sense: str = "ccw") -> str:
+    """The text of a clothlab table holding ``m`` in the requested conventions (floats as repr, exact)."""
+    for name, value in (("quantity", quantity), ("angle_unit", angle_unit), ("azimuth_zero", azimuth_zero),
+                        ("azimuth_sense", azimuth_sense)):
+        check_choice(name, value)
+    theta_i, theta_o = m.theta_i, m.theta_o
+    phi_i = azimuth_from_clothlab(m.phi_i, zero=azimuth_zero, sense=azimuth_sense)
+    phi_o = azimuth_from_clothlab(m.phi_o, zero=azimuth_zero, sense=azimuth_sense)
+    angles = [theta_i, phi_i, theta_o, phi_o]
+    if angle_unit == "rad":
+        angles = [np.deg2rad(a) for a in angles]
+    values, sigma = m.values, m.sigma
+    if quantity == "reflectance_factor":
+        values = values * np.pi
+        sigma = None if sigma is None else sigma * np.pi
+    elif quantity == "cosine_weighted":
+        cos = np.cos(np.deg2rad(theta_i))[:, None]
+        values = values * cos
+        sigma = None if sigma is None else sigma * cos
+    header = {"clothlab-table": TABLE_VERSION, "angle_unit": angle_unit, "quantity": quantity,
+              "azimuth_zero": azimuth_zero, "azimuth_sense": azimuth_sense, "channels": list(m.channels)}
+    if m.provenance:
+        header["provenance"] = _plain(dict(m.provenance))
+    names = [*ANGLE_COLUMNS, *m.channels]
+    columns = [*angles, *values.T]
+    if sigma is not None:
+        names += [SIGMA_PREFIX + c for c in m.channels]
+        columns += list(sigma.T)
+    body = np.stack(columns, axis=1).tolist() if m.n else []
+    lines = _header_text(header) + [",".join(names)] + [",".join(map(repr, row)) for row in body]
+    return "\n".join(lines) + "\n"
+
+
+def write_table(m: Measurement, path, *, overwrite: bool = False, quantity: str = "brdf",
+                angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw") -> Path:
+    """Write ``m`` as a clothlab table, atomically; returns the path.
+
+    With the defaults, ``read_table(write_table(m, p))`` reproduces ``m`` exactly (floats are written with
+    ``repr``; azimuths must be in [0, 360) as every loader produces; provenance must be plain YAML data -
+    tuples come back as lists).  The text is parsed back before writing, so an invalid measurement (NaN,
+    negative values, duplicate directions ...) raises :class:`InputError` and nothing is written.
+    An existing file raises :class:`ResultExistsError` unless ``overwrite``.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise ResultExistsError(f"{path} already exists; pass overwrite=True (--force) to replace it", path=path)
+    text = format_table(m, quantity=quantity, angle_unit=angle_unit, azimuth_zero=azimuth_zero,
+                        azimuth_sense=azimuth_sense)
+    try:
+        _parse_table_lines(text.split("\n")[:-1], path, None)
+    except InputError as exc:
+        raise InputError(f"the measurement cannot be written as a valid table: {exc.detail}",
+                         path=path, line=exc.line, field=exc.field) from None
+    return atomic_write_text(path, text)
