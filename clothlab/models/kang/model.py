@@ -1,0 +1,189 @@
+"""The Kang fabric shader as a clothlab model ("Real-time level-of-detail fabric rendering", secs. 3-4,
+extending Kang 2010): Ashikhmin-Shirley BRDF per yarn type with alternating anisotropy, yarn normal
+perturbation with ambient occlusion, per-yarn noise, the eq. 5 LoD blend and Algorithm 1.
+
+Components (1/sr), per yarn type k in (warp, weft): ``diffuse_k`` = Lambert 1/pi times the ambient
+occlusion, ``specular_k`` = eq. 1 with the eq. 2 distribution about the perturbed normal, times the
+ambient occlusion.  The per-yarn diffuse and specular colours (sec. 4.2.1; denim: blue weft, white warp)
+are the linear coefficients of the components, solved outside the model.
+
+Tile average (:meth:`KangModel.components`).  Within yarn type k the point BRDF depends on the position
+only through the perturbation (delta_across, delta_along) of eqs. 3-4; over a yarn, sigma is uniform in
+[-1, 1] and the sawtooth phase uniform in [0, 1), so delta_across is uniform in [-c_y, c_y] and
+delta_along uniform in [-c_f, c_f] (exact when a yarn's visible part spans its width and a whole number of
+fibre ridges).  The average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the pattern's cell
+share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle (``tile_nodes`` per axis).
+The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is measured in tests/test_kang.py
+against a fine grid over the tile (see docs/kang.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clothlab.errors import ConfigError
+from clothlab.frames import to_yarn_frame
+from clothlab.models.kang import lod, microfacet, yarn
+from clothlab.models.kang.parameters import KANG_PARAMS, resolve_parameters
+from clothlab.weave import YARN_KINDS, Weave
+from clothlab.weave_lookup import locate_segments
+
+WEAVE_LEVELS = ("prefiltered", "flat")
+
+
+class KangModel:
+    """Kang's procedural fabric shader behind the clothlab model interface.
+
+    Options: ``tile_nodes`` (Gauss-Legendre nodes per perturbation axis of the tile average and the
+    prefiltered weave level, default 24); ``weave_level``: the far (alpha = 1) level of eq. 5,
+    ``'prefiltered'`` (default: the yarn level averaged over the yarn, so the far view equals the tile
+    average) or ``'flat'`` (the paper's literal choice: the unperturbed normal, no ambient occlusion);
+    ``prefilter_min_samples`` / ``prefilter_max_samples`` / ``seed`` for Algorithm 1.
+    """
+
+    kind = "kang"
+    params = KANG_PARAMS
+    component_names = ("diffuse_warp", "diffuse_weft", "specular_warp", "specular_weft")
+
+    def __init__(self, weave: Weave, *, tile_nodes: int = 24, weave_level: str = "prefiltered",
+                 prefilter_min_samples: int = 5, prefilter_max_samples: int = 64, seed: int = 0):
+        if not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1:
+            raise ConfigError(f"tile_nodes must be a positive integer, got {tile_nodes!r}", field="tile_nodes")
+        if weave_level not in WEAVE_LEVELS:
+            raise ConfigError(f"weave_level must be one of {WEAVE_LEVELS}, got {weave_level!r}",
+                              field="weave_level")
+        if not 1 <= prefilter_min_samples < prefilter_max_samples:
+            raise ConfigError(f"need 1 <= prefilter_min_samples < prefilter_max_samples, got "
+                              f"{prefilter_min_samples!r}, {prefilter_max_samples!r}", field="prefilter_max_samples")
+        self.weave = weave
+        self.tile_nodes = int(tile_nodes)
+        self.weave_level = weave_level
+        self.prefilter_min_samples = int(prefilter_min_samples)
+        self.prefilter_max_samples = int(prefilter_max_samples)
+        self.seed = seed
+        self.shares = {kind: weave.cell_share(kind) for kind in YARN_KINDS}
+        self._segment_is_weft = np.array([s.kind == "weft" for s in weave.segments])
+        nodes, weights = np.polynomial.legendre.leggauss(self.tile_nodes)
+        across, along = np.meshgrid(nodes, nodes, indexing="ij")
+        self._unit_nodes = (across.ravel(), along.ravel())  # in [-1, 1]^2
+        self._node_weights = np.outer(weights, weights).ravel() / 4.0  # sum 1
+
+    # --- one yarn type, yarn frame -------------------------------------------------------------------
+
+    @staticmethod
+    def _specular_about(wi_l, wo_l, normal, nx, ny, f0):
+        """Eq. 1 with the eq. 2 lobe about ``normal`` (yarn frame; nx across, ny along the yarn)."""
+        h = microfacet.half_vector(wi_l, wo_l)
+        pdf = microfacet.half_vector_pdf(h, nx, ny, normal, yarn.tangent_of(normal))
+        return microfacet.ashikhmin_shirley(wi_l, wo_l, pdf, f0)
+
+    def _yarn_average(self, kind, wi_l, wo_l, p):
+        """(E[ao rho], E[ao]) over the perturbation rectangle of eqs. 3-4 (Gauss-Legendre), (N,), scalar."""
+        d_across = p["yarn_curvature"] * self._unit_nodes[0]
+        d_along = p["fibre_curvature"] * self._unit_nodes[1]
+        normal = yarn.perturbed_normal(d_across, d_along)  # (Q, 3)
+        ao = yarn.ambient_occlusion(normal)
+        rho = self._specular_about(wi_l[:, None, :], wo_l[:, None, :], normal[None], p[f"{kind}.nx"],
+                                   p[f"{kind}.ny"], p["fresnel_f0"])
+        weights = self._node_weights * ao
+        return rho @ weights, float(np.sum(weights))
+
+    def _weave_level(self, kind, wi_l, wo_l, p):
+        """The alpha = 1 level of eq. 5: (specular, ao) of yarn type ``kind``."""
+        if self.weave_level == "prefiltered":
+            return self._yarn_average(kind, wi_l, wo_l, p)
+        flat = np.broadcast_to(np.array([0.0, 0.0, 1.0]), wi_l.shape)
+        return self._specular_about(wi_l, wo_l, flat, p[f"{kind}.nx"], p[f"{kind}.ny"], p["fresnel_f0"]), 1.0
+
+    # --- the interface ---------------------------------------------------------------------------------
+
+    def components(self, wi, wo, params: dict) -> dict[str, np.ndarray]:
+        """Tile-averaged components (1/sr) at (N, 3) fabric-frame directions; zero below the horizon."""
+        p = resolve_parameters(params)
+        wi, wo = _directions(wi, wo)
+        visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+        out = {name: np.zeros(len(wi)) for name in self.component_names}
+        for kind in YARN_KINDS:
+            share = self.shares[kind]
+            if share == 0.0:
+                continue  # a yarn type with no visible area is skipped (DESIGN principle 5)
+            specular, ao = self._yarn_average(kind, to_yarn_frame(wi, kind), to_yarn_frame(wo, kind), p)
+            out[f"specular_{kind}"] = share * specular
+            out[f"diffuse_{kind}"] = np.where(visible, share * ao / np.pi, 0.0)
+        return out
+
+    def point_components(self, u, v, wi, wo, params: dict, footprint=None, *,
+                         view_distance=None) -> dict[str, np.ndarray]:
+        """Components (1/sr) at texture points (u, v) (tile units) for (N, 3) direction pairs.
+
+        ``footprint`` (scalar or (N,), tile units): the pixel's texture-space extent, giving the eq. 5
+        blend (None: full yarn detail, alpha = 0).  ``view_distance`` (scalar or (N,)): when given
+        (with a footprint), Algorithm 1 averages jittered evaluations over the footprint, stopping when
+        the running mean changes by less than 1 / view_distance.
+        """
+        p = resolve_parameters(params)
+        wi, wo = _directions(wi, wo)
+        u, v = (np.broadcast_to(np.asarray(c, dtype=np.float64), (len(wi),)).copy() for c in (u, v))
+        if footprint is not None:
+            footprint = np.broadcast_to(np.asarray(footprint, dtype=np.float64), (len(wi),))
+            if not np.all(np.isfinite(footprint) & (footprint >= 0.0)):
+                raise ConfigError("footprint must be finite and >= 0 (tile units)", field="footprint")
+        if view_distance is None:
+            return self._point(u, v, wi, wo, p, footprint)
+        if footprint is None:
+            raise ConfigError("Algorithm 1 (view_distance) needs a footprint", field="footprint")
+        view_distance = np.broadcast_to(np.asarray(view_distance, dtype=np.float64), (len(wi),))
+        if not np.all(np.isfinite(view_distance) & (view_distance > 0.0)):
+            raise ConfigError("view_distance must be finite and > 0", field="view_distance")
+
+        def evaluate(index, uu, vv):
+            comps = self._point(uu, vv, wi[index], wo[index], p, footprint[index])
+            return np.stack([comps[name] for name in self.component_names], axis=-1)
+
+        mean, _ = lod.adaptive_prefilter(evaluate, u, v, footprint, view_distance,
+                                         rng=np.random.default_rng(self.seed),
+                                         min_samples=self.prefilter_min_samples,
+                                         max_samples=self.prefilter_max_samples)
+        return {name: mean[:, k] for k, name in enumerate(self.component_names)}
+
+    def _point(self, u, v, wi, wo, p, footprint):
+        """Point evaluation with the eq. 5 blend (no prefilter)."""
+        segment, x_across, y_along = locate_segments(self.weave, u, v)
+        visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+        if footprint is None:
+            alpha = np.zeros(len(wi))
+        else:
+            cells = footprint * max(self.weave.tile_width, self.weave.tile_height)
+            alpha = lod.lod_alpha(cells, p["n_strands"])
+        noise = yarn.yarn_noise(np.floor(u), np.floor(v), segment, p["noise"])
+        out = {name: np.zeros(len(wi)) for name in self.component_names}
+        for kind in YARN_KINDS:
+            m = self._segment_is_weft[segment] == (kind == "weft")
+            if not np.any(m):
+                continue
+            wi_l, wo_l = to_yarn_frame(wi[m], kind), to_yarn_frame(wo[m], kind)
+            sigma, phase = yarn.yarn_offsets(x_across[m], y_along[m], self.weave.geometry(kind).w,
+                                             p["n_strands"], p["fibre_slope"])
+            normal = yarn.perturbed_normal(*yarn.perturbation(sigma, phase, p["fibre_curvature"],
+                                                              p["yarn_curvature"]))
+            ao = yarn.ambient_occlusion(normal)
+            specular = ao * self._specular_about(wi_l, wo_l, normal, p[f"{kind}.nx"], p[f"{kind}.ny"],
+                                                 p["fresnel_f0"])
+            diffuse = ao.copy()
+            far = alpha[m] > 0.0
+            if np.any(far):
+                far_specular, far_ao = self._weave_level(kind, wi_l[far], wo_l[far], p)
+                a = alpha[m][far]
+                specular[far] = lod.blend(specular[far], far_specular, a)  # eq. 5
+                diffuse[far] = lod.blend(diffuse[far], far_ao, a)
+            out[f"specular_{kind}"][m] = noise[m] * specular
+            out[f"diffuse_{kind}"][m] = np.where(visible[m], noise[m] * diffuse / np.pi, 0.0)
+        return out
+
+
+def _directions(wi, wo):
+    wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
+    wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+    if wi.shape != wo.shape or wi.shape[-1] != 3 or wi.ndim != 2:
+        raise ValueError(f"wi, wo must both be (N, 3) arrays, got {wi.shape} and {wo.shape}")
+    return wi, wo
