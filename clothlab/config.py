@@ -411,8 +411,22 @@ class _Validator:
                                   field=_dotted(path + (key,)))
         return value
 
-    def resolve(self, written: str) -> Path:
-        return Path(os.path.normpath(self.base_dir / Path(written).expanduser()))
+    def resolve(self, written: str, at: _Field) -> Path:
+        """``written`` relative to the yaml's directory ('~' expanded), normalised but not symlink-resolved."""
+        if not written or "\0" in written:
+            raise at.error(f"expected a path, got {written!r}")
+        try:
+            expanded = Path(written).expanduser()
+        except RuntimeError as exc:  # '~user' with an unknown user
+            raise at.error(f"cannot expand {written!r}: {exc}") from None
+        return Path(os.path.normpath(self.base_dir / expanded))
+
+    @staticmethod
+    def is_there(path: Path, need_file: bool) -> bool:
+        try:
+            return path.is_file() if need_file else path.exists()
+        except (OSError, ValueError):  # e.g. a name too long for the file system
+            return False
 
     # -- sections -------------------------------------------------------------------------------------------
 
@@ -443,8 +457,8 @@ class _Validator:
         p = ("measurement",)
         m = self.section(value, p, ("path", "format", "options"), required=("path",))
         written = _as_str(m["path"], self.r.at(p + ("path",)))
-        resolved = self.resolve(written)
-        if not resolved.exists():
+        resolved = self.resolve(written, self.r.at(p + ("path",)))
+        if not self.is_there(resolved, need_file=False):
             raise self.r.at(p + ("path",)).error(
                 f"measurement not found: {resolved} (from {written!r}, relative to {self.base_dir})"
             )
@@ -501,8 +515,8 @@ class _Validator:
             except ConfigError:
                 raise at.error(f"unknown preset {preset!r}{_suggest(preset, PRESET_NAMES)}; "
                                f"known presets: {', '.join(PRESET_NAMES)}") from None
-        resolved = self.resolve(text)
-        if not resolved.is_file():
+        resolved = self.resolve(text, at)
+        if not self.is_there(resolved, need_file=True):
             raise at.error(f"weave file not found: {resolved} (from {text!r}, relative to {self.base_dir}); "
                            f"give a .wv file or preset:<name>")
         return str(resolved)
@@ -639,7 +653,8 @@ class _Validator:
             if o.get(key) is None:
                 dirs[key] = Path.cwd() / key
             else:
-                dirs[key] = self.resolve(_as_str(o[key], self.r.at(p + (key,))))
+                at = self.r.at(p + (key,))
+                dirs[key] = self.resolve(_as_str(o[key], at), at)
         return OutputConfig(**dirs)
 
 

@@ -6,6 +6,8 @@ import shutil
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from clothlab.config import apply_overrides, config_from_dict, load_config
 from clothlab.errors import ConfigError
@@ -380,6 +382,13 @@ def test_block_style_lines_point_at_the_value(tmp_path):
     assert err.field == "fit.optimizer.max_evals" and err.line == line_of(text, "-3")
 
 
+@pytest.mark.parametrize("written", ['"a\\0b.csv"', "x" * 5000 + ".csv", "~no_such_user_4711/brdf.csv", '""'])
+def test_unusable_measurement_paths(tmp_path, written):
+    text = edit(FULL, "../measurements/polyester-lining/brdf.csv", written)
+    err = fails(tmp_path, text)
+    assert err.field == "measurement.path" and err.line == 3
+
+
 def test_missing_config_file(tmp_path):
     with pytest.raises(ConfigError) as info:
         load_config(tmp_path / "nope.yaml")
@@ -404,3 +413,40 @@ def test_overrides_apply_and_validate(tmp_path):
         with pytest.raises(ConfigError) as info:
             apply_overrides(config, **kwargs)
         assert info.value.field == field and info.value.line is None and shown in str(info.value)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# robustness and documentation
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(start=st.integers(0, len(FULL)), length=st.integers(0, 12),
+       junk=st.text(alphabet=st.sampled_from(list(" \t\n:-[]{},#&*!|>'\"0123456789.eanulx")), max_size=12))
+def test_mangled_yaml_gives_a_config_or_a_config_error(tmp_path, start, length, junk):
+    text = FULL[:start] + junk + FULL[start + length:]
+    try:
+        config = load_config(project(tmp_path, text))
+    except ConfigError as err:
+        assert err.path.endswith("fabric.yaml")
+        assert err.line is None or 1 <= err.line <= text.count("\n") + 1
+    else:
+        assert config.hash == load_config(tmp_path / "configs/fabric.yaml").hash
+
+
+def test_reference_lists_every_key_choice_and_parameter():
+    from clothlab import config as cfg
+    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+
+    doc = (Path(__file__).parent.parent / "docs" / "fabric-yaml.md").read_text()
+    keys = ["name", "measurement.path", "measurement.format", "measurement.options", "model.kind",
+            "model.weave", "model.quadrature.rule", "model.quadrature.nodes", "model.params", "fit.free",
+            "fit.bounds", "fit.metric", "fit.optimizer.global", "fit.optimizer.local",
+            "fit.optimizer.max_evals", "fit.optimizer.seed", "fit.optimizer.max_time", "fit.posterior.walkers",
+            "fit.posterior.steps", "fit.posterior.max_steps", "fit.cv_folds", "report.percentiles",
+            "output.fits", "output.reports"]
+    words = keys + [f"`{name}`" for name in IRAWAN_PARAMS.names()]
+    for group in (cfg.FORMATS, cfg.MODEL_KINDS, cfg.QUADRATURE_RULES, cfg.METRICS, cfg.GLOBAL_ALGORITHMS,
+                  cfg.LOCAL_ALGORITHMS):
+        words += [f"`{c}`" for c in group]
+    missing = [w for w in words if w not in doc]
+    assert not missing
