@@ -36,9 +36,6 @@ from clothlab.models.irawan.quadrature import (
     interval_rule,
     piecewise_rule,
 )
-from clothlab.models.irawan.spine import spine_radius
-
-CHUNK = 2048  # directions per block: keeps the (N, nodes) temporaries in cache
 
 
 def half_vectors(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,56 +44,6 @@ def half_vectors(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray
     length = np.sqrt(np.einsum("nk,nk->n", s, s))
     h = s / np.where(length > 0.0, length, 1.0)[:, None]
     return h, length
-
-
-def smoothstep(x):
-    """Cubic smoothstep s(x) = 3x^2 - 2x^3 on [0, 1], 0 below and 1 above (eq. 9)."""
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
-def staple_integrand(wi, wo, h, u, psi, umax, kappa, w, l):
-    """G_v A at nodes u (N, K) for directions (N, 3) (eqs. 3, 5, 8); zero where no visible reflection."""
-    hx, hy, hz = (h[:, k, None] for k in range(3))
-    su, cu = np.sin(u), np.cos(u)
-    b = hy * su + hz * cu
-    rho = np.sqrt(hx * hx + b * b)
-    rho_safe = np.where(rho > 0.0, rho, 1.0)
-    d = (hy * cu - hz * su) * (np.cos(psi) / np.sin(psi)) / rho_safe
-    in_support = (np.abs(d) <= 1.0) & (rho > 0.0)
-    root = np.sqrt(np.maximum(1.0 - d * d, 0.0))
-    cos_v = (hx * d + b * root) / rho_safe
-    sin_v = (hx * root - b * d) / rho_safe
-    ci = wi[:, 0, None] * sin_v + (wi[:, 1, None] * su + wi[:, 2, None] * cu) * cos_v
-    cr = wo[:, 0, None] * sin_v + (wo[:, 1, None] * su + wo[:, 2, None] * cu) * cos_v
-    ci = np.maximum(ci, 0.0)
-    cr = np.maximum(cr, 0.0)
-    total = ci + cr
-    a = 0.5 * w
-    radius = spine_radius(u, umax, kappa, w, l)
-    ok = in_support & (cos_v > 0.0) & (total > 0.0)
-    value = a * (radius + a * cos_v) * ci * cr / (abs(np.sin(psi)) * np.where(ok, total * total, 1.0))
-    return np.where(ok, value, 0.0)
-
-
-def filament_integrand(wi, wo, h, hlen, v, umax, kappa, w, l, delta):
-    """G_u A_s at nodes v (N, K) for directions (N, 3) (eqs. 4, 6, 8, 9)."""
-    hy, hz = h[:, 1, None], h[:, 2, None]
-    u = np.arctan(hy / np.where(hz > 0.0, hz, 1.0))
-    rho_yz = np.sqrt(hy * hy + hz * hz)
-    fade = np.where(np.abs(u) < umax, 1.0, 0.0)
-    if delta > 0.0:
-        fade = fade * (1.0 - smoothstep((np.abs(u) - (1.0 - delta) * umax) / (delta * umax)))
-    su, cu = np.sin(u), np.cos(u)
-    sv, cv = np.sin(v), np.cos(v)
-    ci = np.maximum(wi[:, 0, None] * sv + (wi[:, 1, None] * su + wi[:, 2, None] * cu) * cv, 0.0)
-    cr = np.maximum(wo[:, 0, None] * sv + (wo[:, 1, None] * su + wo[:, 2, None] * cu) * cv, 0.0)
-    total = ci + cr
-    a = 0.5 * w
-    radius = spine_radius(u, umax, kappa, w, l)
-    ok = (hz > 0.0) & (total > 0.0) & (hlen[:, None] > 0.0) & (rho_yz > 0.0) & (fade > 0.0)
-    denom = np.where(ok, total * hlen[:, None] * rho_yz, 1.0)
-    return np.where(ok, a * (radius + a * cv) * ci * cr * fade / denom, 0.0)
 
 
 def _staple_breaks(h, psi, umax):
@@ -125,22 +72,24 @@ def _filament_breaks(wi, wo, h):
     return compact_breaks(-0.5 * np.pi, 0.5 * np.pi, np.stack(cols, axis=1))
 
 
-def _integrate_block(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
-    h, hlen = half_vectors(wi, wo)
+def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
+    from clothlab.models.irawan import kernels
 
-    def integrand(rows, nodes):
+    def quadrature(rows, nodes, weights):
         if staple:
-            return staple_integrand(wi[rows], wo[rows], h[rows], nodes, psi, umax, kappa, w, l)
-        return filament_integrand(wi[rows], wo[rows], h[rows], hlen[rows], nodes, umax, kappa, w, l, delta)
+            return kernels.staple_quadrature(wi[rows], wo[rows], nodes, weights, psi, umax, kappa, w, l)
+        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta)
 
     every = slice(None)
     if rule in ("trapezoid", "gauss"):
         lo, hi = (-umax, umax) if staple else (-0.5 * np.pi, 0.5 * np.pi)
         nodes, weights = interval_rule(rule, n, lo, hi)
-        return integrand(every, np.broadcast_to(nodes, (len(wi), n))) @ weights
+        shape = (len(wi), n)  # contiguous copies: numba's kernels are ~50x slower on broadcast views
+        return quadrature(every, np.ascontiguousarray(np.broadcast_to(nodes, shape)),
+                          np.ascontiguousarray(np.broadcast_to(weights, shape)))
+    h, _ = half_vectors(wi, wo)
     breaks = _staple_breaks(h, psi, umax) if staple else _filament_breaks(wi, wo, h)
-    nodes, weights = piecewise_rule(breaks, n)
-    value = np.einsum("nk,nk->n", integrand(every, nodes), weights)
+    value = quadrature(every, *piecewise_rule(breaks, n))
     if rule == "support":
         return value
     if rule != "adaptive":
@@ -148,8 +97,7 @@ def _integrate_block(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
     todo = np.arange(len(wi))
     while n < ADAPTIVE_MAX_NODES and todo.size:
         n *= 2
-        nodes, weights = piecewise_rule(breaks[todo], n)
-        new = np.einsum("nk,nk->n", integrand(todo, nodes), weights)
+        new = quadrature(todo, *piecewise_rule(breaks[todo], n))
         changed = np.abs(new - value[todo]) > ADAPTIVE_RTOL * np.abs(new)
         value[todo] = new
         todo = todo[changed]
@@ -164,10 +112,9 @@ def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid"
     wi = np.ascontiguousarray(wi, dtype=np.float64)
     wo = np.ascontiguousarray(wo, dtype=np.float64)
     out = np.zeros(len(wi))
-    front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
-    idx = np.flatnonzero(front)
-    staple = abs(psi) >= psi_threshold
-    for start in range(0, idx.size, CHUNK):
-        sel = idx[start:start + CHUNK]
-        out[sel] = _integrate_block(wi[sel], wo[sel], rule, n, staple, psi, umax, kappa, w, l, delta)
+    front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
+    if front.size:
+        staple = abs(psi) >= psi_threshold
+        out[front] = _integrate(wi[front], wo[front], rule, n, staple, float(psi), float(umax), float(kappa),
+                                float(w), float(l), float(delta))
     return out

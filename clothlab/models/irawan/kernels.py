@@ -1,0 +1,125 @@
+"""Compiled (numba) kernels of the yarn integrals: one pass over directions x nodes, no temporaries.
+
+The formulas are those of :mod:`clothlab.models.irawan.yarn` (see its docstring for the equations); this
+module holds their only implementation.  Imported lazily (numba costs ~0.5 s to import) by
+:func:`clothlab.models.irawan.yarn.yarn_integral`.  Compiled code is cached on disk (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, inline="always")
+def spine_radius_scalar(u, umax, kappa, w, l):
+    """R(u) of :func:`clothlab.models.irawan.spine.spine_radius` for scalars (same formula)."""
+    r_hat = 1.0 + kappa * (1.0 + 1.0 / math.tan(umax))
+    q = r_hat * abs(r_hat)
+    cot = 1.0 / math.tan(umax)
+    half = max(0.5 * l - 0.5 * w * math.sin(umax), 0.0)
+    scale = half * math.sqrt(max(cot * cot + q, 0.0))
+    u = min(max(u, -umax), umax)
+    c = math.cos(u)
+    s = math.sin(u)
+    return scale / (c * c + q * s * s) ** 1.5
+
+
+@njit(cache=True, inline="always")
+def staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, u, cot_psi, abs_sin_psi, umax, kappa, w, l):
+    """G_v A at one node u (eqs. 3, 5, 8; bounded form, yarn.py docstring)."""
+    su = math.sin(u)
+    cu = math.cos(u)
+    b = hy * su + hz * cu
+    rho = math.sqrt(hx * hx + b * b)
+    if rho <= 0.0:
+        return 0.0
+    d = (hy * cu - hz * su) * cot_psi / rho
+    if abs(d) > 1.0:
+        return 0.0
+    root = math.sqrt(max(1.0 - d * d, 0.0))
+    cos_v = (hx * d + b * root) / rho
+    if cos_v <= 0.0:
+        return 0.0
+    sin_v = (hx * root - b * d) / rho
+    ci = wix * sin_v + (wiy * su + wiz * cu) * cos_v
+    cr = wox * sin_v + (woy * su + woz * cu) * cos_v
+    if ci <= 0.0 or cr <= 0.0:
+        return 0.0
+    total = ci + cr
+    a = 0.5 * w
+    radius = spine_radius_scalar(u, umax, kappa, w, l)
+    return a * (radius + a * cos_v) * ci * cr / (abs_sin_psi * total * total)
+
+
+@njit(cache=True, parallel=True)
+def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
+    """sum_k weights[n, k] G_v A(nodes[n, k]) for each direction pair n (rows of wi, wo: yarn frame)."""
+    n_dir, n_nodes = nodes.shape
+    out = np.zeros(n_dir)
+    cot_psi = math.cos(psi) / math.sin(psi)
+    abs_sin_psi = abs(math.sin(psi))
+    for n in prange(n_dir):
+        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
+        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
+        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
+        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+            continue
+        hx, hy, hz = sx / length, sy / length, sz / length
+        acc = 0.0
+        for k in range(n_nodes):
+            wk = weights[n, k]
+            if wk != 0.0:
+                acc += wk * staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, nodes[n, k],
+                                         cot_psi, abs_sin_psi, umax, kappa, w, l)
+        out[n] = acc
+    return out
+
+
+@njit(cache=True, parallel=True)
+def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta):
+    """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eqs. 4, 6, 8, 9) for each direction pair n (yarn frame)."""
+    n_dir, n_nodes = nodes.shape
+    out = np.zeros(n_dir)
+    a = 0.5 * w
+    for n in prange(n_dir):
+        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
+        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
+        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
+        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+            continue
+        hy, hz = sy / length, sz / length
+        u = math.atan(hy / hz)
+        if abs(u) >= umax:
+            continue
+        fade = 1.0
+        if delta > 0.0:
+            x = min(max((abs(u) - (1.0 - delta) * umax) / (delta * umax), 0.0), 1.0)
+            fade = 1.0 - x * x * (3.0 - 2.0 * x)
+        rho_yz = math.sqrt(hy * hy + hz * hz)
+        if fade <= 0.0 or rho_yz <= 0.0:
+            continue
+        su = math.sin(u)
+        cu = math.cos(u)
+        radius = spine_radius_scalar(u, umax, kappa, w, l)
+        pi_ = wiy * su + wiz * cu
+        po_ = woy * su + woz * cu
+        acc = 0.0
+        for k in range(n_nodes):
+            wk = weights[n, k]
+            if wk == 0.0:
+                continue
+            v = nodes[n, k]
+            sv = math.sin(v)
+            cv = math.cos(v)
+            ci = wix * sv + pi_ * cv
+            cr = wox * sv + po_ * cv
+            if ci <= 0.0 or cr <= 0.0:
+                continue
+            acc += wk * a * (radius + a * cv) * ci * cr / (ci + cr)
+        out[n] = acc * fade / (length * rho_yz)
+    return out
