@@ -13,7 +13,7 @@ the bottom of the tile (values outside [0, 1] occur and wrap around the tile).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -41,7 +41,7 @@ class Segment:
     center_v: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Weave:
     """A weave tile with its segments, the two segment types and the fibre/texture parameters."""
 
@@ -60,6 +60,15 @@ class Weave:
     dumax: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # warp<-warp, warp<-weft, weft<-warp, weft<-weft
     period: float = 0.0  # Perlin period of the umax modulation; 0 = none
     source: str | None = field(default=None, compare=False)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Weave):
+            return NotImplemented
+        names = [f.name for f in fields(self) if f.compare and f.name != "pattern"]
+        return np.array_equal(self.pattern, other.pattern) and all(
+            getattr(self, n) == getattr(other, n) for n in names)
+
+    __hash__ = None
 
     @property
     def tile_width(self) -> int:
