@@ -144,7 +144,7 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
     bad = _first(~np.isfinite(numbers))
     if bad is not None:
         row, col = bad
-        raise InputError(f"value {numbers[row, col]!r} is not finite; expected a finite number",
+        raise InputError(f"value {float(numbers[row, col])!r} is not finite; expected a finite number",
                          path=raw.path, line=int(raw.lines[row]), field=columns[col])
     right_angle = 90.0 if angle_unit == "deg" else math.pi / 2
     thetas = raw.angles[:, [0, 2]]
@@ -152,14 +152,14 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
     if bad is not None:
         row, col = bad
         raise InputError(
-            f"value {thetas[row, col]!r} is outside [0, {right_angle!r}] {angle_unit}; a polar angle is "
+            f"value {float(thetas[row, col])!r} is outside [0, {right_angle!r}] {angle_unit}; a polar angle is "
             f"measured from the surface normal and clothlab handles reflection only",
             path=raw.path, line=int(raw.lines[row]), field=names[2 * col])
     bad = _first(raw.values < 0.0)
     if bad is not None:
         row, col = bad
         raise InputError(
-            f"value {raw.values[row, col]!r} is negative; {_QUANTITY_NOUN[quantity]} values must be >= 0",
+            f"value {float(raw.values[row, col])!r} is negative; {_QUANTITY_NOUN[quantity]} values must be >= 0",
             path=raw.path, line=int(raw.lines[row]), field=raw.channels[col])
     if quantity in _COSINE_COLUMN:
         index = ANGLE_COLUMNS.index(_COSINE_COLUMN[quantity])
@@ -168,7 +168,7 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
         if len(grazing):
             row = int(grazing[0])
             raise InputError(
-                f"value {raw.angles[row, index]!r} gives cos({names[index]}) = 0, where a "
+                f"value {float(raw.angles[row, index])!r} gives cos({names[index]}) = 0, where a "
                 f"{_QUANTITY_NOUN[quantity]} value cannot be converted to a BRDF; drop grazing rows",
                 path=raw.path, line=int(raw.lines[row]), field=names[index])
     if raw.sigma is not None:
@@ -176,13 +176,13 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
         bad = _first(~np.isfinite(raw.sigma))
         if bad is not None:
             row, col = bad
-            raise InputError(f"value {raw.sigma[row, col]!r} is not finite; expected a finite number",
+            raise InputError(f"value {float(raw.sigma[row, col])!r} is not finite; expected a finite number",
                              path=raw.path, line=int(raw.lines[row]), field=sigma_names[col])
         bad = _first(raw.sigma <= 0.0)
         if bad is not None:
             row, col = bad
             raise InputError(
-                f"value {raw.sigma[row, col]!r} is not positive; an uncertainty (one standard deviation) "
+                f"value {float(raw.sigma[row, col])!r} is not positive; an uncertainty (one standard deviation) "
                 f"must be > 0", path=raw.path, line=int(raw.lines[row]), field=sigma_names[col])
 
 
@@ -299,7 +299,7 @@ def _parse_yaml_header(text_lines: list[str], first_line: int, path) -> _Header:
     return _Header({str(k): v for k, v in data.items()}, where)
 
 
-def _sidecar_of(path: Path) -> Path | None:
+def find_sidecar(path: Path) -> Path | None:
     """The sidecar header of a table: ``<file>.yaml`` or ``<stem>.yaml``; InputError if both exist."""
     candidates = [path.with_name(path.name + ".yaml")]
     if path.suffix and path.suffix != ".yaml":
@@ -470,7 +470,7 @@ def read_table(path) -> Measurement:
     """
     path = Path(path)
     lines = read_text_lines(path)
-    sidecar_path = _sidecar_of(path)
+    sidecar_path = find_sidecar(path)
     sidecar = None
     if sidecar_path is not None:
         sidecar = _parse_yaml_header(read_text_lines(sidecar_path), 1, sidecar_path)
