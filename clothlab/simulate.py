@@ -21,6 +21,7 @@ import numpy as np
 
 from clothlab.frames import vector_to_spherical
 from clothlab.measurement import Measurement
+from clothlab.models.components import combine
 
 EXITANT_DIRECTIONS = ((0.0, 0.0), (30.0, 0.0), (30.0, 90.0), (45.0, 45.0), (45.0, 135.0), (60.0, 0.0), (60.0, 90.0))
 
@@ -90,8 +91,6 @@ def simulate(model, params: dict, coefficients: dict, *, channels=("R", "G", "B"
 
     ti, pi_, to, po = sampling if sampling is not None else paper_sampling()
     wi, wo = spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
-    from clothlab.models.irawan.model import combine
-
     clean = combine(model.components(wi, wo, params), {k: np.asarray(v, dtype=np.float64)
                                                        for k, v in coefficients.items()})
     noise = noise or NoiseModel()

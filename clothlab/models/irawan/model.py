@@ -34,6 +34,7 @@ import numpy as np
 
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
+from clothlab.models.components import combine
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, apply_parameters, weave_parameters
 from clothlab.models.irawan.phase import phase_function
 from clothlab.models.irawan.quadrature import RULES
@@ -77,16 +78,29 @@ def geometry_warnings(params: dict, fabric: str = "") -> list[str]:
     return out
 
 
-def yarn_specular(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
-    """Raw f_c I_j for segment type ``kind`` at fabric-frame directions (N, 3); params in declared units."""
+GEOMETRY_KEYS = ("psi", "umax", "kappa", "w", "l")
+
+
+def yarn_geometry_key(params: dict, kind: str) -> tuple:
+    """The parameters the yarn integral I_j depends on (not alpha, beta: f_c factors out of eq. 10)."""
+    return tuple(params[f"{kind}.{k}"] for k in GEOMETRY_KEYS) + (params["delta"],)
+
+
+def yarn_integral_fabric(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
+    """I_j (eq. 10 without f_c) for segment type ``kind`` at fabric-frame directions (N, 3)."""
     lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
-    integral = yarn_integral(
+    return yarn_integral(
         lw, lo,
         psi=np.deg2rad(params[f"{kind}.psi"]), umax=np.deg2rad(params[f"{kind}.umax"]),
         kappa=params[f"{kind}.kappa"], w=params[f"{kind}.w"], l=params[f"{kind}.l"],
         delta=params["delta"], rule=quadrature.rule, n=int(quadrature.nodes),
         psi_threshold=PSI_FILAMENT_THRESHOLD,
     )
+
+
+def yarn_specular(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
+    """Raw f_c I_j for segment type ``kind`` at fabric-frame directions (N, 3); params in declared units."""
+    integral = yarn_integral_fabric(wi, wo, params, kind, quadrature)
     return phase_function(wi, wo, params["alpha"], params["beta"]) * integral
 
 
@@ -135,6 +149,20 @@ class IrawanModel:
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
+        self._memo: dict = {}  # (kind, id(wi), id(wo), geometry) -> (wi, wo, I_j); see _integral
+
+    def _integral(self, wi, wo, p, kind):
+        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta
+        reuses it.  The entry keeps references to wi and wo, so their ids cannot be reused meanwhile."""
+        key = (kind, id(wi), id(wo), wi.shape, yarn_geometry_key(p, kind), self.quadrature)
+        hit = self._memo.get(key)
+        if hit is not None:
+            return hit[2]
+        value = yarn_integral_fabric(wi, wo, p, kind, self.quadrature)
+        if len(self._memo) >= 8:
+            self._memo.pop(next(iter(self._memo)))
+        self._memo[key] = (wi, wo, value)
+        return value
 
     def default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
@@ -159,6 +187,7 @@ class IrawanModel:
         p = self.resolve(params)
         wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+        phase = None
         need = COMPONENTS if need is None else tuple(need)
         if warn:
             for message in geometry_warnings(p, self.weave.name):
@@ -171,7 +200,9 @@ class IrawanModel:
             name = f"specular_{kind}"
             if name not in need:
                 continue
-            value = yarn_specular(wi, wo, p, kind, self.quadrature)
+            if phase is None:
+                phase = phase_function(wi, wo, p["alpha"], p["beta"])
+            value = phase * self._integral(wi, wo, p, kind)
             if normalised:
                 albedo = specular_albedo(p, kind, self.quadrature)
                 value = value / albedo if albedo > 0.0 else np.zeros_like(value)
@@ -183,20 +214,3 @@ class IrawanModel:
         (or component names) to (C,) arrays."""
         comps = self.components(wi, wo, params)
         return combine(comps, coefficients)
-
-
-COEFFICIENT_OF = {"diffuse": "kd", "specular_warp": "ks_warp", "specular_weft": "ks_weft"}
-
-
-def combine(components: dict, coefficients: dict) -> np.ndarray:
-    """sum_k c_k (C,) x component_k (N,) -> (N, C)."""
-    total = None
-    for name, comp in components.items():
-        coef = coefficients.get(COEFFICIENT_OF.get(name, name), coefficients.get(name))
-        if coef is None:
-            continue
-        term = comp[:, None] * np.atleast_1d(np.asarray(coef, dtype=np.float64))[None, :]
-        total = term if total is None else total + term
-    if total is None:
-        raise ValueError("no coefficient matches any component")
-    return total
