@@ -1,0 +1,103 @@
+"""The fit objective: free parameters in a unit box, linear coefficients eliminated inside.
+
+For free parameters theta (declared units) the objective is
+
+    F(theta) = mean_{n,c} r(measured[n,c], sum_k c_k[c] component_k(theta)[n])^2
+
+with r the chosen metric (:mod:`clothlab.metrics`) and the coefficients c_k >= 0 solved per channel at
+every evaluation by non-negative least squares with the metric's linearised row weights
+(:func:`clothlab.metrics.linear_weights`; the paper fits kd and ks linearly too, sec. 8).  Parameters are
+seen by the optimiser in [0, 1]: x = (T(theta) - T(lo)) / (T(hi) - T(lo)) with T = log for parameters
+declared with a log transform, identity otherwise (numerics.md item 12: scales differ by orders of magnitude).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from clothlab.errors import ConfigError, GeometryWarning
+from clothlab.fit.nnls import nnls_small
+from clothlab.metrics import linear_weights, metric_residuals, objective_value
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Everything at one parameter point: raw coefficients (k, C), prediction (N, C), objective value."""
+
+    params: dict
+    coefficients: np.ndarray
+    prediction: np.ndarray
+    objective: float
+
+
+class FitProblem:
+    """Measurement + model + free parameter set + bounds + metric -> a scalar objective on [0, 1]^k."""
+
+    def __init__(self, model, measurement, free, start: dict | None = None, bounds: dict | None = None,
+                 metric: str = "relative"):
+        self.model = model
+        self.measurement = measurement
+        self.metric = metric
+        self.free = tuple(free)
+        if not self.free:
+            raise ConfigError("no free parameters: list at least one under fit.free", field="fit.free")
+        self.start = model.resolve(start or {})
+        self.specs = [model.params[name] for name in self.free]
+        bounds = bounds or {}
+        self.lower = np.array([float(bounds.get(s.name, s.bounds)[0]) for s in self.specs])
+        self.upper = np.array([float(bounds.get(s.name, s.bounds)[1]) for s in self.specs])
+        for spec, lo, hi in zip(self.specs, self.lower, self.upper, strict=True):
+            spec.check(lo, f"fit.bounds.{spec.name}")
+            spec.check(hi, f"fit.bounds.{spec.name}")
+            if not lo < hi or (spec.transform == "log" and lo <= 0):
+                raise ConfigError(f"bounds [{lo:g}, {hi:g}] of {spec.name} are empty or not positive for a "
+                                  "log-scaled parameter", field=f"fit.bounds.{spec.name}")
+        self.wi = np.ascontiguousarray(measurement.wi)
+        self.wo = np.ascontiguousarray(measurement.wo)
+        self.y = measurement.values
+        self.weights = linear_weights(self.y, metric)
+        self.component_names = tuple(model.component_names)
+        self.evaluations = 0
+
+    # ------------------------------------------------------------------ coordinates
+    def _t(self, values):
+        return np.array([np.log(v) if s.transform == "log" else v for s, v in zip(self.specs, values, strict=True)])
+
+    def to_unit(self, params: dict) -> np.ndarray:
+        """Unit-box coordinates of the free parameters of ``params`` (clipped into the box)."""
+        t = self._t([params[name] for name in self.free])
+        lo, hi = self._t(self.lower), self._t(self.upper)
+        return np.clip((t - lo) / (hi - lo), 0.0, 1.0)
+
+    def from_unit(self, x) -> dict:
+        """The full parameter dict (start values with the free ones replaced) at unit coordinates ``x``."""
+        x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+        lo, hi = self._t(self.lower), self._t(self.upper)
+        t = lo + x * (hi - lo)
+        params = dict(self.start)
+        for spec, value in zip(self.specs, t, strict=True):
+            params[spec.name] = float(np.exp(value) if spec.transform == "log" else value)
+        return params
+
+    # ------------------------------------------------------------------ evaluation
+    def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
+        """(N, k) matrix of the model components at ``params``."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GeometryWarning)
+            comps = self.model.components(self.wi, self.wo, params, normalised=normalised, warn=False)
+        return np.stack([comps[name] for name in self.component_names], axis=1)
+
+    def solve(self, params: dict, *, normalised: bool = False) -> Solution:
+        """Coefficients by weighted NNLS, prediction and objective at ``params``."""
+        design = self.design(params, normalised=normalised)
+        coef, _ = nnls_small(design, self.y, self.weights)
+        prediction = design @ coef
+        value = objective_value(metric_residuals(self.y, prediction, self.metric))
+        return Solution(params, coef, prediction, float(value))
+
+    def __call__(self, x) -> float:
+        self.evaluations += 1
+        return self.solve(self.from_unit(x)).objective

@@ -1,0 +1,233 @@
+"""Run a fit from a validated configuration: load, build, optimise, summarise, save.
+
+``run_fit(config)`` returns a :class:`FitResult`; ``save_fit(result)`` writes fits/<name>/
+(:mod:`clothlab.fit.store`).  Steps: the measurement is loaded and the weave resolved; the model's free
+parameters start from fabric.yaml ``model.params`` (else the weave's values); nlopt runs a seeded global stage
+then a local polish (:func:`clothlab.fit.optimize.minimize`); the linear coefficients are re-solved at the
+optimum and converted to albedos (kd, ks_j; :mod:`clothlab.models.irawan.model`); relative-error
+percentiles (paper sec. 8) and at-bound flags are computed.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+import warnings
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from importlib import metadata
+
+import numpy as np
+
+from clothlab import __version__
+from clothlab.errors import GeometryWarning
+from clothlab.fit.problem import FitProblem, Solution
+from clothlab.frames import spherical_to_vector
+from clothlab.metrics import error_percentiles
+from clothlab.models.components import coefficient_name
+
+VERSIONED = ("numpy", "scipy", "numba", "nlopt", "matplotlib", "PyYAML", "emcee")
+
+
+def package_versions() -> dict:
+    out = {"python": platform.python_version(), "clothlab": __version__}
+    for name in VERSIONED:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+@dataclass
+class FitResult:
+    """The outcome of one fit (everything fit.json holds, plus the arrays behind it)."""
+
+    config: object
+    problem: FitProblem
+    params: dict
+    solution: Solution  # at the optimum, normalised components
+    coefficients: dict  # name -> (C,) albedos
+    optimum: object  # OptimizeResult
+    errors: dict
+    start_objective: float
+    wall_time: float
+    warnings: list = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+
+def build_problem(config, measurement=None):
+    """Measurement, weave and model of a configuration -> FitProblem."""
+    from clothlab.io.loader import load_measurement
+    from clothlab.models.registry import build_model
+    from clothlab.presets import resolve_weave
+
+    if measurement is None:
+        measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
+                                       else config.measurement.format, **config.measurement.options)
+    weave = resolve_weave(config.model.weave, config.base_dir)
+    q = config.model.quadrature
+    model = build_model(config.model.kind, weave, (q.rule, q.nodes))
+    return FitProblem(model, measurement, config.fit.free, config.model.params, config.fit.bounds, config.fit.metric)
+
+
+def run_fit(config, *, measurement=None, progress=None) -> FitResult:
+    """Fit the model of ``config`` to its measurement.  ``progress(row)`` is called after each evaluation."""
+    from clothlab.fit.optimize import minimize
+    from clothlab.models.irawan.model import geometry_warnings
+
+    started = time.perf_counter()
+    problem = build_problem(config, measurement)
+    opt = config.fit.optimizer
+    x0 = problem.to_unit(problem.start)
+    start_objective = problem(x0)
+    k = len(problem.free)
+    optimum = minimize(problem, x0, np.zeros(k), np.ones(k), global_algorithm=opt.global_algorithm,
+                       local_algorithm=opt.local_algorithm, max_evals=opt.max_evals, seed=opt.seed,
+                       max_time=opt.max_time, callback=progress)
+    params = problem.from_unit(optimum.x)
+    solution = problem.solve(params, normalised=True)
+    names = problem.component_names
+    channels = problem.measurement.channels
+    coefficients = {coefficient_name(n): solution.coefficients[i] for i, n in enumerate(names)}
+    errors = error_percentiles(problem.y, solution.prediction, config.report.percentiles, channels)
+    notes = []
+    if config.model.kind == "irawan":
+        notes += geometry_warnings(params, problem.model.weave.name)
+    for name, lo, hi in zip(problem.free, optimum.at_lower, optimum.at_upper, strict=True):
+        if lo or hi:
+            notes.append(f"{name} ended at its {'lower' if lo else 'upper'} bound "
+                         f"({params[name]:.6g}): not determined by these data within the bounds")
+    for name, coef in coefficients.items():
+        if np.all(coef == 0.0):
+            notes.append(f"coefficient {name} is 0 in every channel: that component is not seen in the data")
+    return FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
+                     time.perf_counter() - started, notes)
+
+
+def _parameter_entries(result: FitResult) -> dict:
+    problem = result.problem
+    truth = (problem.measurement.provenance or {}).get("parameters", {}) if _is_simulated(problem) else {}
+    free_bounds = {n: (lo, hi) for n, lo, hi in zip(problem.free, problem.lower, problem.upper, strict=True)}
+    flags = {n: ("lower" if lo else "upper" if hi else None)
+             for n, lo, hi in zip(problem.free, result.optimum.at_lower, result.optimum.at_upper, strict=True)}
+    out = {}
+    for spec in problem.model.params:
+        name = spec.name
+        if name not in result.params:
+            continue
+        lo, hi = free_bounds.get(name, spec.bounds)
+        entry = {"value": result.params[name], "unit": spec.unit, "free": name in problem.free,
+                 "lower": lo, "upper": hi, "start": problem.start[name], "at_bound": flags.get(name),
+                 "doc": spec.doc}
+        if name in truth:
+            entry["truth"] = truth[name]
+        out[name] = entry
+    return out
+
+
+def _is_simulated(problem) -> bool:
+    return bool((problem.measurement.provenance or {}).get("simulated"))
+
+
+def fit_summary(result: FitResult) -> dict:
+    """The content of fit.json."""
+    cfg = result.config
+    problem = result.problem
+    m = problem.measurement
+    channels = list(m.channels)
+    opt = result.optimum
+    return {
+        "name": cfg.name,
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        "clothlab_version": __version__,
+        "versions": package_versions(),
+        "config_hash": cfg.hash,
+        "config": cfg.canonical(),
+        "model": {"kind": cfg.model.kind, "weave": cfg.canonical()["model"]["weave"],
+                  "quadrature": {"rule": cfg.model.quadrature.rule, "nodes": cfg.model.quadrature.nodes}},
+        "measurement": {"path": cfg.canonical()["measurement"]["path"], "n": m.n, "channels": channels,
+                        "provenance": {k: v for k, v in (m.provenance or {}).items()}},
+        "parameters": _parameter_entries(result),
+        "coefficients": {name: dict(zip(channels, map(float, coef), strict=True))
+                         for name, coef in result.coefficients.items()},
+        "coefficient_meaning": "kd: diffuse albedo; ks_<kind>: mean specular albedo of that segment type",
+        "metric": problem.metric,
+        "errors": result.errors,
+        "objective": {"start": result.start_objective, "final": float(opt.fun),
+                      "final_normalised": result.solution.objective},
+        "evaluations": int(opt.nevals),
+        "wall_time_s": result.wall_time,
+        "seed": cfg.fit.optimizer.seed,
+        "optimizer": {"global": cfg.fit.optimizer.global_algorithm, "local": cfg.fit.optimizer.local_algorithm,
+                      "max_evals": cfg.fit.optimizer.max_evals, "status": getattr(opt, "message", "")},
+        "warnings": list(result.warnings),
+    }
+
+
+def prediction_table(result: FitResult) -> dict:
+    """predictions.csv columns: angles, measured, model, sigma and per-component contributions."""
+    problem = result.problem
+    m = problem.measurement
+    table = {"theta_i": m.theta_i, "phi_i": m.phi_i, "theta_o": m.theta_o, "phi_o": m.phi_o}
+    design = problem.design(result.params, normalised=True)
+    for c, ch in enumerate(m.channels):
+        table[f"measured_{ch}"] = m.values[:, c]
+        table[f"model_{ch}"] = result.solution.prediction[:, c]
+        if m.sigma is not None:
+            table[f"sigma_{ch}"] = m.sigma[:, c]
+        for k, name in enumerate(problem.component_names):
+            table[f"{name}_{ch}"] = design[:, k] * result.solution.coefficients[k, c]
+    return table
+
+
+def slice_table(result: FitResult, step: float = 1.0) -> dict:
+    """slices.csv: the model in each exitant direction's incidence plane, signed theta_i in [-89, 89] deg
+    (positive on the mirror side, phi_i = phi_o + 180)."""
+    problem = result.problem
+    m = problem.measurement
+    exitant = np.unique(np.stack([m.theta_o, m.phi_o], axis=1), axis=0)
+    signed = np.arange(-89.0, 89.0 + 0.5 * step, step)
+    rows_to, rows_po, rows_s, wi, wo = [], [], [], [], []
+    for to, po in exitant:
+        phi_i = np.where(signed >= 0, po + 180.0, po) % 360.0
+        wi.append(spherical_to_vector(np.abs(signed), phi_i))
+        wo.append(np.repeat(spherical_to_vector(to, po)[None, :], len(signed), axis=0))
+        rows_to.append(np.full(len(signed), to))
+        rows_po.append(np.full(len(signed), po))
+        rows_s.append(signed)
+    wi, wo = np.concatenate(wi), np.concatenate(wo)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        comps = problem.model.components(wi, wo, result.params, normalised=True, warn=False)
+    from clothlab.models.components import combine
+
+    values = combine(comps, result.coefficients)
+    table = {"theta_o": np.concatenate(rows_to), "phi_o": np.concatenate(rows_po),
+             "signed_theta_i": np.concatenate(rows_s)}
+    for c, ch in enumerate(m.channels):
+        table[f"model_{ch}"] = values[:, c]
+    return table
+
+
+def trace_table(result: FitResult) -> dict:
+    trace = result.optimum.trace
+    keys = ("evaluation", "time_s", "value", "best", "stage")
+    if isinstance(trace, np.ndarray) and trace.dtype.names:
+        return {k: trace[k] for k in keys}
+    return {k: [row[k] if isinstance(row, dict) else getattr(row, k) for row in trace] for k in keys}
+
+
+def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
+    """Write fits/<name>/ for ``result``; returns the directory."""
+    from clothlab.fit.store import write_fit_directory
+
+    cfg = result.config
+    dest = (fits_dir if fits_dir is not None else cfg.output.fits) / cfg.name
+    config_text = cfg.path.read_text() if cfg.path is not None else None
+    return write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
+                               slices=slice_table(result), trace=trace_table(result), config_text=config_text,
+                               force=force)

@@ -1,0 +1,75 @@
+"""fits/<name>/: the saved result of a fit, written atomically (DESIGN.md principle 6).
+
+Layout (read by :mod:`clothlab.report` and :func:`load_fit`):
+
+- ``fit.json``        parameters (value, unit, free, bounds, start, at_bound, truth), coefficients,
+                      error percentiles, objective, evaluations, wall time, seed, versions, config + hash
+- ``predictions.csv`` theta_i, phi_i, theta_o, phi_o [deg], measured_<c>, model_<c>, sigma_<c>,
+                      diffuse_<c>, specular_warp_<c>, specular_weft_<c> (1/sr)
+- ``slices.csv``      dense model curves in each exitant direction's incidence plane
+- ``trace.csv``       evaluation, time_s, value, best, stage
+- ``fabric.yaml``     the configuration as given
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.atomic import atomic_directory
+from clothlab.errors import InputError
+
+
+def _csv_text(header, columns) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    for row in zip(*columns, strict=True):
+        writer.writerow([repr(float(v)) if isinstance(v, float | np.floating) else v for v in row])
+    return buf.getvalue()
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, trace: dict, config_text: str | None,
+                        force: bool = False) -> Path:
+    """Write the files of a fit result into ``dest`` atomically; refuses an existing dest without ``force``."""
+    dest = Path(dest)
+    with atomic_directory(dest, force=force) as tmp:
+        (tmp / "fit.json").write_text(json.dumps(_json_safe(fit), indent=2, allow_nan=False) + "\n")
+        for name, table in (("predictions.csv", predictions), ("slices.csv", slices), ("trace.csv", trace)):
+            (tmp / name).write_text(_csv_text(list(table), [np.asarray(v).tolist() for v in table.values()]))
+        if config_text is not None:
+            (tmp / "fabric.yaml").write_text(config_text)
+    return dest
+
+
+def read_fit_json(fit_dir) -> dict:
+    """fit.json of a fit directory, with a clear error when it is missing or not valid JSON."""
+    path = Path(fit_dir) / "fit.json"
+    if not path.is_file():
+        raise InputError("no fit.json here: not a fit directory (run `clothlab fit fabric.yaml` first)", path=path)
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"fit.json is not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
