@@ -1,0 +1,76 @@
+"""One entry point for measurement files: detect the format, dispatch to its reader.
+
+Detection (first 200 lines of a file):
+
+- ``clothlab``: a ``# clothlab-table`` header line, or a sidecar ``<file>.yaml`` / ``<stem>.yaml``;
+- ``pabopto``: a ``#format:``, ``#intheta``, ``#inphi`` or ``#incident_angle`` header line; a directory is
+  read as the pab-opto files of one sample;
+- ``astm``: a ``NUM_POINTS`` or ``VARS`` keyword line.
+
+``format=`` skips detection; ``**options`` go to the reader (:func:`clothlab.io.astm.read_astm`'s
+conventions, :func:`clothlab.io.pabopto.read_pabopto`'s ``up``; the clothlab table takes none).
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+
+from clothlab.errors import InputError
+from clothlab.io.astm import read_astm
+from clothlab.io.pabopto import read_pabopto
+from clothlab.io.table import find_sidecar, read_table
+from clothlab.measurement import Measurement
+
+READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto}
+FORMATS = tuple(READERS)
+_DETECT_LINES = 200
+_CLOTHLAB = re.compile(r"^#\s*clothlab-table\s*:")
+_PABOPTO = re.compile(r"^#\s*(format\s*:|intheta\b|inphi\b|incident_angle\b)", re.IGNORECASE)
+_ASTM = re.compile(r"^\s*(NUM_POINTS|VARS)\b", re.IGNORECASE)
+
+
+def detect_format(path) -> str:
+    """The format name of a measurement file or directory (one of :data:`FORMATS`), or InputError."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError("measurement file or directory not found", path=path)
+    if path.is_dir():
+        return "pabopto"
+    with open(path, "rb") as handle:
+        head = [handle.readline() for _ in range(_DETECT_LINES)]
+    text = b"".join(head).decode("utf-8", errors="replace")
+    if not text.strip():
+        if find_sidecar(path) is not None:
+            return "clothlab"
+        raise InputError("file is empty; expected a measurement table", path=path)
+    lines = text.splitlines()
+    if any(_CLOTHLAB.match(line) for line in lines) or find_sidecar(path) is not None:
+        return "clothlab"
+    if any(_PABOPTO.match(line) for line in lines):
+        return "pabopto"
+    if any(_ASTM.match(line) for line in lines):
+        return "astm"
+    raise InputError(
+        "unknown measurement format: expected a clothlab table ('# clothlab-table: 1' header or a sidecar "
+        f"{path.name}.yaml), an ASTM E1392 file (NUM_POINTS / VARS keywords) or pab-opto files ('#format:', "
+        "'#intheta' or '#incident_angle' lines); or pass format= one of " + ", ".join(FORMATS), path=path)
+
+
+def load_measurement(path, format: str | None = None, **options) -> Measurement:  # noqa: A002
+    """Load a measurement in any supported format into clothlab's convention (degrees, BRDF in 1/sr)."""
+    if format is None:
+        format = detect_format(path)
+    elif format not in READERS:
+        raise InputError(f"unknown measurement format {format!r}; expected one of {', '.join(FORMATS)}",
+                         path=path, field="format")
+    elif not Path(path).exists():
+        raise InputError("measurement file or directory not found", path=path)
+    reader = READERS[format]
+    accepted = [p.name for p in inspect.signature(reader).parameters.values() if p.kind == p.KEYWORD_ONLY]
+    for name in options:
+        if name not in accepted:
+            raise InputError(f"option {name!r} is not accepted by the {format} reader; it takes "
+                             f"{', '.join(accepted) or 'no options'}", path=path, field=name)
+    return reader(path, **options)
