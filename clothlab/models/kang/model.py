@@ -19,6 +19,8 @@ against a fine grid over the tile (see docs/kang.md).
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
 from clothlab.errors import ConfigError
@@ -35,7 +37,8 @@ class KangModel:
     """Kang's procedural fabric shader behind the clothlab model interface.
 
     Options: ``tile_nodes`` (Gauss-Legendre nodes per perturbation axis of the tile average and the
-    prefiltered weave level, default 24); ``weave_level``: the far (alpha = 1) level of eq. 5,
+    prefiltered weave level; None (default) chooses per axis from the lobe width, see
+    :func:`nodes_for_axis`); ``weave_level``: the far (alpha = 1) level of eq. 5,
     ``'prefiltered'`` (default: the yarn level averaged over the yarn, so the far view equals the tile
     average) or ``'flat'`` (the paper's literal choice: the unperturbed normal, no ambient occlusion);
     ``prefilter_min_samples`` / ``prefilter_max_samples`` / ``seed`` for Algorithm 1.
@@ -45,9 +48,9 @@ class KangModel:
     params = KANG_PARAMS
     component_names = ("diffuse_warp", "diffuse_weft", "specular_warp", "specular_weft")
 
-    def __init__(self, weave: Weave, *, tile_nodes: int = 24, weave_level: str = "prefiltered",
+    def __init__(self, weave: Weave, *, tile_nodes: int | None = None, weave_level: str = "prefiltered",
                  prefilter_min_samples: int = 5, prefilter_max_samples: int = 64, seed: int = 0):
-        if not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1:
+        if tile_nodes is not None and (not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1):
             raise ConfigError(f"tile_nodes must be a positive integer, got {tile_nodes!r}", field="tile_nodes")
         if weave_level not in WEAVE_LEVELS:
             raise ConfigError(f"weave_level must be one of {WEAVE_LEVELS}, got {weave_level!r}",
@@ -56,17 +59,13 @@ class KangModel:
             raise ConfigError(f"need 1 <= prefilter_min_samples < prefilter_max_samples, got "
                               f"{prefilter_min_samples!r}, {prefilter_max_samples!r}", field="prefilter_max_samples")
         self.weave = weave
-        self.tile_nodes = int(tile_nodes)
+        self.tile_nodes = None if tile_nodes is None else int(tile_nodes)
         self.weave_level = weave_level
         self.prefilter_min_samples = int(prefilter_min_samples)
         self.prefilter_max_samples = int(prefilter_max_samples)
         self.seed = seed
         self.shares = {kind: weave.cell_share(kind) for kind in YARN_KINDS}
         self._segment_is_weft = np.array([s.kind == "weft" for s in weave.segments])
-        nodes, weights = np.polynomial.legendre.leggauss(self.tile_nodes)
-        across, along = np.meshgrid(nodes, nodes, indexing="ij")
-        self._unit_nodes = (across.ravel(), along.ravel())  # in [-1, 1]^2
-        self._node_weights = np.outer(weights, weights).ravel() / 4.0  # sum 1
 
     # --- one yarn type, yarn frame -------------------------------------------------------------------
 
@@ -79,13 +78,20 @@ class KangModel:
 
     def _yarn_average(self, kind, wi_l, wo_l, p):
         """(E[ao rho], E[ao]) over the perturbation rectangle of eqs. 3-4 (Gauss-Legendre), (N,), scalar."""
-        d_across = p["yarn_curvature"] * self._unit_nodes[0]
-        d_along = p["fibre_curvature"] * self._unit_nodes[1]
-        normal = yarn.perturbed_normal(d_across, d_along)  # (Q, 3)
+        if self.tile_nodes is not None:
+            q_across = q_along = self.tile_nodes
+        else:
+            q_across = nodes_for_axis(p["yarn_curvature"], p[f"{kind}.nx"])
+            q_along = nodes_for_axis(p["fibre_curvature"], p[f"{kind}.ny"])
+        x_across, w_across = _gauss_legendre(q_across)
+        x_along, w_along = _gauss_legendre(q_along)
+        d_across, d_along = np.meshgrid(p["yarn_curvature"] * x_across, p["fibre_curvature"] * x_along,
+                                        indexing="ij")
+        normal = yarn.perturbed_normal(d_across.ravel(), d_along.ravel())  # (Q, 3)
         ao = yarn.ambient_occlusion(normal)
         rho = self._specular_about(wi_l[:, None, :], wo_l[:, None, :], normal[None], p[f"{kind}.nx"],
                                    p[f"{kind}.ny"], p["fresnel_f0"])
-        weights = self._node_weights * ao
+        weights = np.outer(w_across, w_along).ravel() * ao
         return rho @ weights, float(np.sum(weights))
 
     def _weave_level(self, kind, wi_l, wo_l, p):
@@ -179,6 +185,23 @@ class KangModel:
             out[f"specular_{kind}"][m] = noise[m] * specular
             out[f"diffuse_{kind}"][m] = np.where(visible[m], noise[m] * diffuse / np.pi, 0.0)
         return out
+
+
+def nodes_for_axis(curvature: float, exponent: float) -> int:
+    """Gauss-Legendre nodes for one perturbation axis: ~1.5 per lobe width over the range 2 c, 8 to 256.
+
+    The lobe of eq. 2 has an angular width ~ 1/sqrt(exponent); the perturbation moves it over 2 c.
+    """
+    if curvature == 0.0:
+        return 1
+    return int(np.clip(np.ceil(8.0 + 3.0 * curvature * np.sqrt(exponent)), 8, 256))
+
+
+@cache
+def _gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes on [-1, 1] and weights summing to 1."""
+    nodes, weights = np.polynomial.legendre.leggauss(n)
+    return nodes, weights / 2.0
 
 
 def _directions(wi, wo):
