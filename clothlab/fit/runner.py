@@ -227,7 +227,13 @@ def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
 
     cfg = result.config
     dest = (fits_dir if fits_dir is not None else cfg.output.fits) / cfg.name
+    from clothlab.models.irawan.parameters import apply_parameters
+    from clothlab.wvfile import format_wv
+
     config_text = cfg.path.read_text() if cfg.path is not None else None
+    weave = result.problem.model.weave
+    if cfg.model.kind == "irawan":
+        weave = apply_parameters(weave, result.params)
     return write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
-                               force=force)
+                               weave_text=format_wv(weave), force=force)

@@ -9,6 +9,7 @@ Layout (read by :mod:`clothlab.report` and :func:`load_fit`):
 - ``slices.csv``      dense model curves in each exitant direction's incidence plane
 - ``trace.csv``       evaluation, time_s, value, best, stage
 - ``fabric.yaml``     the configuration as given
+- ``weave.wv``        the weave with the fitted parameters (the fit directory is self-contained for eval)
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ def _json_safe(value):
 
 
 def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, trace: dict, config_text: str | None,
-                        force: bool = False) -> Path:
+                        weave_text: str | None = None, force: bool = False) -> Path:
     """Write the files of a fit result into ``dest`` atomically; refuses an existing dest without ``force``."""
     dest = Path(dest)
     with atomic_directory(dest, force=force) as tmp:
@@ -61,6 +62,8 @@ def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, tra
             (tmp / name).write_text(_csv_text(list(table), [np.asarray(v).tolist() for v in table.values()]))
         if config_text is not None:
             (tmp / "fabric.yaml").write_text(config_text)
+        if weave_text is not None:
+            (tmp / "weave.wv").write_text(weave_text)
     return dest
 
 
@@ -73,3 +76,25 @@ def read_fit_json(fit_dir) -> dict:
         return json.loads(path.read_text())
     except json.JSONDecodeError as exc:
         raise InputError(f"fit.json is not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+
+
+def load_fitted(fit_dir):
+    """(model, params, coefficients {name: (C,)}, channels) of a saved fit, ready to evaluate."""
+    from clothlab.models.registry import build_model
+    from clothlab.wvfile import parse_wv
+
+    fit_dir = Path(fit_dir)
+    fit = read_fit_json(fit_dir)
+    weave_path = fit_dir / "weave.wv"
+    if not weave_path.is_file():
+        raise InputError("weave.wv is missing from the fit directory", path=weave_path)
+    try:
+        kind = fit["model"]["kind"]
+        q = fit["model"].get("quadrature") or {}
+        params = {k: float(v["value"]) for k, v in fit["parameters"].items()}
+        channels = tuple(fit["measurement"]["channels"])
+        coefficients = {k: np.array([float(v[c]) for c in channels]) for k, v in fit["coefficients"].items()}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"fit.json lacks or mangles a required entry ({exc})", path=fit_dir / "fit.json") from None
+    model = build_model(kind, parse_wv(weave_path), (q.get("rule", "trapezoid"), int(q.get("nodes", 11))))
+    return model, params, coefficients, channels

@@ -1,0 +1,271 @@
+"""The ``clothlab`` command line: fit, report, eval, simulate, bench, check.
+
+Heavy imports live inside the commands so that ``clothlab --help`` stays fast.  A user mistake
+(:class:`clothlab.errors.ClothlabError`) prints one line ``clothlab: error: ...`` and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from clothlab import __version__
+from clothlab.errors import ClothlabError, ConfigError, ResultExistsError
+
+
+def _add_quadrature_overrides(p):
+    p.add_argument("--rule", choices=("trapezoid", "gauss", "support", "adaptive"),
+                   help="quadrature rule (overrides fabric.yaml model.quadrature.rule)")
+    p.add_argument("--nodes", type=int, help="quadrature nodes (per piece for support/adaptive)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="clothlab",
+        description="Measure, fit and report the appearance of woven cloth (Irawan-Marschner, Kang).")
+    parser.add_argument("--version", action="version", version=f"clothlab {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser("fit", help="fit a model to a measurement as configured in fabric.yaml -> fits/<name>/")
+    p.add_argument("configs", nargs="+", type=Path, metavar="fabric.yaml")
+    p.add_argument("--force", action="store_true", help="replace an existing fits/<name>/")
+    p.add_argument("--max-evals", type=int, help="optimiser evaluation budget (overrides the yaml)")
+    p.add_argument("--seed", type=int, help="optimiser seed (overrides the yaml)")
+    p.add_argument("--fits-dir", type=Path, help="write under this directory instead of output.fits")
+    p.add_argument("--report", action="store_true", help="also build reports/<name>/ afterwards")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    _add_quadrature_overrides(p)
+
+    p = sub.add_parser("report", help="HTML report of fits (default: every fit under ./fits)")
+    p.add_argument("fits", nargs="*", type=Path, metavar="fits/<name>")
+    p.add_argument("--out", type=Path, default=Path("reports"), help="reports directory (default: reports)")
+    p.add_argument("--force", action="store_true", help="replace existing reports")
+    p.add_argument("--comparison-name", default="comparison", help="name of the multi-fit comparison report")
+
+    p = sub.add_parser("eval", help="evaluate a fitted or configured model at the directions of a CSV")
+    p.add_argument("source", type=Path, help="a fit directory (fits/<name>) or a fabric.yaml")
+    p.add_argument("directions", type=Path, help="CSV with theta_i, phi_i, theta_o, phi_o in degrees")
+    p.add_argument("-o", "--output", type=Path, help="output CSV (default: stdout)")
+    p.add_argument("--components", action="store_true", help="add one column per component and channel")
+    p.add_argument("--force", action="store_true", help="overwrite the output file")
+    _add_quadrature_overrides(p)
+
+    p = sub.add_parser("simulate", help="virtual gonioreflectometer: model + paper sampling + noise -> table")
+    p.add_argument("source", nargs="?", help="preset:<name>, a .wv file or a fabric.yaml")
+    p.add_argument("-o", "--output", type=Path, help="output table (clothlab CSV)")
+    p.add_argument("--paper-examples", type=Path, metavar="DIR",
+                   help="write the six simulated paper-fabric example sets into DIR")
+    p.add_argument("--kd", help="diffuse albedo per channel, e.g. 0.2,0.1,0.1")
+    p.add_argument("--ks-warp", help="warp specular albedo per channel")
+    p.add_argument("--ks-weft", help="weft specular albedo per channel")
+    p.add_argument("--channels", default="R,G,B")
+    p.add_argument("--noise-mult", type=float, default=0.0, help="multiplicative log-normal sigma (0.05 = 5 %%)")
+    p.add_argument("--noise-add", type=float, default=0.0, help="additive Gaussian sigma in 1/sr")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true")
+    _add_quadrature_overrides(p)
+
+    p = sub.add_parser("bench", help="speed and accuracy figures, measured side by side in one run")
+    p.add_argument("--quick", action="store_true", help="a reduced run (seconds instead of minutes)")
+    p.add_argument("--json", type=Path, help="also write the figures as JSON")
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    try:
+        return COMMANDS[args.command](args)
+    except ClothlabError as exc:
+        print(f"clothlab: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("\nclothlab: interrupted", file=sys.stderr)
+        return 130
+
+
+# ---------------------------------------------------------------------------------------------- fit
+
+class _Progress:
+    def __init__(self, name: str, budget: int, quiet: bool):
+        self.name, self.budget, self.quiet = name, budget, quiet
+        self.last = 0.0
+
+    def __call__(self, row):
+        if self.quiet:
+            return
+        now = time.perf_counter()
+        if now - self.last < 0.2:
+            return
+        self.last = now
+        get = row.get if isinstance(row, dict) else (lambda k: getattr(row, k))
+        print(f"\r  {self.name}: [{get('stage'):6s}] evaluation {int(get('evaluation')):5d}/{self.budget}  "
+              f"best {float(get('best')):.4e}  {float(get('time_s')):6.1f} s", end="", file=sys.stderr, flush=True)
+
+    def done(self):
+        if not self.quiet:
+            print(file=sys.stderr)
+
+
+def cmd_fit(args) -> int:
+    from clothlab.config import apply_overrides, load_config
+    from clothlab.fit.runner import run_fit, save_fit
+
+    configs = []
+    for path in args.configs:
+        cfg = apply_overrides(load_config(path), rule=args.rule, nodes=args.nodes, max_evals=args.max_evals,
+                              seed=args.seed)
+        dest = (args.fits_dir or cfg.output.fits) / cfg.name
+        if dest.exists() and not args.force:
+            raise ResultExistsError(f"{dest} exists; pass --force to replace it", path=dest)
+        configs.append(cfg)
+    for cfg in configs:
+        progress = _Progress(cfg.name, cfg.fit.optimizer.max_evals, args.quiet)
+        result = run_fit(cfg, progress=progress)
+        progress.done()
+        out = save_fit(result, force=args.force, fits_dir=args.fits_dir)
+        print(format_summary(result, out))
+        if args.report:
+            from clothlab.report.build import build_report
+
+            report = build_report(out, cfg.output.reports, force=args.force, percentiles=cfg.report.percentiles)
+            print(f"  report: {report / 'index.html'}")
+    return 0
+
+
+def format_summary(result, out) -> str:
+    """The short summary printed after a fit: parameters, coefficients, error percentiles, time."""
+    p = result.problem
+    lines = [f"{result.name}: {p.model.kind} fit of {p.measurement.n} directions x {len(p.measurement.channels)} "
+             f"channels -> {out}"]
+    for name in p.free:
+        spec = p.model.params[name]
+        i = p.free.index(name)
+        flag = ("  (at lower bound)" if result.optimum.at_lower[i] else
+                "  (at upper bound)" if result.optimum.at_upper[i] else "")
+        lines.append(f"  {name:12s} = {result.params[name]:10.4g} {spec.unit}{flag}")
+    for name, coef in result.coefficients.items():
+        lines.append(f"  {name:12s} = " + ", ".join(f"{c:.4g}" for c in coef))
+    e = result.errors["overall"]
+    lines.append("  relative error: " + ", ".join(
+        f"{'median' if k == 'p50' else k[1:] + 'th'} {100 * e[k]:.2f} %" for k in e if k.startswith("p")))
+    lines.append(f"  {int(result.optimum.nevals)} evaluations, {result.wall_time:.1f} s")
+    for w in result.warnings:
+        lines.append(f"  warning: {w}")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- report
+
+def cmd_report(args) -> int:
+    from clothlab.report.build import build_comparison, build_report
+
+    fits = list(args.fits)
+    if not fits:
+        root = Path("fits")
+        fits = sorted(d for d in root.iterdir() if (d / "fit.json").is_file()) if root.is_dir() else []
+        if not fits:
+            raise ConfigError("no fit directories given and none found under ./fits (run `clothlab fit` first)")
+    for fit_dir in fits:
+        out = build_report(fit_dir, args.out, force=args.force)
+        print(f"{fit_dir} -> {out / 'index.html'}")
+    if len(fits) > 1:
+        out = build_comparison(fits, args.out, name=args.comparison_name, force=args.force)
+        print(f"comparison of {len(fits)} fits -> {out / 'index.html'}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------- eval
+
+def cmd_eval(args) -> int:
+    from clothlab.evaluate import evaluate_directions_file
+
+    text = evaluate_directions_file(args.source, args.directions, components=args.components, rule=args.rule,
+                                    nodes=args.nodes)
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        from clothlab.atomic import atomic_write_text
+
+        if args.output.exists() and not args.force:
+            raise ResultExistsError(f"{args.output} exists; pass --force to overwrite it", path=args.output)
+        atomic_write_text(args.output, text)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------- simulate
+
+def _channel_values(text, field, n):
+    import numpy as np
+
+    try:
+        values = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise ConfigError(f"expected comma-separated numbers, got {text!r}", field=field) from None
+    if values.size == 1:
+        values = np.repeat(values, n)
+    if values.size != n or np.any(values < 0) or not np.all(np.isfinite(values)):
+        raise ConfigError(f"expected {n} non-negative values (one per channel), got {text!r}", field=field)
+    return values
+
+
+def cmd_simulate(args) -> int:
+    if args.paper_examples is not None:
+        from clothlab.examples import write_paper_examples
+
+        for path in write_paper_examples(args.paper_examples, force=args.force):
+            print(path)
+        return 0
+    if not args.source or args.output is None:
+        raise ConfigError("give a source (preset:<name>, a .wv file or a fabric.yaml) and -o OUTPUT, "
+                          "or --paper-examples DIR")
+    import warnings
+
+    from clothlab.errors import GeometryWarning
+    from clothlab.io.table import write_table
+    from clothlab.models.registry import build_model
+    from clothlab.presets import resolve_weave
+    from clothlab.simulate import NoiseModel, simulate
+
+    source = args.source
+    params, rule, nodes, kind = {}, "trapezoid", 11, "irawan"
+    if source.endswith((".yaml", ".yml")):
+        from clothlab.config import load_config
+
+        cfg = load_config(source)
+        weave = resolve_weave(cfg.model.weave, cfg.base_dir)
+        params, rule, nodes, kind = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes, \
+            cfg.model.kind
+    else:
+        weave = resolve_weave(source, Path.cwd())
+    channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
+    n = len(channels)
+    coefficients = {"kd": _channel_values(args.kd or "0.1", "--kd", n),
+                    "ks_warp": _channel_values(args.ks_warp or "0.1", "--ks-warp", n),
+                    "ks_weft": _channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
+    model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes))
+    noise = NoiseModel(args.noise_mult, args.noise_add, args.seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        m = simulate(model, params, coefficients, channels=channels, noise=noise,
+                     provenance={"sample_name": f"{weave.name} (SIMULATED)"})
+    print(write_table(m, args.output, overwrite=args.force))
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from clothlab.bench import run_benchmarks
+
+    return run_benchmarks(quick=args.quick, json_path=args.json)
+
+
+COMMANDS = {"fit": cmd_fit, "report": cmd_report, "eval": cmd_eval, "simulate": cmd_simulate, "bench": cmd_bench}
+
+
+if __name__ == "__main__":
+    sys.exit(main())
