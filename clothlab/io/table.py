@@ -130,6 +130,19 @@ def parse_number(text: str, *, path, line: int, column: str) -> float:
         raise InputError(f"value {text!r} is not a number", path=path, line=line, field=column) from None
 
 
+def parse_numbers(rows: list[list[str]], lines: list[int], columns, *, path) -> np.ndarray:
+    """(N, K) floats from rows of K text fields; InputError naming line and column of the first bad one."""
+    try:  # fast path; the per-field parse below finds and names the culprit
+        return np.array([[float(text) for text in fields] for fields in rows], dtype=np.float64).reshape(
+            len(rows), len(columns))
+    except ValueError:
+        pass
+    for fields, lineno in zip(rows, lines, strict=True):
+        for text, column in zip(fields, columns, strict=True):
+            parse_number(text, path=path, line=lineno, column=column)
+    raise AssertionError("unreachable: a field failed float() but passed parse_number")
+
+
 def _first(mask: np.ndarray) -> tuple[int, int] | None:
     """(row, column) of the first True entry of a 2-D mask in row-major order, or None."""
     hits = np.argwhere(mask)
@@ -439,15 +452,15 @@ def _parse_table_lines(lines: list[str], path, sidecar: _Header | None) -> Measu
     if not data:
         raise InputError("empty table: no data rows after the column names", path=path, line=column_line)
 
-    table = np.empty((len(data), len(names)), dtype=np.float64)
-    for r, (lineno, line) in enumerate(data):
+    split = []
+    for lineno, line in data:
         fields = line.split(",")
         if len(fields) != len(names):
             field = names[len(fields)] if len(fields) < len(names) else None
             raise InputError(f"row has {len(fields)} fields, expected {len(names)} ({','.join(names)})",
                              path=path, line=lineno, field=field)
-        for c, text in enumerate(fields):
-            table[r, c] = parse_number(text, path=path, line=lineno, column=names[c])
+        split.append(fields)
+    table = parse_numbers(split, [lineno for lineno, _ in data], names, path=path)
 
     index = {name: c for c, name in enumerate(names)}
     raw = RawRows(
