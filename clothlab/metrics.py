@@ -1,0 +1,161 @@
+"""Error figures and fit metrics for BRDF measurements.
+
+Two uses share this module:
+
+* **Reporting** - :func:`relative_errors` and :func:`error_percentiles` give the fit-quality figures of
+  Irawan & Marschner 2012, sec. 8 (median and 80th-percentile relative error per fabric), as fractions
+  (0.21 means 21 %).
+* **Fitting** - :func:`metric_residuals` / :func:`objective_value` define what a fit minimises, and
+  :func:`linear_weights` gives the row weights under which the linear coefficients (kd, ks) are solved
+  by weighted least squares inside the objective (DESIGN.md principle 3, numerics.md item 12).
+
+Arrays are ``(N,)`` or ``(N, C)`` (N directions, C colour channels); BRDF values are in 1/sr.
+
+Metrics (``METRICS``):
+
+``relative``  r = (model - measured) / measured; needs measured > 0.
+``log``       r = log(max(model, LOG_FLOOR * measured) / measured); needs measured > 0.  The floor keeps
+              r finite where the model is 0 (r >= log(1e-6) ~ -13.8) instead of letting one direction make
+              the objective infinite.
+``cube-root`` r = cbrt(model) - cbrt(measured), a difference of cube roots: the compression of the
+              dynamic range of specular peaks used in BRDF fitting (e.g. Ngan, Durand & Matusik 2005,
+              "Experimental analysis of BRDF models"; any cos(theta_i) factor is the caller's to apply).
+              Units (1/sr)^(1/3); defined for every real measured value (cbrt is odd), so noisy values
+              <= 0 are allowed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+METRICS = ("relative", "log", "cube-root")
+
+LOG_FLOOR = 1e-6
+"""Model values are floored at ``LOG_FLOOR * measured`` in the ``log`` metric (residual >= ln 1e-6)."""
+
+CUBE_ROOT_WEIGHT_FLOOR = 1e-6
+"""In the ``cube-root`` linear weights, measured is floored at this fraction of its channel maximum."""
+
+
+def _as_pair(measured, model) -> tuple[np.ndarray, np.ndarray]:
+    measured = np.asarray(measured, dtype=np.float64)
+    model = np.asarray(model, dtype=np.float64)
+    if measured.shape != model.shape:
+        raise ValueError(f"measured has shape {measured.shape} but model has shape {model.shape}; "
+                         "expected equal shapes (N,) or (N, C)")
+    if measured.ndim not in (1, 2):
+        raise ValueError(f"expected arrays of shape (N,) or (N, C), got {measured.shape}")
+    return measured, model
+
+
+def _check_metric(metric: str) -> None:
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}")
+
+
+def _require_positive(measured: np.ndarray, metric: str) -> None:
+    bad = ~(measured > 0)
+    if bad.any():
+        first = np.unravel_index(int(np.argmax(bad)), measured.shape)
+        raise ValueError(
+            f"the {metric!r} metric needs measured values > 0; {int(bad.sum())} are not (first at index "
+            f"{tuple(int(i) for i in first)}: {measured[first]!r}); drop those rows or use 'cube-root'")
+
+
+def relative_errors(measured, model) -> np.ndarray:
+    """|model - measured| / measured, same shape as the inputs (fractions, dimensionless).
+
+    Where measured <= 0 or either value is not finite the relative error is undefined and NaN is
+    returned; :func:`error_percentiles` ignores those entries and reports how many it used (``n``).
+    """
+    measured, model = _as_pair(measured, model)
+    valid = (measured > 0) & np.isfinite(measured) & np.isfinite(model)
+    safe = np.where(valid, measured, 1.0)
+    return np.where(valid, np.abs(model - measured) / safe, np.nan)
+
+
+def _summary(errors: np.ndarray, percentiles: Sequence[float]) -> dict:
+    finite = errors[np.isfinite(errors)]
+    out: dict = {}
+    for p in percentiles:
+        out[f"p{p:g}"] = float(np.percentile(finite, p)) if finite.size else float("nan")
+    out["mean"] = float(finite.mean()) if finite.size else float("nan")
+    out["n"] = int(finite.size)
+    return out
+
+
+def error_percentiles(measured, model, percentiles: Sequence[float] = (50, 80, 95),
+                      channels: Sequence[str] | None = None) -> dict:
+    """Percentiles and mean of the relative error (Irawan & Marschner 2012, sec. 8), as fractions.
+
+    Returns ``{"overall": {"p50": .., "p80": .., "p95": .., "mean": .., "n": ..}, "per_channel":
+    {name: {...}}}``; keys are ``f"p{p:g}"``.  "overall" pools all channels.  Undefined entries
+    (measured <= 0, non-finite) are skipped; ``n`` counts the entries used (NaN figures when n == 0).
+    Channels default to ``"c0", "c1", ...``.
+    """
+    errors = relative_errors(measured, model)
+    if errors.ndim == 1:
+        errors = errors[:, None]
+    for p in percentiles:
+        if not 0 <= p <= 100:
+            raise ValueError(f"percentile {p!r} outside [0, 100]")
+    n_channels = errors.shape[1]
+    if channels is None:
+        channels = [f"c{i}" for i in range(n_channels)]
+    elif len(channels) != n_channels:
+        raise ValueError(f"{len(channels)} channel names {list(channels)} for {n_channels} channels")
+    return {
+        "overall": _summary(errors.ravel(), percentiles),
+        "per_channel": {name: _summary(errors[:, i], percentiles) for i, name in enumerate(channels)},
+    }
+
+
+def metric_residuals(measured, model, metric: str) -> np.ndarray:
+    """Residuals of ``model`` against ``measured`` under ``metric`` (see the module docstring).
+
+    Returns an array shaped like the inputs.  ``relative`` and ``log`` raise ValueError if any measured
+    value is <= 0 (mask those rows first); a non-finite model value gives a non-finite residual, which
+    the optimiser turns into its penalty.
+    """
+    _check_metric(metric)
+    measured, model = _as_pair(measured, model)
+    if metric == "cube-root":
+        return np.cbrt(model) - np.cbrt(measured)
+    _require_positive(measured, metric)
+    if metric == "relative":
+        return (model - measured) / measured
+    return np.log(np.maximum(model, LOG_FLOOR * measured) / measured)
+
+
+def objective_value(residuals) -> float:
+    """Mean squared residual, the scalar a fit minimises (NaN propagates, on purpose)."""
+    residuals = np.asarray(residuals, dtype=np.float64)
+    return float(np.mean(residuals * residuals))
+
+
+def linear_weights(measured, metric: str) -> np.ndarray:
+    """Row weights w such that sum (w (A c - y))^2 is the metric linearised at the data y = measured.
+
+    A residual r(m) is expanded to first order at m = y: r ~ r'(y) (m - y), so w = |r'(y)|:
+
+    * relative: r = (m - y) / y is already linear in m -> w = 1 / y (exact);
+    * log: d/dm log(m / y) at m = y is 1 / y -> w = 1 / y;
+    * cube-root: d/dm (m^(1/3) - y^(1/3)) at m = y is (1/3) y^(-2/3) -> w = (1/3) y^(-2/3), with y
+      floored at ``CUBE_ROOT_WEIGHT_FLOOR`` times its channel maximum (the derivative is infinite at 0).
+
+    Same shape as ``measured``.  ``relative`` and ``log`` need measured > 0 (ValueError otherwise).
+    """
+    _check_metric(metric)
+    measured = np.asarray(measured, dtype=np.float64)
+    if measured.ndim not in (1, 2):
+        raise ValueError(f"expected measured of shape (N,) or (N, C), got {measured.shape}")
+    if metric != "cube-root":
+        _require_positive(measured, metric)
+        return 1.0 / measured
+    if not np.isfinite(measured).all():
+        raise ValueError("measured holds non-finite values; cannot form cube-root weights")
+    peak = np.max(np.abs(measured), axis=0, keepdims=True)
+    floor = np.where(peak > 0, CUBE_ROOT_WEIGHT_FLOOR * peak, 1.0)
+    return np.cbrt(np.maximum(np.abs(measured), floor)) ** -2 / 3.0
