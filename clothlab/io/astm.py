@@ -24,7 +24,7 @@ from clothlab.io.table import (
     RawRows,
     check_choice,
     conventions_provenance,
-    parse_number,
+    parse_rows,
     read_text_lines,
     rows_to_measurement,
 )
@@ -99,14 +99,7 @@ def read_astm(path, *, angle_unit: str = "rad", azimuth_zero: str = "weft", azim
         raise InputError(f"NUM_POINTS says {num_points} but the file has {len(data)} data rows",
                          path=path, line=num_line, field="NUM_POINTS")
 
-    table = np.empty((len(data), len(names)))
-    for r, (lineno, text) in enumerate(data):
-        fields = _split_fields(text)
-        if len(fields) != len(names):
-            raise InputError(f"row has {len(fields)} fields, expected {len(names)} (VARS {','.join(names)})",
-                             path=path, line=lineno, field=names[len(fields)] if len(fields) < len(names) else None)
-        for c, field in enumerate(fields):
-            table[r, c] = parse_number(field, path=path, line=lineno, column=names[c])
+    table = parse_rows(data, names, path=path, split=_split_fields)
 
     canonical = [_ANGLE_ALIASES.get(n.lower()) for n in names]
     angle_index = [canonical.index(a) for a in ANGLE_COLUMNS]

@@ -38,6 +38,7 @@ from clothlab.io.table import (
     check_unique_directions,
     convert_rows,
     parse_number,
+    parse_rows,
     read_text_lines,
 )
 from clothlab.measurement import Measurement
@@ -126,24 +127,19 @@ def _read_file(path: Path) -> _PabFile:
         raise InputError(f"upphi {upphi!r} is not finite", path=path, line=found["upphi"][1], field="upphi")
 
     names = ("theta", "phi", *channels)
-    rows, row_lines = [], []
+    rows = []
     for lineno, line in enumerate(lines[start:], start + 1):
         text = line.strip()
-        if not text:
-            continue
         if text.startswith("#"):
             raise InputError("'#' header line after the data rows; header lines come first", path=path, line=lineno)
-        fields = text.split()
-        if len(fields) != len(names):
-            raise InputError(f"row has {len(fields)} fields, expected {len(names)} ({' '.join(names)})",
-                             path=path, line=lineno, field=names[len(fields)] if len(fields) < len(names) else None)
-        rows.append([parse_number(f, path=path, line=lineno, column=n) for f, n in zip(fields, names, strict=True)])
-        row_lines.append(lineno)
+        if text:
+            rows.append((lineno, text))
+    table = parse_rows(rows, names, path=path, split=str.split, separator=" ")
+    row_lines = [lineno for lineno, _ in rows]
     if "datapoints_in_file" in found and found["datapoints_in_file"][0] != len(rows):
         count, lineno = found["datapoints_in_file"]
         raise InputError(f"datapoints_in_file says {count} but the file has {len(rows)} data rows",
                          path=path, line=lineno, field="datapoints_in_file")
-    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(names))
     transmitted = (table[:, 0] > 90.0) & (table[:, 0] <= 180.0)
     table = table[~transmitted]
     angles = np.column_stack([np.full(len(table), theta_i), np.full(len(table), phi_i), table[:, :2]])

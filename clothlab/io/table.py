@@ -130,15 +130,29 @@ def parse_number(text: str, *, path, line: int, column: str) -> float:
         raise InputError(f"value {text!r} is not a number", path=path, line=line, field=column) from None
 
 
-def parse_numbers(rows: list[list[str]], lines: list[int], columns, *, path) -> np.ndarray:
-    """(N, K) floats from rows of K text fields; InputError naming line and column of the first bad one."""
+def _split_csv(text: str) -> list[str]:
+    return text.split(",")
+
+
+def parse_rows(rows: list[tuple[int, str]], columns, *, path, split=_split_csv, separator: str = ",") -> np.ndarray:
+    """(N, K) floats from (line number, text) rows; InputError naming line and column of the first bad row.
+
+    ``split`` cuts a row into fields (comma-separated by default); ``separator`` is only for messages.
+    """
+    fields = []
+    for lineno, text in rows:
+        row = split(text)
+        if len(row) != len(columns):
+            raise InputError(f"row has {len(row)} fields, expected {len(columns)} ({separator.join(columns)})",
+                             path=path, line=lineno, field=columns[len(row)] if len(row) < len(columns) else None)
+        fields.append(row)
     try:  # fast path; the per-field parse below finds and names the culprit
-        return np.array([[float(text) for text in fields] for fields in rows], dtype=np.float64).reshape(
+        return np.array([[float(text) for text in row] for row in fields], dtype=np.float64).reshape(
             len(rows), len(columns))
     except ValueError:
         pass
-    for fields, lineno in zip(rows, lines, strict=True):
-        for text, column in zip(fields, columns, strict=True):
+    for row, (lineno, _) in zip(fields, rows, strict=True):
+        for text, column in zip(row, columns, strict=True):
             parse_number(text, path=path, line=lineno, column=column)
     raise AssertionError("unreachable: a field failed float() but passed parse_number")
 
@@ -452,15 +466,7 @@ def _parse_table_lines(lines: list[str], path, sidecar: _Header | None) -> Measu
     if not data:
         raise InputError("empty table: no data rows after the column names", path=path, line=column_line)
 
-    split = []
-    for lineno, line in data:
-        fields = line.split(",")
-        if len(fields) != len(names):
-            field = names[len(fields)] if len(fields) < len(names) else None
-            raise InputError(f"row has {len(fields)} fields, expected {len(names)} ({','.join(names)})",
-                             path=path, line=lineno, field=field)
-        split.append(fields)
-    table = parse_numbers(split, [lineno for lineno, _ in data], names, path=path)
+    table = parse_rows(data, names, path=path)
 
     index = {name: c for c, name in enumerate(names)}
     raw = RawRows(
