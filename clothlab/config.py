@@ -244,14 +244,30 @@ class _Lines:
         self.source = source
         self.key_lines: dict[tuple, int] = {}
         self.value_lines: dict[tuple, int] = {}
+        self._open: set[int] = set()  # nodes being walked (an alias to one of them is a cycle)
+        self._done: set[int] = set()  # nodes walked already (aliases are not walked again)
         if root is not None:
             self._walk(root, ())
 
     def _walk(self, node, path: tuple, merged: bool = False) -> None:
-        import yaml
 
         if not merged or path not in self.value_lines:
             self.value_lines[path] = node.start_mark.line + 1
+        if id(node) in self._open:
+            raise ConfigError("a YAML alias refers to the structure containing it (a cycle)",
+                              path=self.source, line=node.start_mark.line + 1, field=_dotted(path) or None)
+        if id(node) in self._done and not merged:
+            return
+        self._open.add(id(node))
+        try:
+            self._walk_children(node, path, merged)
+        finally:
+            self._open.discard(id(node))
+        self._done.add(id(node))
+
+    def _walk_children(self, node, path: tuple, merged: bool) -> None:
+        import yaml
+
         if isinstance(node, yaml.MappingNode):
             merges = []
             seen: dict[str, int] = {}

@@ -389,6 +389,16 @@ def test_unusable_measurement_paths(tmp_path, written):
     assert err.field == "measurement.path" and err.line == 3
 
 
+def test_anchors_merges_and_cycles(tmp_path):
+    text = edit(FULL, "  posterior: {walkers: 40, steps: 500, max_steps: 9000}\n",
+                "  posterior:\n    <<: &chain {steps: 500, max_steps: 9000}\n    walkers: 40\n")
+    assert load_config(project(tmp_path, text)).fit.posterior.max_steps == 9000
+    err = fails(tmp_path, edit(text, "max_steps: 9000", "max_steps: 300"))
+    assert err.field == "fit.posterior.max_steps" and err.line == line_of(text, "<<: &chain")
+    err = fails(tmp_path, edit(FULL, "  options: {angle_unit: rad}", "  options: &loop {a: *loop}"))
+    assert err.line == line_of(FULL, "options:") and "cycle" in str(err)
+
+
 def test_missing_config_file(tmp_path):
     with pytest.raises(ConfigError) as info:
         load_config(tmp_path / "nope.yaml")
