@@ -1,0 +1,359 @@
+"""Tests of the Kang fabric shader (clothlab.models.kang): paper eqs. 1-5 and Algorithm 1."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clothlab.errors import ConfigError, ParameterError
+from clothlab.frames import spherical_to_vector
+from clothlab.models.kang import KANG_PARAMS, KangModel, default_parameters, lod, microfacet, yarn
+from clothlab.presets import PRESET_NAMES, get_preset
+from clothlab.weave import Segment, Weave, YarnGeometry
+
+
+def plain_weave() -> Weave:
+    """2x2 plain weave: warp 1, 2 and weft 3, 4 (as the polyester lining)."""
+    geometry = YarnGeometry(psi=0.0, umax=20.0, kappa=0.0, w=1.0, l=1.0)
+    segments = (Segment(1, "warp", 0.25, 0.25), Segment(2, "warp", 0.75, 0.75),
+                Segment(3, "weft", 0.25, 0.75), Segment(4, "weft", 0.75, 0.25))
+    return Weave("plain", np.array([[3, 2], [1, 4]]), segments, geometry, geometry)
+
+
+def random_directions(n, seed, max_theta=85.0):
+    rng = np.random.default_rng(seed)
+    return spherical_to_vector(rng.uniform(0, max_theta, n), rng.uniform(0, 360, n))
+
+
+def total(comps, kind):
+    return comps[f"{kind}_warp"] + comps[f"{kind}_weft"]
+
+
+# --- eq. 2: normalisation ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("nx, ny", [(0, 0), (1, 1), (0, 50), (10, 1), (30, 300), (1000, 5), (2000, 2000)])
+def test_distribution_normalised(nx, ny):
+    """Integral of D(h) (h.n) = p(h) over the hemisphere is 1 (adaptive quadrature in cos(theta))."""
+    from scipy.integrate import quad_vec
+
+    phi = (np.arange(256) + 0.5) * 2 * np.pi / 256  # periodic: midpoint rule is spectrally accurate
+
+    def ring(mu):
+        s = np.sqrt(max(1.0 - mu * mu, 0.0))
+        h = np.stack([s * np.cos(phi), s * np.sin(phi), np.full_like(phi, mu)], axis=-1)
+        return microfacet.microfacet_distribution(h, nx, ny) * mu
+
+    integral = quad_vec(ring, 0.0, 1.0, epsabs=1e-12, epsrel=1e-10)[0].mean() * 2 * np.pi
+    assert integral == pytest.approx(1.0, abs=2e-6)
+
+
+@pytest.mark.parametrize("n", [0.0, 3.0, 40.0])
+def test_eq2_constant_is_the_half_vector_density(n):
+    """Isotropic closed form: the integral of p(h) (h.n) is (n+1)/(n+2), not 1 (p is a density of h)."""
+    from scipy.integrate import quad
+
+    value = quad(lambda t: microfacet.half_vector_pdf(np.array([np.sin(t), 0, np.cos(t)]), n, n)
+                 * np.cos(t) * np.sin(t) * 2 * np.pi, 0, np.pi / 2)[0]
+    assert value == pytest.approx((n + 1) / (n + 2), rel=1e-8)
+
+
+def test_distribution_exponent_along_axes():
+    """h at azimuth 0 uses exponent x, at 90 deg exponent y (eq. 2), about a tilted normal too."""
+    t = np.deg2rad(20.0)
+    for phi_axis, expected in ((0, 7.0), (np.pi / 2, 90.0)):
+        h = np.array([np.sin(t) * np.cos(phi_axis), np.sin(t) * np.sin(phi_axis), np.cos(t)])
+        p = microfacet.half_vector_pdf(h, 7.0, 90.0)
+        assert p == pytest.approx(np.sqrt(8 * 91) / (2 * np.pi) * np.cos(t) ** expected, rel=1e-12)
+    # rotating h and the (normal, tangent) frame together leaves p unchanged
+    rot = np.array([[1, 0, 0], [0, np.cos(0.3), -np.sin(0.3)], [0, np.sin(0.3), np.cos(0.3)]])
+    h = np.array([0.2, -0.1, 0.97]) / np.linalg.norm([0.2, -0.1, 0.97])
+    tilted = microfacet.half_vector_pdf(rot @ h, 7.0, 90.0, rot @ [0, 0, 1.0], rot @ [1.0, 0, 0])
+    assert tilted == pytest.approx(microfacet.half_vector_pdf(h, 7.0, 90.0), rel=1e-12)
+
+
+def test_shadowing_and_fresnel_bounds():
+    wi, wo = random_directions(500, 1), random_directions(500, 2)
+    h = microfacet.half_vector(wi, wo)
+    kh = np.sum(wi * h, axis=-1)
+    shadow = microfacet.shadowing(wi[:, 2], wo[:, 2], h[:, 2], kh)
+    assert np.all(shadow >= 0) and np.all(shadow <= h[:, 2] ** 2 + 1e-12)
+    assert microfacet.schlick_fresnel(1.0, 0.04) == pytest.approx(0.04)
+    assert microfacet.schlick_fresnel(0.0, 0.04) == pytest.approx(1.0)
+
+
+# --- reciprocity, non-negativity, white furnace ----------------------------------------------------------
+
+PARAMETER_CORNERS = [
+    {},
+    {"warp.nx": 0.0, "warp.ny": 0.0, "weft.nx": 0.0, "weft.ny": 0.0, "fresnel_f0": 1.0},
+    {"warp.nx": 100.0, "warp.ny": 100.0, "weft.nx": 1.0, "weft.ny": 100.0, "fibre_curvature": 0.7,
+     "yarn_curvature": 0.7, "fresnel_f0": 1.0},
+    {"warp.nx": 100.0, "warp.ny": 100.0, "weft.nx": 100.0, "weft.ny": 100.0, "fibre_curvature": 0.0,
+     "yarn_curvature": 0.0, "fresnel_f0": 1.0},
+]
+
+
+@pytest.mark.parametrize("params", PARAMETER_CORNERS)
+def test_reciprocal_and_non_negative(params):
+    model = KangModel(get_preset("cotton-denim"))
+    wi, wo = random_directions(300, 3, 95.0), random_directions(300, 4, 95.0)  # some below the horizon
+    below = (wi[:, 2] <= 0) | (wo[:, 2] <= 0)
+    forward, backward = model.components(wi, wo, params), model.components(wo, wi, params)
+    rng = np.random.default_rng(5)
+    u, v = rng.uniform(-2, 2, 300), rng.uniform(-2, 2, 300)
+    point_f = model.point_components(u, v, wi, wo, params, footprint=0.01)
+    point_b = model.point_components(u, v, wo, wi, params, footprint=0.01)
+    for name in model.component_names:
+        for a, b in ((forward, backward), (point_f, point_b)):
+            assert np.all(np.isfinite(a[name])) and np.all(a[name] >= 0)
+            np.testing.assert_allclose(a[name], b[name], rtol=1e-12, atol=0)
+            assert np.all(a[name][below] == 0)
+
+
+def hemisphere_albedo(evaluate, wi, n_theta=96, n_phi=128):
+    """Integral of f(wi, wo) cos(theta_o) over wo, by Gauss-Legendre in theta_h x midpoint in phi_h.
+
+    Integrates over the half vector (d omega_o = 4 (wi.h) d omega_h), where the specular lobes are compact.
+    """
+    t, wt = np.polynomial.legendre.leggauss(n_theta)
+    theta = (t + 1) * np.pi / 4
+    wtheta = wt * np.pi / 4
+    phi = (np.arange(n_phi) + 0.5) * 2 * np.pi / n_phi
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    h = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1).reshape(-1, 3)
+    d_omega = (wtheta[:, None] * np.sin(theta)[:, None] * np.full((1, n_phi), 2 * np.pi / n_phi)).ravel()
+    kh = h @ wi
+    wo = 2 * kh[:, None] * h - wi
+    keep = (kh > 0) & (wo[:, 2] > 0)
+    f = evaluate(np.repeat(wi[None], keep.sum(), 0), wo[keep])
+    return float(np.sum(f * wo[keep, 2] * 4 * kh[keep] * d_omega[keep]))
+
+
+@pytest.mark.parametrize("params", PARAMETER_CORNERS)
+def test_white_furnace_albedo_at_most_one(params):
+    """Unit coefficients: specular albedo <= 1 and diffuse albedo <= 1, tile average and points."""
+    model = KangModel(get_preset("cotton-twill"), tile_nodes=10)
+    for theta in (0.0, 45.0, 80.0):
+        wi = spherical_to_vector(theta, 30.0)
+        spec = hemisphere_albedo(lambda a, b: total(model.components(a, b, params), "specular"), wi)
+        assert 0 < spec <= 1.0
+        for u, v in ((0.1, 0.2), (0.6, 0.85)):
+            point = hemisphere_albedo(
+                lambda a, b, u=u, v=v: total(model.point_components(u, v, a, b, params), "specular"), wi)
+            assert 0 < point <= 1.0
+    diffuse = hemisphere_albedo(lambda a, b: total(model.components(a, b, params), "diffuse"),
+                                spherical_to_vector(20.0, 0.0))
+    assert diffuse <= 1.0 + 1e-9
+
+
+def test_white_furnace_quadrature_resolves_the_lobe():
+    """Flat isotropic lobe, F = 1, normal incidence: closed form (n - 1) / (n + 3) (the check has teeth).
+
+    At normal incidence the albedo is the integral of p(h) min(1, cos 2 theta_h) over h.
+    """
+    model = KangModel(plain_weave())
+    params = {"warp.nx": 300.0, "warp.ny": 300.0, "weft.nx": 300.0, "weft.ny": 300.0, "fresnel_f0": 1.0,
+              "fibre_curvature": 0.0, "yarn_curvature": 0.0}
+    albedo = hemisphere_albedo(lambda a, b: total(model.components(a, b, params), "specular"),
+                               np.array([0.0, 0.0, 1.0]))
+    assert albedo == pytest.approx(299.0 / 303.0, rel=1e-6)
+
+
+# --- alternating anisotropy, yarn geometry ------------------------------------------------------------------
+
+def test_weft_is_the_warp_lobe_rotated_by_90_degrees():
+    model = KangModel(plain_weave())
+    params = {"warp.nx": 3.0, "warp.ny": 80.0, "weft.nx": 3.0, "weft.ny": 80.0, "yarn_curvature": 0.4}
+    wi, wo = random_directions(50, 6), random_directions(50, 7)
+    quarter = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])  # +90 deg about z: fabric x -> y
+    weft = model.components(wi, wo, params)["specular_weft"]
+    warp_rotated = model.components(wi @ quarter.T, wo @ quarter.T, params)["specular_warp"]
+    np.testing.assert_allclose(weft, warp_rotated, rtol=1e-12)
+    # exchanging x and y (sec. 3.3) differs from the unrotated warp lobe
+    assert not np.allclose(weft, model.components(wi, wo, params)["specular_warp"])
+
+
+def test_perturbation_eqs_3_4():
+    sigma, phase = yarn.yarn_offsets(x_across=0.5, y_along=0.3, width=1.0, n_strands=4.0, fibre_slope=0.2)
+    assert sigma == pytest.approx(1.0)
+    assert phase == pytest.approx((4.0 * (0.3 - 0.2 * 0.5)) % 1.0)
+    d_across, d_along = yarn.perturbation(sigma, 0.75, fibre_curvature=0.4, yarn_curvature=0.6)
+    assert (d_across, d_along) == pytest.approx((0.6, 0.2))
+    n = yarn.perturbed_normal(d_across, d_along)
+    assert n == pytest.approx([0.6, 0.2, np.sqrt(1 - 0.36 - 0.04)])
+    assert yarn.ambient_occlusion(n) == pytest.approx(np.sqrt(0.6))
+
+
+def test_yarn_noise_is_deterministic_with_mean_one():
+    i, j = np.meshgrid(np.arange(-50, 50), np.arange(-50, 50))
+    factor = yarn.yarn_noise(i, j, 3, 0.5)
+    np.testing.assert_array_equal(factor, yarn.yarn_noise(i, j, 3, 0.5))
+    assert factor.min() >= 0.5 and factor.max() <= 1.5
+    assert factor.mean() == pytest.approx(1.0, abs=0.01)
+    assert not np.allclose(factor, yarn.yarn_noise(i, j, 4, 0.5))
+
+
+# --- tile average and LoD -----------------------------------------------------------------------------
+
+def fine_tile_grid(weave, per_cell):
+    w, h = weave.tile_width, weave.tile_height
+    u = (np.arange(w * per_cell) + 0.5) / (w * per_cell)
+    v = (np.arange(h * per_cell) + 0.5) / (h * per_cell)
+    uu, vv = np.meshgrid(u, v)
+    return uu.ravel(), vv.ravel()
+
+
+def grid_mean(model, u, v, wi, wo, params, footprint=None):
+    out = {name: np.zeros(len(wi)) for name in model.component_names}
+    for j in range(len(wi)):
+        comps = model.point_components(u, v, np.repeat(wi[j:j + 1], u.size, 0), np.repeat(wo[j:j + 1], u.size, 0),
+                                       params, footprint=footprint)
+        for name in out:
+            out[name][j] = comps[name].mean()
+    return out
+
+
+SHARP = {"noise": 0.0, "warp.ny": 200.0, "weft.ny": 200.0, "fibre_curvature": 0.7, "yarn_curvature": 0.7}
+
+
+@pytest.mark.parametrize("params", [{"noise": 0.0}, SHARP])
+def test_tile_average_matches_fine_grid(params):
+    """The closed-form-in-position average (Gauss-Legendre over the perturbation) vs 48 x 48 points per cell."""
+    weave = get_preset("cotton-denim")
+    model = KangModel(weave)
+    wi = random_directions(8, 8, 75.0)
+    wo = np.concatenate([wi[:4] * [-1, -1, 1], random_directions(4, 9, 75.0)])  # 4 specular pairs
+    average = model.components(wi, wo, params)
+    fine = grid_mean(model, *fine_tile_grid(weave, 48), wi, wo, params)
+    for kind in ("diffuse", "specular"):
+        np.testing.assert_allclose(total(average, kind), total(fine, kind), rtol=1e-2)
+    np.testing.assert_allclose(average["diffuse_warp"], fine["diffuse_warp"], rtol=1e-3)
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_far_view_equals_tile_average(name):
+    """alpha = 1 (footprint >> a fibre ridge): the point values average over the tile to components()."""
+    weave = get_preset(name)
+    model = KangModel(weave, tile_nodes=12)
+    params = {"noise": 0.0}
+    wi, wo = random_directions(4, 10, 70.0), random_directions(4, 11, 70.0)
+    far = grid_mean(model, *fine_tile_grid(weave, 2), wi, wo, params, footprint=1.0)
+    average = model.components(wi, wo, params)
+    for component in model.component_names:
+        np.testing.assert_allclose(far[component], average[component], rtol=1e-10, atol=1e-14)
+
+
+def test_lod_alpha_clamped_and_continuous():
+    texels = 6.0
+    f = np.geomspace(1e-4, 10.0, 2001)
+    alpha = lod.lod_alpha(f, texels)
+    assert alpha.min() == 0.0 and alpha.max() == 1.0
+    assert np.all(np.diff(alpha) >= 0)
+    for boundary in (1.0 / texels, 2.0 / texels):  # mip levels 0 and 1
+        eps = 1e-9
+        assert abs(lod.lod_alpha(boundary * (1 + eps), texels) - lod.lod_alpha(boundary * (1 - eps), texels)) < 1e-8
+
+
+def test_lod_blend_has_no_jump_at_level_boundaries():
+    weave = get_preset("cotton-denim")
+    model = KangModel(weave)
+    params = {"n_strands": 6.0}
+    rng = np.random.default_rng(12)
+    n = 50
+    u, v = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    wi, wo = random_directions(n, 13, 70.0), random_directions(n, 14, 70.0)
+    cells = max(weave.tile_width, weave.tile_height)
+    detail = model.point_components(u, v, wi, wo, params)
+    far = model.point_components(u, v, wi, wo, params, footprint=1.0)
+    for level in (0.0, 1.0):
+        boundary = 2.0**level / (6.0 * cells)  # footprint (tile units) at mip level `level`
+        for eps in (1e-4, 1e-7):
+            below = model.point_components(u, v, wi, wo, params, footprint=boundary * (1 - eps))
+            above = model.point_components(u, v, wi, wo, params, footprint=boundary * (1 + eps))
+            for name in model.component_names:
+                scale = np.abs(detail[name] - far[name]) + 1e-12
+                assert np.all(np.abs(above[name] - below[name]) <= 3 * eps * scale)
+    outside = model.point_components(u, v, wi, wo, params, footprint=0.5 / (6.0 * cells))
+    for name in model.component_names:
+        np.testing.assert_array_equal(outside[name], detail[name])  # below level 0: full yarn detail
+
+
+def test_flat_weave_level_is_the_unperturbed_lobe():
+    weave = plain_weave()
+    flat, pre = KangModel(weave, weave_level="flat"), KangModel(weave)
+    params = {"noise": 0.0, "yarn_curvature": 0.0, "fibre_curvature": 0.0}
+    wi, wo = random_directions(20, 15), random_directions(20, 16)
+    u, v = np.full(20, 0.3), np.full(20, 0.1)
+    a = flat.point_components(u, v, wi, wo, params, footprint=1.0)
+    b = pre.point_components(u, v, wi, wo, params, footprint=1.0)
+    for name in flat.component_names:  # without perturbation both levels coincide
+        np.testing.assert_allclose(a[name], b[name], rtol=1e-12)
+
+
+# --- Algorithm 1 -------------------------------------------------------------------------------------
+
+def test_prefilter_stopping_rule():
+    rng = np.random.default_rng(0)
+    u = np.zeros(4)
+
+    def constant(index, uu, vv):
+        return np.ones((len(index), 3))
+
+    mean, count = lod.adaptive_prefilter(constant, u, u, 0.1, 10.0, rng=rng, min_samples=5, max_samples=50)
+    np.testing.assert_array_equal(count, 6)  # settles as soon as more than 5 samples are taken
+    np.testing.assert_allclose(mean, 1.0)
+
+    def stripes(index, uu, vv):  # never settles below a zero tolerance
+        return (np.floor(uu * 20) % 2)[:, None] * np.ones((1, 2))
+
+    mean, count = lod.adaptive_prefilter(stripes, u + 0.5, u, 1.0, np.inf, rng=rng, max_samples=400)
+    np.testing.assert_array_equal(count, 400)
+    np.testing.assert_allclose(mean, 0.5, atol=0.1)  # the box average of the stripes
+
+
+def test_prefiltered_render_approaches_tile_average():
+    weave = get_preset("polyester-lining")
+    model = KangModel(weave, prefilter_max_samples=600, seed=3)
+    params = {"noise": 0.0}
+    wi = np.repeat(spherical_to_vector([40.0], [10.0]), 3, 0)
+    wo = np.repeat(spherical_to_vector([40.0], [190.0]), 3, 0)
+    comps = model.point_components([0.1, 0.4, 0.8], [0.3, 0.9, 0.5], wi, wo, params, footprint=20.0,
+                                   view_distance=1e9)
+    average = model.components(wi, wo, params)
+    for kind in ("diffuse", "specular"):
+        np.testing.assert_allclose(total(comps, kind), total(average, kind), rtol=0.05)
+
+
+# --- parameters and errors ---------------------------------------------------------------------------------
+
+def test_declared_parameters():
+    assert set(default_parameters()) == set(KANG_PARAMS.names())
+    for spec in KANG_PARAMS:
+        lo, hi = spec.valid
+        assert lo <= spec.default <= hi and lo <= spec.bounds[0] < spec.bounds[1] <= hi and spec.unit
+
+
+@pytest.mark.parametrize("name, value", [("warp.nx", -1.0), ("weft.ny", -0.5), ("n_strands", 0.5),
+                                         ("fibre_curvature", 0.8), ("yarn_curvature", -0.1),
+                                         ("fresnel_f0", 1.5), ("noise", float("nan"))])
+def test_bad_parameter_names_the_parameter(name, value):
+    model = KangModel(plain_weave())
+    wi = np.array([[0.0, 0.0, 1.0]])
+    with pytest.raises(ParameterError, match=name.replace(".", r"\.")) as err:
+        model.components(wi, wi, {name: value})
+    assert err.value.field == name
+    with pytest.raises(ParameterError, match=name.replace(".", r"\.")):
+        model.point_components(0.1, 0.1, wi, wi, {name: value})
+
+
+def test_unknown_parameter_and_bad_options():
+    model = KangModel(plain_weave())
+    wi = np.array([[0.0, 0.0, 1.0]])
+    with pytest.raises(ParameterError, match="warp.umax"):
+        model.components(wi, wi, {"warp.umax": 10.0})
+    with pytest.raises(ConfigError, match="weave_level"):
+        KangModel(plain_weave(), weave_level="coarse")
+    with pytest.raises(ConfigError, match="tile_nodes"):
+        KangModel(plain_weave(), tile_nodes=0)
+    with pytest.raises(ConfigError, match="footprint"):
+        model.point_components(0.1, 0.1, wi, wi, {}, view_distance=3.0)
