@@ -6,12 +6,13 @@ numerics.md item 12) at every objective evaluation by solving, independently for
     min_{x >= 0} || w_c * (A_c x - y_c) ||_2 ,   A_c (N, k), k <= 6 columns, N >> k rows.
 
 Method (exact, no iteration): an NNLS optimum always exists whose support columns are linearly
-independent, and on its support it is the unconstrained least-squares solution.  So the minimum over all
-2^k supports of the unconstrained solutions that are feasible (>= 0) is the NNLS optimum.  To keep the
-work independent of N and the conditioning that of A (not of A^T A), each channel's weighted design is
-reduced once by a thin QR, W A = Q R; then for a support S the residual is ||R_S x - Q^T W y||^2 + const,
-a k x |S| problem solved with a pseudo-inverse on unit-norm columns (rank-deficient supports and zero
-columns are harmless: a zero column gets coefficient 0).
+independent, and on its support it is the unconstrained least-squares solution.  So the best of the
+unconstrained solutions on all 2^k - 1 supports that are feasible (>= 0), or x = 0, is the NNLS optimum.
+Each channel's weighted design [W A, W y] is reduced once by a thin QR to its (k+1) x (k+1) triangular
+factor, so the work per support is independent of N and every candidate is scored by the honest sum of
+squares ||R x - q||^2 (conditioning of A, not of A^T A, in the score).  Columns are scaled to unit norm;
+a zero column gets coefficient 0; an exactly singular support falls back to an SVD pseudo-inverse.
+~0.3 ms for N = 1,575, k = 3, C = 3.
 """
 
 from __future__ import annotations
