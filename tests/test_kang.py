@@ -191,6 +191,7 @@ def test_yarn_noise_is_deterministic_with_mean_one():
     assert factor.min() >= 0.5 and factor.max() <= 1.5
     assert factor.mean() == pytest.approx(1.0, abs=0.01)
     assert not np.allclose(factor, yarn.yarn_noise(i, j, 4, 0.5))
+    assert yarn.yarn_noise(-3.0, 7.0, 3, 0.5) == factor[57, 47]  # scalars: same value, no overflow warning
 
 
 # --- tile average and LoD -----------------------------------------------------------------------------

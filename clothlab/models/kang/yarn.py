@@ -69,11 +69,12 @@ def yarn_random(tile_u, tile_v, segment):
 
     Independent of float width and platform (numerics.md item 9); negative tile indices are fine.
     """
-    key = np.zeros(np.broadcast(tile_u, tile_v, segment).shape, dtype=np.uint64)
+    shape = np.broadcast(tile_u, tile_v, segment).shape
+    key = np.zeros(max(1, int(np.prod(shape))), dtype=np.uint64)  # 1-D: array ops wrap silently
     for part in (tile_u, tile_v, segment):
         bits = np.asarray(part, dtype=np.int64).astype(np.uint64)  # two's complement for negatives
-        key = _splitmix(key ^ np.broadcast_to(bits, key.shape))
-    return (key >> np.uint64(11)).astype(np.float64) / float(2**53)
+        key = _splitmix(key ^ np.broadcast_to(bits, shape).ravel())
+    return ((key >> np.uint64(11)).astype(np.float64) / float(2**53)).reshape(shape)
 
 
 def yarn_noise(tile_u, tile_v, segment, amplitude):
