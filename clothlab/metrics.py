@@ -30,6 +30,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from clothlab.errors import InputError
+
 METRICS = ("relative", "log", "cube-root")
 
 LOG_FLOOR = 1e-6
@@ -55,11 +57,16 @@ def _check_metric(metric: str) -> None:
         raise ValueError(f"unknown metric {metric!r}; expected one of {', '.join(METRICS)}")
 
 
+class MetricDataError(InputError, ValueError):
+    """Measured values the chosen metric cannot use (<= 0 for ``relative`` / ``log``): a user-facing
+    InputError (one line from the CLI) that is also a ValueError for library callers."""
+
+
 def _require_positive(measured: np.ndarray, metric: str) -> None:
     bad = ~(measured > 0)
     if bad.any():
         first = np.unravel_index(int(np.argmax(bad)), measured.shape)
-        raise ValueError(
+        raise MetricDataError(
             f"the {metric!r} metric needs measured values > 0; {int(bad.sum())} are not (first at index "
             f"{tuple(int(i) for i in first)}: {measured[first]!r}); drop those rows or use 'cube-root'")
 
@@ -115,9 +122,9 @@ def error_percentiles(measured, model, percentiles: Sequence[float] = (50, 80, 9
 def metric_residuals(measured, model, metric: str) -> np.ndarray:
     """Residuals of ``model`` against ``measured`` under ``metric`` (see the module docstring).
 
-    Returns an array shaped like the inputs.  ``relative`` and ``log`` raise ValueError if any measured
-    value is <= 0 (mask those rows first); a non-finite model value gives a non-finite residual, which
-    the optimiser turns into its penalty.
+    Returns an array shaped like the inputs.  ``relative`` and ``log`` raise :class:`MetricDataError`
+    (an InputError and ValueError) if any measured value is <= 0 (mask those rows first); a non-finite
+    model value gives a non-finite residual, which the optimiser turns into its penalty.
     """
     _check_metric(metric)
     measured, model = _as_pair(measured, model)
@@ -145,7 +152,7 @@ def linear_weights(measured, metric: str) -> np.ndarray:
     * cube-root: d/dm (m^(1/3) - y^(1/3)) at m = y is (1/3) y^(-2/3) -> w = (1/3) y^(-2/3), with y
       floored at ``CUBE_ROOT_WEIGHT_FLOOR`` times its channel maximum (the derivative is infinite at 0).
 
-    Same shape as ``measured``.  ``relative`` and ``log`` need measured > 0 (ValueError otherwise).
+    Same shape as ``measured``.  ``relative`` and ``log`` need measured > 0 (MetricDataError otherwise).
     """
     _check_metric(metric)
     measured = np.asarray(measured, dtype=np.float64)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from clothlab.errors import InputError
 from clothlab.metrics import (
     METRICS,
     error_percentiles,
@@ -74,7 +75,9 @@ def test_log_metric_stays_finite_at_zero_model():
 def test_metrics_reject_non_positive_measured_but_cube_root_accepts():
     measured = np.array([1.0, 0.0, 2.0])
     for metric in ("relative", "log"):
-        with pytest.raises(ValueError, match="index"):
+        with pytest.raises(ValueError, match=r"index \(1,\): 0\.0"):
+            metric_residuals(measured, np.ones(3), metric)
+        with pytest.raises(InputError, match="cube-root"):  # user-facing: one line from the CLI
             metric_residuals(measured, np.ones(3), metric)
         with pytest.raises(ValueError):
             linear_weights(measured, metric)
