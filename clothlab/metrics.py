@@ -68,7 +68,7 @@ def _require_positive(measured: np.ndarray, metric: str) -> None:
         first = np.unravel_index(int(np.argmax(bad)), measured.shape)
         raise MetricDataError(
             f"the {metric!r} metric needs measured values > 0; {int(bad.sum())} are not (first at index "
-            f"{tuple(int(i) for i in first)}: {measured[first]!r}); drop those rows or use 'cube-root'")
+            f"{tuple(int(i) for i in first)}: {float(measured[first])!r}); drop those rows or use 'cube-root'")
 
 
 def relative_errors(measured, model) -> np.ndarray:
