@@ -103,6 +103,7 @@ class OptimizerConfig:
     max_evals: int = 4000
     seed: int = 1
     max_time: float | None = None
+    starts: int = 1
 
 
 @dataclass(frozen=True)
@@ -195,6 +196,7 @@ class Config:
                     "max_evals": opt.max_evals,
                     "seed": opt.seed,
                     "max_time": opt.max_time,
+                    "starts": opt.starts,
                 },
                 "posterior": None if post is None else {
                     "walkers": post.walkers, "steps": post.steps, "max_steps": post.max_steps,
@@ -604,7 +606,7 @@ class _Validator:
 
     def optimizer(self, value: Any) -> OptimizerConfig:
         p = ("fit", "optimizer")
-        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time"))
+        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time", "starts"))
         d = OptimizerConfig()
         g = _as_choice(o.get("global", d.global_algorithm), self.r.at(p + ("global",)), GLOBAL_ALGORITHMS,
                        allow_null=True)
@@ -623,7 +625,11 @@ class _Validator:
             max_time = _as_number(max_time, at)
             if max_time <= 0:
                 raise at.error(f"expected a positive number of seconds or null, got {max_time:g}")
-        return OptimizerConfig(g, loc, max_evals, seed, max_time)
+        starts = _as_int(o.get("starts", d.starts), self.r.at(p + ("starts",)), 1, 64)
+        if starts > max_evals:
+            raise self.r.at(p + ("starts",)).error(f"{starts} starts need at least as many evaluations; max_evals is "
+                                                   f"{max_evals}")
+        return OptimizerConfig(g, loc, max_evals, seed, max_time, starts)
 
     def posterior(self, value: Any, free: tuple) -> PosteriorConfig | None:
         p = ("fit", "posterior")

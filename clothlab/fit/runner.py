@@ -74,9 +74,34 @@ def build_problem(config, measurement=None):
     return FitProblem(model, measurement, config.fit.free, config.model.params, config.fit.bounds, config.fit.metric)
 
 
+def multistart_minimize(problem, x0, opt, progress=None):
+    """``opt.starts`` independent seeded global + local runs (budget split evenly); the best is kept and the
+    traces are concatenated (stage names carry the start number when there are several)."""
+    from dataclasses import replace
+
+    from clothlab.fit.optimize import minimize
+
+    k = len(problem.free)
+    budget = max(opt.max_evals // opt.starts, 1)
+    best, trace, offset, time_offset = None, [], 0, 0.0
+    for start in range(opt.starts):
+        result = minimize(problem, x0, np.zeros(k), np.ones(k), global_algorithm=opt.global_algorithm,
+                          local_algorithm=opt.local_algorithm, max_evals=budget, seed=opt.seed + start,
+                          max_time=opt.max_time, callback=progress)
+        best_before = best.fun if best is not None else np.inf
+        for row in result.trace:
+            stage = row.stage if opt.starts == 1 else f"{row.stage}#{start + 1}"
+            trace.append(row._replace(index=row.index + offset, time=row.time + time_offset, stage=stage,
+                                      best=min(row.best, best_before)))
+        offset += result.nevals
+        time_offset += result.wall_time
+        if best is None or result.fun < best.fun:
+            best = result
+    return replace(best, trace=trace, nevals=offset, wall_time=time_offset)
+
+
 def run_fit(config, *, measurement=None, progress=None) -> FitResult:
     """Fit the model of ``config`` to its measurement.  ``progress(row)`` is called after each evaluation."""
-    from clothlab.fit.optimize import minimize
     from clothlab.models.irawan.model import geometry_warnings
 
     started = time.perf_counter()
@@ -84,10 +109,7 @@ def run_fit(config, *, measurement=None, progress=None) -> FitResult:
     opt = config.fit.optimizer
     x0 = problem.to_unit(problem.start)
     start_objective = problem(x0)
-    k = len(problem.free)
-    optimum = minimize(problem, x0, np.zeros(k), np.ones(k), global_algorithm=opt.global_algorithm,
-                       local_algorithm=opt.local_algorithm, max_evals=opt.max_evals, seed=opt.seed,
-                       max_time=opt.max_time, callback=progress)
+    optimum = multistart_minimize(problem, x0, opt, progress)
     params = problem.from_unit(optimum.x)
     solution = problem.solve(params, normalised=True)
     names = problem.component_names
@@ -214,11 +236,10 @@ def slice_table(result: FitResult, step: float = 1.0) -> dict:
 
 
 def trace_table(result: FitResult) -> dict:
+    """trace.csv columns from the optimiser's TraceRow records."""
     trace = result.optimum.trace
-    keys = ("evaluation", "time_s", "value", "best", "stage")
-    if isinstance(trace, np.ndarray) and trace.dtype.names:
-        return {k: trace[k] for k in keys}
-    return {k: [row[k] if isinstance(row, dict) else getattr(row, k) for row in trace] for k in keys}
+    return {"evaluation": [r.index for r in trace], "time_s": [r.time for r in trace],
+            "value": [r.value for r in trace], "best": [r.best for r in trace], "stage": [r.stage for r in trace]}
 
 
 def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
