@@ -103,9 +103,8 @@ class _Progress:
         if now - self.last < 0.2:
             return
         self.last = now
-        get = row.get if isinstance(row, dict) else (lambda k: getattr(row, k))
-        print(f"\r  {self.name}: [{get('stage'):6s}] evaluation {int(get('evaluation')):5d}/{self.budget}  "
-              f"best {float(get('best')):.4e}  {float(get('time_s')):6.1f} s", end="", file=sys.stderr, flush=True)
+        print(f"\r  {self.name}: [{row.stage:6s}] evaluation {row.index:5d}/{self.budget}  "
+              f"best {row.best:.4e}  {row.time:6.1f} s", end="", file=sys.stderr, flush=True)
 
     def done(self):
         if not self.quiet:
