@@ -103,15 +103,27 @@ class KangModel:
 
     # --- the interface ---------------------------------------------------------------------------------
 
-    def components(self, wi, wo, params: dict) -> dict[str, np.ndarray]:
-        """Tile-averaged components (1/sr) at (N, 3) fabric-frame directions; zero below the horizon."""
+    def default_parameters(self) -> dict[str, float]:
+        return resolve_parameters({})
+
+    def resolve(self, params: dict | None) -> dict[str, float]:
+        """Defaults overridden by ``params``, validated against KANG_PARAMS (the fit-facing interface)."""
+        return resolve_parameters(params)
+
+    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                   warn: bool = True) -> dict[str, np.ndarray]:
+        """Tile-averaged components (1/sr) at (N, 3) fabric-frame directions; zero below the horizon.
+
+        ``need`` limits the components computed; ``normalised`` and ``warn`` exist for interface parity with
+        the IM model (Kang's components are already in albedo units and raise no geometry warnings)."""
         p = resolve_parameters(params)
         wi, wo = _directions(wi, wo)
         visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         out = {name: np.zeros(len(wi)) for name in self.component_names}
+        need = self.component_names if need is None else tuple(need)
         for kind in YARN_KINDS:
             share = self.shares[kind]
-            if share == 0.0:
+            if share == 0.0 or not ({f"specular_{kind}", f"diffuse_{kind}"} & set(need)):
                 continue  # a yarn type with no visible area is skipped (DESIGN principle 5)
             specular, ao = self._yarn_average(kind, to_yarn_frame(wi, kind), to_yarn_frame(wo, kind), p)
             out[f"specular_{kind}"] = share * specular
