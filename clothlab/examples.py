@@ -56,7 +56,7 @@ def fabric_yaml(name: str, variant: str) -> str:
         "fit:",
         "  free: [" + ", ".join(free) + "]",
         "  metric: relative",
-        "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 4000, starts: 4, seed: 1}",
+        "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: 8, seed: 1}",
         "report: {percentiles: [50, 80, 95]}",
         "output: {fits: ../../fits, reports: ../../reports}",
     ]

@@ -1,0 +1,135 @@
+"""The command line as a user meets it: exit codes, one-line errors, files left behind."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from clothlab.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "measurements" / "polyester-lining"
+
+
+def _project(tmp_path, max_evals=200):
+    """A copy of one example with a small budget, writing under tmp_path."""
+    shutil.copy(EXAMPLE / "noisy.csv", tmp_path / "noisy.csv")
+    text = (EXAMPLE / "fabric.yaml").read_text()
+    text = text.replace("max_evals: 6000, starts: 8", f"max_evals: {max_evals}, starts: 1")
+    text = text.replace("output: {fits: ../../fits, reports: ../../reports}", "output: {fits: fits, reports: reports}")
+    (tmp_path / "fabric.yaml").write_text(text)
+    return tmp_path / "fabric.yaml"
+
+
+def test_import_is_light_and_help_is_fast():
+    code = ("import sys, clothlab, clothlab.cli; heavy = [m for m in ('matplotlib', 'colour', 'OpenImageIO', "
+            "'emcee', 'nlopt', 'numba', 'scipy') if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+    help_out = subprocess.run([sys.executable, "-m", "clothlab.cli", "--help"], capture_output=True, text=True)
+    assert help_out.returncode == 0 and "fit" in help_out.stdout and "report" in help_out.stdout
+
+
+def test_fit_report_eval_end_to_end(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    config = _project(tmp_path)
+    assert main(["fit", str(config), "--quiet", "--report"]) == 0
+    out = capsys.readouterr().out
+    assert "relative error: median" in out and "warp.umax" in out
+    fit_dir = tmp_path / "fits" / "polyester-lining"
+    assert (fit_dir / "fit.json").is_file()
+    assert (tmp_path / "reports" / "polyester-lining" / "index.html").is_file()
+    # the same command again refuses to overwrite, with exit code 2 and one line naming --force
+    before = (fit_dir / "fit.json").read_bytes()
+    assert main(["fit", str(config), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--force" in err[0]
+    assert (fit_dir / "fit.json").read_bytes() == before
+    # eval of the saved fit at a few directions, with components; values match predictions.csv
+    directions = tmp_path / "dirs.csv"
+    with (fit_dir / "predictions.csv").open() as fh:
+        rows = list(csv.DictReader(fh))[:5]
+    with directions.open("w") as fh:
+        fh.write("theta_i,phi_i,theta_o,phi_o\n")
+        for r in rows:
+            fh.write(f"{r['theta_i']},{r['phi_i']},{r['theta_o']},{r['phi_o']}\n")
+    out_csv = tmp_path / "values.csv"
+    assert main(["eval", str(fit_dir), str(directions), "-o", str(out_csv), "--components"]) == 0
+    with out_csv.open() as fh:
+        values = list(csv.DictReader(fh))
+    for r, v in zip(rows, values, strict=True):
+        assert float(v["R"]) == pytest.approx(float(r["model_R"]), rel=1e-9)
+        parts = float(v["diffuse_R"]) + float(v["specular_warp_R"]) + float(v["specular_weft_R"])
+        assert parts == pytest.approx(float(v["R"]), rel=1e-12)
+    # report of several fits -> comparison page
+    shutil.copytree(fit_dir, tmp_path / "fits" / "polyester-copy")
+    fit_json = json.loads((tmp_path / "fits" / "polyester-copy" / "fit.json").read_text())
+    fit_json["name"] = "polyester-copy"
+    (tmp_path / "fits" / "polyester-copy" / "fit.json").write_text(json.dumps(fit_json))
+    assert main(["report", "--force"]) == 0
+    assert (tmp_path / "reports" / "comparison" / "index.html").is_file()
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda t: t.replace("metric: relative", "metric: relative\n  colour: red"), ["colour"]),
+    (lambda t: t.replace("weft.umax: 30", "weft.umax: 120"), ["weft.umax", "120"]),
+    (lambda t: t.replace("preset:polyester-lining", "preset:velvet"), ["velvet"]),
+    (lambda t: t.replace("path: noisy.csv", "path: missing.csv"), ["missing.csv"]),
+])
+def test_bad_fabric_yaml_exits_2_with_one_line(tmp_path, capsys, monkeypatch, edit, words):
+    monkeypatch.chdir(tmp_path)
+    config = _project(tmp_path)
+    config.write_text(edit(config.read_text()))
+    assert main(["fit", str(config), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("clothlab: error:")
+    for word in words:
+        assert word in err[0]
+    assert "fabric.yaml" in err[0]
+    assert not (tmp_path / "fits").exists() or not any((tmp_path / "fits").iterdir())
+
+
+def _set_cell(rows, data_row, column, value):
+    """Replace one cell of the data_row-th data row (after the header comments and the column header)."""
+    first = next(i for i, r in enumerate(rows) if not r.startswith("#")) + 1
+    cells = rows[first + data_row].split(",")
+    cells[column] = value
+    return rows[:first + data_row] + [",".join(cells)] + rows[first + data_row + 1:]
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda rows: _set_cell(rows, 10, 5, "nan"), ["nan", "field 'G'"]),
+    (lambda rows: _set_cell(rows, 10, 4, "-0.5"), ["negative", "'R'"]),
+    (lambda rows: _set_cell(rows, 3, 0, "95"), ["theta_i", "95"]),
+    (lambda rows: [r.replace("angle_unit: deg", "angle_unit: gradians") for r in rows], ["gradians"]),
+    (lambda rows: [r.replace(",sigma_B", "") for r in rows], ["sigma"]),
+])
+def test_bad_table_exits_2_naming_the_line(tmp_path, capsys, monkeypatch, edit, words):
+    monkeypatch.chdir(tmp_path)
+    config = _project(tmp_path)
+    table = tmp_path / "noisy.csv"
+    rows = table.read_text().splitlines()
+    table.write_text("\n".join(edit(rows)) + "\n")
+    assert main(["fit", str(config), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "noisy.csv" in err[0]
+    for word in words:
+        assert word.lower() in err[0].lower(), err[0]
+    assert not (tmp_path / "fits").exists() or not any((tmp_path / "fits").iterdir())
+
+
+def test_simulate_writes_a_loadable_table(tmp_path):
+    out = tmp_path / "sim.csv"
+    assert main(["simulate", "preset:silk-charmeuse", "-o", str(out), "--kd", "0.2,0.02,0.03",
+                 "--noise-mult", "0.05", "--seed", "3"]) == 0
+    from clothlab.io.loader import load_measurement
+
+    m = load_measurement(out)
+    assert m.n == 1575 and m.provenance["simulated"] is True and m.sigma is not None
+    assert main(["simulate", "preset:silk-charmeuse", "-o", str(out)]) == 2  # exists, no --force
