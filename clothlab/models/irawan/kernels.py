@@ -30,10 +30,8 @@ def spine_radius_scalar(u, umax, kappa, w, l):
 
 
 @njit(cache=True, inline="always")
-def staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, u, cot_psi, abs_sin_psi, umax, kappa, w, l):
-    """G_v A at one node u (eqs. 3, 5, 8; bounded form, yarn.py docstring)."""
-    su = math.sin(u)
-    cu = math.cos(u)
+def staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, su, cu, radius, cot_psi, abs_sin_psi, a):
+    """G_v A at one node u given sin u, cos u and R(u) (eqs. 3, 5, 8; bounded form, yarn.py docstring)."""
     b = hy * su + hz * cu
     rho = math.sqrt(hx * hx + b * b)
     if rho <= 0.0:
@@ -51,18 +49,30 @@ def staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, u, cot_psi, abs_sin_p
     if ci <= 0.0 or cr <= 0.0:
         return 0.0
     total = ci + cr
-    a = 0.5 * w
-    radius = spine_radius_scalar(u, umax, kappa, w, l)
     return a * (radius + a * cos_v) * ci * cr / (abs_sin_psi * total * total)
 
 
 @njit(cache=True)
 def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
-    """sum_k weights[n, k] G_v A(nodes[n, k]) for each direction pair n (rows of wi, wo: yarn frame)."""
-    n_dir, n_nodes = nodes.shape
+    """sum_k weights[n, k] G_v A(nodes[n, k]) for each direction pair n (rows of wi, wo: yarn frame).
+
+    ``nodes`` / ``weights`` of shape (1, K) are shared by all directions: sin, cos and R are then computed
+    once per node instead of once per (direction, node)."""
+    n_dir = wi.shape[0]
+    n_nodes = nodes.shape[1]
+    shared = nodes.shape[0] == 1
     out = np.zeros(n_dir)
     cot_psi = math.cos(psi) / math.sin(psi)
     abs_sin_psi = abs(math.sin(psi))
+    a = 0.5 * w
+    su = np.empty(n_nodes)
+    cu = np.empty(n_nodes)
+    radius = np.empty(n_nodes)
+    if shared:
+        for k in range(n_nodes):
+            su[k] = math.sin(nodes[0, k])
+            cu[k] = math.cos(nodes[0, k])
+            radius[k] = spine_radius_scalar(nodes[0, k], umax, kappa, w, l)
     for n in range(n_dir):
         wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
         wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
@@ -71,22 +81,38 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
         if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
             continue
         hx, hy, hz = sx / length, sy / length, sz / length
+        row = 0 if shared else n
         acc = 0.0
         for k in range(n_nodes):
-            wk = weights[n, k]
-            if wk != 0.0:
-                acc += wk * staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, nodes[n, k],
-                                         cot_psi, abs_sin_psi, umax, kappa, w, l)
+            wk = weights[row, k]
+            if wk == 0.0:
+                continue
+            if shared:
+                s, c, r = su[k], cu[k], radius[k]
+            else:
+                u = nodes[n, k]
+                s, c, r = math.sin(u), math.cos(u), spine_radius_scalar(u, umax, kappa, w, l)
+            acc += wk * staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, s, c, r, cot_psi, abs_sin_psi, a)
         out[n] = acc
     return out
 
 
 @njit(cache=True)
 def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta):
-    """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eqs. 4, 6, 8, 9) for each direction pair n (yarn frame)."""
-    n_dir, n_nodes = nodes.shape
+    """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eqs. 4, 6, 8, 9) for each direction pair n (yarn frame).
+
+    ``nodes`` / ``weights`` of shape (1, K) are shared by all directions (sin v, cos v computed once)."""
+    n_dir = wi.shape[0]
+    n_nodes = nodes.shape[1]
+    shared = nodes.shape[0] == 1
     out = np.zeros(n_dir)
     a = 0.5 * w
+    sv_shared = np.empty(n_nodes)
+    cv_shared = np.empty(n_nodes)
+    if shared:
+        for k in range(n_nodes):
+            sv_shared[k] = math.sin(nodes[0, k])
+            cv_shared[k] = math.cos(nodes[0, k])
     for n in range(n_dir):
         wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
         wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
@@ -110,14 +136,16 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta):
         radius = spine_radius_scalar(u, umax, kappa, w, l)
         pi_ = wiy * su + wiz * cu
         po_ = woy * su + woz * cu
+        row = 0 if shared else n
         acc = 0.0
         for k in range(n_nodes):
-            wk = weights[n, k]
+            wk = weights[row, k]
             if wk == 0.0:
                 continue
-            v = nodes[n, k]
-            sv = math.sin(v)
-            cv = math.cos(v)
+            if shared:
+                sv, cv = sv_shared[k], cv_shared[k]
+            else:
+                sv, cv = math.sin(nodes[n, k]), math.cos(nodes[n, k])
             ci = wix * sv + pi_ * cv
             cr = wox * sv + po_ * cv
             if ci <= 0.0 or cr <= 0.0:

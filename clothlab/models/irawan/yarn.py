@@ -84,9 +84,7 @@ def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
     if rule in ("trapezoid", "gauss"):
         lo, hi = (-umax, umax) if staple else (-0.5 * np.pi, 0.5 * np.pi)
         nodes, weights = interval_rule(rule, n, lo, hi)
-        shape = (len(wi), n)  # contiguous copies: numba's kernels are ~50x slower on broadcast views
-        return quadrature(every, np.ascontiguousarray(np.broadcast_to(nodes, shape)),
-                          np.ascontiguousarray(np.broadcast_to(weights, shape)))
+        return quadrature(every, nodes[None, :], weights[None, :])  # (1, K): shared by all directions
     h, _ = half_vectors(wi, wo)
     breaks = _staple_breaks(h, psi, umax) if staple else _filament_breaks(wi, wo, h)
     value = quadrature(every, *piecewise_rule(breaks, n))
