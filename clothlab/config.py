@@ -78,6 +78,7 @@ class ModelConfig:
     weave: str | None = None
     quadrature: QuadratureConfig = field(default_factory=QuadratureConfig)
     params: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)  # passed to the model's constructor (e.g. kang tile_nodes)
 
     @property
     def weave_preset(self) -> str | None:
@@ -185,6 +186,7 @@ class Config:
                 "weave": weave,
                 "quadrature": {"rule": model.quadrature.rule, "nodes": model.quadrature.nodes},
                 "params": dict(model.params),
+                "options": dict(model.options),
             },
             "fit": {
                 "free": list(fit.free),
@@ -491,14 +493,14 @@ class _Validator:
 
     def model(self, value: Any) -> ModelConfig:
         p = ("model",)
-        m = self.section(value, p, ("kind", "weave", "quadrature", "params"))
+        m = self.section(value, p, ("kind", "weave", "quadrature", "params", "options"))
         kind = _as_choice(m.get("kind", "irawan"), self.r.at(p + ("kind",)), MODEL_KINDS)
         weave = None
         if m.get("weave") is not None:
             weave = self.weave(m["weave"], self.r.at(p + ("weave",)))
-        elif kind == "irawan":
+        else:
             where = self.r.at(p, key=True)
-            raise ConfigError("missing required key 'weave' (preset:<name> or a .wv file) for kind irawan",
+            raise ConfigError(f"missing required key 'weave' (preset:<name> or a .wv file) for kind {kind}",
                               path=where.source, line=where.line, field="model.weave")
         q = self.section(m.get("quadrature", {}), p + ("quadrature",), ("rule", "nodes"))
         rule = _as_choice(q.get("rule", "trapezoid"), self.r.at(p + ("quadrature", "rule")), QUADRATURE_RULES)
@@ -518,7 +520,12 @@ class _Validator:
                 at = self.r.at(p + ("params", name))
                 _as_number(v, at)
                 checked[name] = _check_parameter(table, name, v, at)
-        return ModelConfig(kind=kind, weave=weave, quadrature=QuadratureConfig(rule, nodes), params=checked)
+        options = m.get("options", {}) or {}
+        if not isinstance(options, dict):
+            raise self.r.at(p + ("options",)).error(f"expected a mapping, got {_shown(options)}")
+        _check_plain_data(options, self.r.at(p + ("options",)))
+        return ModelConfig(kind=kind, weave=weave, quadrature=QuadratureConfig(rule, nodes), params=checked,
+                           options=copy.deepcopy(options))
 
     def weave(self, value: Any, at: _Field) -> str:
         """``preset:<name>`` (spelled as clothlab.presets accepts it) -> ``preset:<key>``; a .wv file ->
@@ -686,6 +693,10 @@ def _param_table(kind: str):
         from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 
         return IRAWAN_PARAMS
+    if kind == "kang":
+        from clothlab.models.kang.parameters import KANG_PARAMS
+
+        return KANG_PARAMS
     return None
 
 

@@ -127,12 +127,16 @@ def test_posterior_true_false_and_defaults(tmp_path):
     assert err.field == "fit.posterior" and "at least one parameter" in str(err)
 
 
-def test_kang_params_are_passed_through(tmp_path):
-    text = edit(MINIMAL, "  weave: weaves/lining.wv\n", "  kind: kang\n  params: {roughness: 0.3, n: [1, 2]}\n")
-    config = load_config(project(tmp_path, text + "fit: {free: [roughness]}\n"))
-    assert config.model.kind == "kang" and config.model.weave is None
-    assert config.model.params == {"roughness": 0.3, "n": [1, 2]}
-    assert config.fit.free == ("roughness",)
+def test_kang_params_are_validated_against_its_declarations(tmp_path):
+    text = edit(MINIMAL, "  weave: weaves/lining.wv\n",
+                "  kind: kang\n  weave: weaves/lining.wv\n  params: {warp.ny: 40}\n  options: {tile_nodes: 6}\n")
+    config = load_config(project(tmp_path, text + "fit: {free: [warp.ny, weft.nx]}\n"))
+    assert config.model.kind == "kang" and config.model.params == {"warp.ny": 40.0}
+    assert config.model.options == {"tile_nodes": 6} and config.fit.free == ("warp.ny", "weft.nx")
+    bad = edit(MINIMAL, "  weave: weaves/lining.wv\n",
+               "  kind: kang\n  weave: weaves/lining.wv\n  params: {roughness: 0.3}\n")
+    with pytest.raises(ConfigError, match="roughness"):
+        load_config(project(tmp_path, bad))
 
 
 def test_config_from_dict_resolves_against_base_dir(tmp_path):

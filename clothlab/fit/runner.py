@@ -70,7 +70,7 @@ def build_problem(config, measurement=None):
                                        else config.measurement.format, **config.measurement.options)
     weave = resolve_weave(config.model.weave, config.base_dir)
     q = config.model.quadrature
-    model = build_model(config.model.kind, weave, (q.rule, q.nodes))
+    model = build_model(config.model.kind, weave, (q.rule, q.nodes), **config.model.options)
     return FitProblem(model, measurement, config.fit.free, config.model.params, config.fit.bounds, config.fit.metric)
 
 

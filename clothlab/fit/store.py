@@ -4,6 +4,8 @@ Layout (read by :mod:`clothlab.report` and :func:`load_fit`):
 
 - ``fit.json``        parameters (value, unit, free, bounds, start, at_bound, truth), coefficients,
                       error percentiles, objective, evaluations, wall time, seed, versions, config + hash
+CSV numbers carry 10 significant digits (figures, not a data archive: the measurement file is the data).
+
 - ``predictions.csv`` theta_i, phi_i, theta_o, phi_o [deg], measured_<c>, model_<c>, sigma_<c>,
                       diffuse_<c>, specular_warp_<c>, specular_weft_<c> (1/sr)
 - ``slices.csv``      dense model curves in each exitant direction's incidence plane
@@ -31,7 +33,7 @@ def _csv_text(header, columns) -> str:
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
     for row in zip(*columns, strict=True):
-        writer.writerow([repr(float(v)) if isinstance(v, float | np.floating) else v for v in row])
+        writer.writerow([f"{float(v):.10g}" if isinstance(v, float | np.floating) else v for v in row])
     return buf.getvalue()
 
 

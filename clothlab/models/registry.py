@@ -23,7 +23,15 @@ def model_class(kind: str):
 
 def build_model(kind: str, weave, quadrature=None, **options):
     """An instance of the model ``kind`` for ``weave``; ``quadrature`` = (rule, nodes) for integrating models."""
+    import inspect
+
     cls = model_class(kind)
+    accepted = [p.name for p in inspect.signature(cls.__init__).parameters.values()
+                if p.kind == p.KEYWORD_ONLY]
+    for name in options:
+        if name not in accepted:
+            raise ConfigError(f"model kind {kind!r} takes no option {name!r}; options: {', '.join(accepted) or 'none'}",
+                              field=f"model.options.{name}")
     if kind == "irawan":
         from clothlab.models.irawan.model import Quadrature
 
