@@ -123,11 +123,31 @@ def run_fit(config, *, measurement=None, progress=None) -> FitResult:
         if lo or hi:
             notes.append(f"{name} ended at its {'lower' if lo else 'upper'} bound "
                          f"({params[name]:.6g}): not determined by these data within the bounds")
+    notes += collinearity_notes(problem.design(params, normalised=True), names)
     for name, coef in coefficients.items():
         if np.all(coef == 0.0):
             notes.append(f"coefficient {name} is 0 in every channel: that component is not seen in the data")
     return FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
                      time.perf_counter() - started, notes)
+
+
+def collinearity_notes(design: np.ndarray, names, threshold: float = 0.999) -> list[str]:
+    """Warnings for pairs of components whose columns are nearly proportional over the measured directions:
+    their linear coefficients (colours) are then not separately determined by the data."""
+    from clothlab.models.components import coefficient_name
+
+    out = []
+    norms = np.linalg.norm(design, axis=0)
+    for i in range(design.shape[1]):
+        for j in range(i + 1, design.shape[1]):
+            if norms[i] == 0.0 or norms[j] == 0.0:
+                continue
+            cosine = float(design[:, i] @ design[:, j] / (norms[i] * norms[j]))
+            if cosine > threshold:
+                out.append(f"components {names[i]} and {names[j]} are nearly proportional over these directions "
+                           f"(cosine {cosine:.5f}): {coefficient_name(names[i])} and {coefficient_name(names[j])} "
+                           "are not separately determined, only their combination is")
+    return out
 
 
 def _parameter_entries(result: FitResult) -> dict:
