@@ -10,6 +10,12 @@ Sections (each prints a table; ``--json`` writes all figures with the machine de
 3. ``fit``       - wall time of one full fit (global GN_CRS2_LM + local LN_BOBYQA, six free parameters,
    1,575 x 3 values, 4,000 evaluations, one start) of the noisy polyester-lining example.
 4. ``cli``       - ``clothlab --help`` time and the heavy modules ``import clothlab`` pulls in.
+5. ``tradeoff``  - error against run time of the whole model: per preset,
+   time of the 1,575-direction set against the median / 80th-percentile relative error, every rule, a
+   log-log plot with the Pareto front, and the answer to "does a rule reach 10x lower p80 than
+   trapezoid-11 at no more than its run time?".
+6. ``fit_algorithms`` - objective value against wall time for every supported nlopt algorithm (globals
+   followed by the default local polish, locals alone), same start, data and budget; table and plot.
 """
 
 from __future__ import annotations
@@ -195,25 +201,318 @@ def _print_accuracy(rows):
         print(f"  {key[0]:18s} {key[1]:5s} trapezoid-11 p80 {b['p80']:.2e}: {', '.join(better) or 'none'}")
 
 
-def run_benchmarks(*, quick: bool = False, json_path=None) -> int:
+TRADEOFF_RULES = tuple((r, n) for r in ("trapezoid", "gauss") for n in (3, 5, 7, 11, 21, 41, 81)) + (
+    ("support", 4), ("support", 8), ("support", 16), ("adaptive", 4), ("split", 4), ("split", 6), ("split", 8))
+"""Rules of the error-against-time study; ``split`` is the experimental rule of
+:mod:`clothlab.models.irawan.rules_experimental` (benchmark only)."""
+
+FIT_DATA = ("polyester-lining", "cotton-denim")
+
+
+def _split_integral(wi, wo, params, kind, nodes):
+    from clothlab.frames import to_yarn_frame
+    from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
+    from clothlab.models.irawan.rules_experimental import split_yarn_integral
+
+    return split_yarn_integral(
+        to_yarn_frame(wi, kind), to_yarn_frame(wo, kind), psi=math.radians(params[f"{kind}.psi"]),
+        umax=math.radians(params[f"{kind}.umax"]), kappa=params[f"{kind}.kappa"], w=params[f"{kind}.w"],
+        l=params[f"{kind}.l"], delta=params["delta"], n=nodes, psi_threshold=PSI_FILAMENT_THRESHOLD)
+
+
+def model_value(wi, wo, params, rule, nodes, coefficients, scale):
+    """The whole IM model (eq. 10 for both yarn types, phase function eq. 7, diffuse term), (N, C):
+    kd / pi + sum_j ks_j f_c I_j / scale_j, with I_j by ``rule`` / ``nodes`` (also ``split``)."""
+    from clothlab.models.irawan.model import Quadrature, yarn_integral_fabric
+    from clothlab.models.irawan.phase import phase_function
+
+    phase = phase_function(wi, wo, params["alpha"], params["beta"])
+    front = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).astype(np.float64)
+    total = front[:, None] * np.asarray(coefficients["kd"])[None, :] / np.pi
+    for kind in ("warp", "weft"):
+        if rule == "split":
+            integral = _split_integral(wi, wo, params, kind, nodes)
+        else:
+            integral = yarn_integral_fabric(wi, wo, params, kind, Quadrature(rule, nodes))
+        total = total + (phase * integral / scale[kind])[:, None] * np.asarray(coefficients[f"ks_{kind}"])[None, :]
+    return total
+
+
+def converged_reference(wi, wo, params, kind) -> tuple[np.ndarray, int]:
+    """f_c I_j per direction by :func:`quad_reference`; where quad raises an IntegrationWarning the
+    ``adaptive`` rule's value is used instead.  Returns the values and the number of such directions."""
+    from scipy.integrate import IntegrationWarning
+
+    from clothlab.models.irawan.model import Quadrature, yarn_specular
+
+    out = np.empty(len(wi))
+    warned = []
+    for n in range(len(wi)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", IntegrationWarning)
+            out[n] = quad_reference(wi[n:n + 1], wo[n:n + 1], params, kind)[0]
+        if any(issubclass(c.category, IntegrationWarning) for c in caught):
+            warned.append(n)
+    if warned:
+        idx = np.array(warned)
+        out[idx] = yarn_specular(wi[idx], wo[idx], params, kind, Quadrature("adaptive", 8))
+    return out, len(warned)
+
+
+def pareto_front(times, errors) -> list[int]:
+    """Indices of the points no other point beats in both time and error, sorted by time."""
+    order = np.lexsort((errors, times))
+    front, best = [], math.inf
+    for i in order:
+        if errors[i] < best:
+            front.append(int(i))
+            best = errors[i]
+    return front
+
+
+def tradeoff_section(quick: bool, figures_dir=None, fabrics=None, n_reference=None, repeats=None) -> dict:
+    """Error against run time of the whole model per preset (see module docstring, section 5).
+
+    The time is for the full 1,575-direction set (best of ``repeats``); errors are relative errors of the
+    model value (all channels) against the converged reference on ``n_reference`` seeded directions (all
+    1,575 in the full run).  The specular normalisations scale_j are fixed (pi x the mean reference f_c I_j
+    over the set) so that only the quadrature differs between rules."""
+    from clothlab.examples import YARN_COLOURS
+    from clothlab.frames import spherical_to_vector
+    from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD, IrawanModel
+    from clothlab.presets import PRESET_NAMES, get_preset
+    from clothlab.simulate import paper_sampling
+
+    fabrics = tuple(fabrics or PRESET_NAMES)
+    repeats = repeats or (3 if quick else 7)
+    ti, pi_, to, po = paper_sampling()
+    wi, wo = spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
+    n_reference = n_reference or (200 if quick else len(wi))
+    subset = np.sort(np.random.default_rng(7).choice(len(wi), min(n_reference, len(wi)), replace=False))
+    out = {"rules": [f"{r}-{n}" for r, n in TRADEOFF_RULES], "n_reference": len(subset), "fabrics": {}}
+    for name in fabrics:
+        p = IrawanModel(get_preset(name)).default_parameters()
+        coef = {k: np.asarray(v) for k, v in YARN_COLOURS[name].items()}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GeometryWarning)
+            refs, quad_warnings = {}, {}
+            for kind in ("warp", "weft"):
+                refs[kind], quad_warnings[kind] = converged_reference(wi[subset], wo[subset], p, kind)
+            scale = {kind: np.pi * float(refs[kind].mean()) for kind in refs}
+            total = np.asarray(coef["kd"])[None, :] / np.pi + sum(
+                (refs[k] / scale[k])[:, None] * np.asarray(coef[f"ks_{k}"])[None, :] for k in refs)
+            rows = []
+            for rule, nodes in TRADEOFF_RULES:
+                model_value(wi[:4], wo[:4], p, rule, nodes, coef, scale)  # compile / warm up
+                def run(r=rule, n=nodes, p=p, c=coef, s=scale):
+                    return model_value(wi, wo, p, r, n, c, s)
+
+                seconds = _best_time(run, repeats)
+                got = model_value(wi[subset], wo[subset], p, rule, nodes, coef, scale)
+                rel = (np.abs(got - total) / total).ravel()
+                rows.append({"rule": rule, "nodes": nodes, "seconds_1575": seconds, "p50": float(np.median(rel)),
+                             "p80": float(np.percentile(rel, 80)), "max": float(rel.max())})
+        times = np.array([r["seconds_1575"] for r in rows])
+        front = pareto_front(times, np.array([r["p80"] for r in rows]))
+        for i, r in enumerate(rows):
+            r["pareto"] = i in front
+        base = next(r for r in rows if r["rule"] == "trapezoid" and r["nodes"] == 11)
+        winners = [f"{r['rule']}-{r['nodes']}" for r in rows
+                   if r["p80"] <= 0.1 * base["p80"] and r["seconds_1575"] <= base["seconds_1575"]]
+        best_10x = min((r for r in rows if r["p80"] <= 0.1 * base["p80"]), key=lambda r: r["seconds_1575"],
+                       default=None)
+        out["fabrics"][name] = {
+            "staple": [abs(math.radians(p[f"{k}.psi"])) >= PSI_FILAMENT_THRESHOLD for k in ("warp", "weft")],
+            "rows": rows,
+            "quad_warnings": quad_warnings, "trapezoid11": {"p80": base["p80"], "seconds_1575": base["seconds_1575"]},
+            "claim_rules": winners,
+            "cheapest_10x": None if best_10x is None else {
+                "rule": f"{best_10x['rule']}-{best_10x['nodes']}", "p80": best_10x["p80"],
+                "seconds_1575": best_10x["seconds_1575"],
+                "time_ratio": best_10x["seconds_1575"] / base["seconds_1575"]}}
+    out["claim_holds"] = {name: bool(f["claim_rules"]) for name, f in out["fabrics"].items()}
+    if figures_dir is not None:
+        out["figure"] = str(plot_tradeoff(out, Path(figures_dir) / "tradeoff.png"))
+    return out
+
+
+def plot_tradeoff(result: dict, path: Path) -> Path:
+    """Log-log plot per fabric: time of the 1,575-direction set vs p80 (filled) / p50 (open) error;
+    the Pareto front (p80) is the black line, trapezoid-11 is circled."""
+    from matplotlib.figure import Figure
+
+    names = list(result["fabrics"])
+    cols = min(3, len(names))
+    rows_ = math.ceil(len(names) / cols)
+    fig = Figure(figsize=(5.2 * cols, 4.2 * rows_), layout="constrained")
+    colours = {"trapezoid": "tab:blue", "gauss": "tab:orange", "support": "tab:green", "adaptive": "tab:red",
+               "split": "tab:purple"}
+    for k, name in enumerate(names):
+        ax = fig.add_subplot(rows_, cols, k + 1)
+        rows = result["fabrics"][name]["rows"]
+        for rule, colour in colours.items():
+            sel = [r for r in rows if r["rule"] == rule]
+            if not sel:
+                continue
+            t = [1e3 * r["seconds_1575"] for r in sel]
+            ax.loglog(t, [r["p80"] for r in sel], "o-", color=colour, label=f"{rule} p80", ms=4, lw=0.8)
+            ax.loglog(t, [r["p50"] for r in sel], "o", mfc="none", color=colour, ms=4)
+            for r, x in zip(sel, t, strict=True):
+                ax.annotate(str(r["nodes"]), (x, r["p80"]), fontsize=6, xytext=(2, 2), textcoords="offset points")
+        front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["seconds_1575"])
+        ax.loglog([1e3 * r["seconds_1575"] for r in front], [r["p80"] for r in front], "k-", lw=2, alpha=0.4,
+                  label="Pareto front (p80)")
+        base = result["fabrics"][name]["trapezoid11"]
+        ax.loglog([1e3 * base["seconds_1575"]], [base["p80"]], "ko", mfc="none", ms=11, label="trapezoid-11")
+        ax.axhline(0.1 * base["p80"], color="k", ls=":", lw=0.8)
+        ax.axvline(1e3 * base["seconds_1575"], color="k", ls=":", lw=0.8)
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("time of 1,575 directions [ms]")
+        ax.set_ylabel("relative error of the model value")
+        if k == 0:
+            ax.legend(fontsize=7)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def print_tradeoff(result: dict) -> None:
+    print(f"\n== error against run time: whole IM model, 1,575 directions, error on {result['n_reference']} "
+          "directions vs converged reference (* = Pareto front) ==")
+    for name, f in result["fabrics"].items():
+        kinds = "/".join("staple" if s else "filament" for s in f["staple"])
+        print(f"\n  {name} (warp/weft {kinds}; quad IntegrationWarnings replaced by adaptive: "
+              f"warp {f['quad_warnings']['warp']}, weft {f['quad_warnings']['weft']})")
+        print(f"  {'rule':10s} {'n':>3s} {'ms/1575':>9s} {'median':>10s} {'p80':>10s} {'max':>10s}")
+        for r in f["rows"]:
+            print(f"  {r['rule']:10s} {r['nodes']:3d} {1e3 * r['seconds_1575']:9.2f} {r['p50']:10.2e} "
+                  f"{r['p80']:10.2e} {r['max']:10.2e} {'*' if r['pareto'] else ''}")
+    print("\n  claim: a rule with p80 <= trapezoid-11's / 10 at no more than trapezoid-11's run time")
+    for name, f in result["fabrics"].items():
+        base, c = f["trapezoid11"], f["cheapest_10x"]
+        cheapest = ("no rule reaches 10x" if c is None else
+                    f"cheapest 10x: {c['rule']} p80 {c['p80']:.2e} at {1e3 * c['seconds_1575']:.2f} ms "
+                    f"({c['time_ratio']:.2f}x the time)")
+        print(f"  {name:18s} {'YES' if f['claim_rules'] else 'NO ':3s} trapezoid-11 p80 {base['p80']:.2e} at "
+              f"{1e3 * base['seconds_1575']:.2f} ms; {cheapest}; qualifying: {', '.join(f['claim_rules']) or '-'}")
+    if "figure" in result:
+        print(f"  plot: {result['figure']}")
+
+
+def fit_algorithms_section(quick: bool, figures_dir=None, fabrics=FIT_DATA, max_evals=None) -> dict:
+    """Objective against wall time for every supported nlopt algorithm on the noisy example data:
+    globals followed by the default local polish, locals alone; same start (the example fabric.yaml's),
+    same data, same evaluation budget, seed 1."""
+    from clothlab.config import load_config
+    from clothlab.fit.optimize import SUPPORTED_GLOBAL, SUPPORTED_LOCAL, minimize
+    from clothlab.fit.runner import build_problem
+
+    max_evals = max_evals or (300 if quick else 3000)
+    root = Path(__file__).resolve().parents[1] / "measurements"
+    out = {"max_evals": max_evals, "fabrics": {}}
+    runs = [(g, "LN_BOBYQA") for g in SUPPORTED_GLOBAL] + [(None, loc) for loc in SUPPORTED_LOCAL]
+    for name in fabrics:
+        path = root / name / "fabric.yaml"
+        if not path.is_file():
+            out["fabrics"][name] = {"skipped": f"{path} not found (bench runs from a source checkout)"}
+            continue
+        problem = build_problem(load_config(path))
+        k = len(problem.free)
+        x0 = problem.to_unit(problem.start)
+        rows = []
+        for global_alg, local_alg in runs:
+            problem.model._memo.clear()
+            result = minimize(problem, x0, np.zeros(k), np.ones(k), global_algorithm=global_alg,
+                              local_algorithm=local_alg, max_evals=max_evals, seed=1)
+            trace = result.trace
+            keep = np.unique(np.geomspace(1, len(trace), 60).astype(int) - 1) if trace else []
+            rows.append({"algorithm": f"{global_alg} + {local_alg}" if global_alg else local_alg,
+                         "objective": float(result.fun), "evaluations": int(result.nevals),
+                         "wall_time_s": float(result.wall_time), "status": result.message,
+                         "trace_time_s": [trace[i].time for i in keep], "trace_best": [trace[i].best for i in keep]})
+        best = min(r["objective"] for r in rows)
+        for r in rows:
+            r["excess"] = r["objective"] / best - 1.0
+        out["fabrics"][name] = {"free": list(problem.free), "start_objective": float(problem(x0)), "rows": rows}
+    if figures_dir is not None and any("rows" in f for f in out["fabrics"].values()):
+        out["figure"] = str(plot_fit_algorithms(out, Path(figures_dir) / "fit_algorithms.png"))
+    return out
+
+
+def plot_fit_algorithms(result: dict, path: Path) -> Path:
+    """Best objective so far against wall time (log-log), one line per algorithm, one panel per data set."""
+    from matplotlib.figure import Figure
+
+    names = [n for n, f in result["fabrics"].items() if "rows" in f]
+    fig = Figure(figsize=(6.5 * len(names), 4.5), layout="constrained")
+    for k, name in enumerate(names):
+        ax = fig.add_subplot(1, len(names), k + 1)
+        for r in result["fabrics"][name]["rows"]:
+            ax.loglog(np.maximum(r["trace_time_s"], 1e-4), r["trace_best"], lw=1.2,
+                      ls="-" if "+" in r["algorithm"] else "--", label=r["algorithm"])
+        ax.set_title(f"{name} (noisy), {result['max_evals']} evaluations", fontsize=10)
+        ax.set_xlabel("wall time [s]")
+        ax.set_ylabel("best objective so far")
+        ax.legend(fontsize=6)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def print_fit_algorithms(result: dict) -> None:
+    print(f"\n== fit: objective against wall time, every supported nlopt algorithm, {result['max_evals']} evaluations "
+          "each, same start and data ==")
+    for name, f in result["fabrics"].items():
+        if "skipped" in f:
+            print(f"  {name}: skipped ({f['skipped']})")
+            continue
+        print(f"\n  {name} (noisy; free {', '.join(f['free'])}; start objective {f['start_objective']:.4e})")
+        print(f"  {'algorithm':26s} {'objective':>11s} {'excess':>9s} {'evals':>6s} {'time s':>7s}  status")
+        for r in sorted(f["rows"], key=lambda r: r["objective"]):
+            print(f"  {r['algorithm']:26s} {r['objective']:11.5e} {100 * r['excess']:8.3f}% {r['evaluations']:6d} "
+                  f"{r['wall_time_s']:7.2f}  {r['status']}")
+    if "figure" in result:
+        print(f"  plot: {result['figure']}")
+
+
+SECTIONS = ("cli", "speed", "accuracy", "fit", "tradeoff", "fit_algorithms")
+
+
+def run_benchmarks(*, quick: bool = False, json_path=None, figures_dir=None, sections=SECTIONS) -> int:
+    """Run the benchmark ``sections`` (all by default), print their tables, write figures (PNG) under
+    ``figures_dir`` (default reports/bench/) and all numbers with the machine description to ``json_path``."""
+    unknown = set(sections) - set(SECTIONS)
+    if unknown:
+        raise ValueError(f"unknown bench sections {sorted(unknown)}; choose from {', '.join(SECTIONS)}")
+    figures_dir = Path("reports/bench") if figures_dir is None else Path(figures_dir)
     figures = {"machine": machine(), "quick": quick}
     print(f"clothlab bench ({'quick' if quick else 'full'}) on {figures['machine']['cpus']} CPUs")
-    figures["cli"] = cli_section()
-    print(f"\n== cli ==\n  clothlab --help: best {figures['cli']['help_seconds_best']:.3f} s; "
-          f"import clothlab pulls in: {figures['cli']['import_pulls'] or 'none of the heavy modules'}")
-    figures["speed"] = speed_section(quick)
-    print("\n== evaluation speed: two-yarn IM model, RGB, trapezoid 11, 1,575 directions ==")
-    for name, s in figures["speed"].items():
-        print(f"  {name:18s} {s['pairs_per_second']:12,.0f} pairs/s ({1e3 * s['seconds_1575']:.2f} ms per set); "
-              f"quad loop {s['quad_pairs_per_second']:8,.1f} pairs/s; ratio {s['speedup_vs_quad']:,.0f}x")
-    figures["accuracy"] = accuracy_section(quick)
-    _print_accuracy(figures["accuracy"])
-    figures["fit"] = fit_section(quick)
-    f = figures["fit"]
-    if "skipped" not in f:
-        print(f"\n== one full fit ({f['fabric']}, {len(f['free'])} free, {f['evaluations']} evaluations) ==\n"
-              f"  wall time {f['wall_time_s']:.1f} s ({1e3 * f['seconds_per_evaluation']:.2f} ms/evaluation); "
-              f"median {100 * f['p50']:.2f} %, 80th {100 * f['p80']:.2f} %")
+    if "cli" in sections:
+        figures["cli"] = cli_section()
+        print(f"\n== cli ==\n  clothlab --help: best {figures['cli']['help_seconds_best']:.3f} s; "
+              f"import clothlab pulls in: {figures['cli']['import_pulls'] or 'none of the heavy modules'}")
+    if "speed" in sections:
+        figures["speed"] = speed_section(quick)
+        print("\n== evaluation speed: two-yarn IM model, RGB, trapezoid 11, 1,575 directions ==")
+        for name, s in figures["speed"].items():
+            print(f"  {name:18s} {s['pairs_per_second']:12,.0f} pairs/s ({1e3 * s['seconds_1575']:.2f} ms per set); "
+                  f"quad loop {s['quad_pairs_per_second']:8,.1f} pairs/s; ratio {s['speedup_vs_quad']:,.0f}x")
+    if "accuracy" in sections:
+        figures["accuracy"] = accuracy_section(quick)
+        _print_accuracy(figures["accuracy"])
+    if "fit" in sections:
+        figures["fit"] = fit_section(quick)
+        f = figures["fit"]
+        if "skipped" not in f:
+            print(f"\n== one full fit ({f['fabric']}, {len(f['free'])} free, {f['evaluations']} evaluations) ==\n"
+                  f"  wall time {f['wall_time_s']:.1f} s ({1e3 * f['seconds_per_evaluation']:.2f} ms/evaluation); "
+                  f"median {100 * f['p50']:.2f} %, 80th {100 * f['p80']:.2f} %")
+    if "tradeoff" in sections:
+        figures["tradeoff"] = tradeoff_section(quick, figures_dir=figures_dir)
+        print_tradeoff(figures["tradeoff"])
+    if "fit_algorithms" in sections:
+        figures["fit_algorithms"] = fit_algorithms_section(quick, figures_dir=figures_dir)
+        print_fit_algorithms(figures["fit_algorithms"])
     if json_path:
         from clothlab.atomic import atomic_write_text
 
