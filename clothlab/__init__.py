@@ -1,7 +1,56 @@
 """clothlab: measure, fit and report the appearance of woven cloth.
 
-The package import is light (numpy only); heavy libraries (matplotlib, colour, OpenImageIO, emcee, nlopt)
-are imported inside the functions that use them.
+The package import is light (numpy only); heavy libraries (matplotlib, colour, OpenImageIO, emcee, nlopt,
+numba) are imported inside the functions that use them.  The objects the CLI uses are available here for
+Jupyter, loaded on first access::
+
+    import clothlab as cl
+    result = cl.run_fit(cl.load_config("measurements/silk-charmeuse/fabric.yaml"))
+    fit_dir = cl.save_fit(result, force=True)
+    fig = cl.plots.plot_hemisphere_comparison(cl.load_fit_dir(fit_dir).predictions)
 """
 
+from importlib import import_module
+
 __version__ = "0.1.0"
+
+_LAZY = {
+    "load_config": "clothlab.config",
+    "config_from_dict": "clothlab.config",
+    "load_measurement": "clothlab.io.loader",
+    "read_table": "clothlab.io.table",
+    "write_table": "clothlab.io.table",
+    "Measurement": "clothlab.measurement",
+    "get_preset": "clothlab.presets",
+    "PRESET_NAMES": "clothlab.presets",
+    "parse_wv": "clothlab.wvfile",
+    "IrawanModel": "clothlab.models.irawan.model",
+    "Quadrature": "clothlab.models.irawan.model",
+    "KangModel": "clothlab.models.kang.model",
+    "build_model": "clothlab.models.registry",
+    "simulate": "clothlab.simulate",
+    "paper_sampling": "clothlab.simulate",
+    "NoiseModel": "clothlab.simulate",
+    "run_fit": "clothlab.fit.runner",
+    "save_fit": "clothlab.fit.runner",
+    "load_fitted": "clothlab.fit.store",
+    "load_fit_dir": "clothlab.report.data",
+    "build_report": "clothlab.report.build",
+    "build_comparison": "clothlab.report.build",
+    "error_percentiles": "clothlab.metrics",
+}
+_MODULES = {"plots": "clothlab.report.plots"}
+
+__all__ = sorted([*_LAZY, *_MODULES, "__version__"])
+
+
+def __getattr__(name):
+    if name in _MODULES:
+        return import_module(_MODULES[name])
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'clothlab' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

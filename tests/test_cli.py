@@ -133,3 +133,12 @@ def test_simulate_writes_a_loadable_table(tmp_path):
     m = load_measurement(out)
     assert m.n == 1575 and m.provenance["simulated"] is True and m.sigma is not None
     assert main(["simulate", "preset:silk-charmeuse", "-o", str(out)]) == 2  # exists, no --force
+
+
+def test_python_api_lazy_exports_resolve():
+    import clothlab as cl
+
+    for name in cl.__all__:
+        assert getattr(cl, name) is not None, name
+    with pytest.raises(AttributeError):
+        cl.no_such_thing  # noqa: B018
