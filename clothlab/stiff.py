@@ -1,0 +1,162 @@
+"""Stiff fits (issue 3, item 3): ill-conditioned IM fits, recovery of the truth and Jacobian conditioning.
+
+Cases (numerics.md item 12): silk charmeuse (beta 7.3, kappa 2), polyester lining (filament, kappa -0.7),
+a very narrow highlight (cotton-denim geometry with umax 2 deg on both yarns, beta 50) and a weak weft
+under a strong warp (cotton-denim with ks_weft = ks_warp / 20).  For each: noisy data are simulated
+(:func:`clothlab.simulate.simulate`, the examples' noise: 5 % log-normal + 2e-4 1/sr), then fitted with the
+examples' free parameters (:func:`clothlab.examples.free_parameters`) from the default start
+(:data:`clothlab.examples.START`) with the default optimiser (GN_CRS2_LM + LN_BOBYQA) and from perturbed
+starts with the local polish alone (LN_BOBYQA).  At the best optimum: the Jacobian of the relative residuals
+(coefficients re-solved by NNLS at every point, as in the objective) by central finite differences in the unit
+box, its condition number (ratio of extreme singular values), and the nearly dependent parameter groups
+(pairs whose Jacobian columns have |cosine| > COLLINEAR_COSINE, and the parameters carrying the smallest
+singular vector).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from clothlab.errors import GeometryWarning
+
+COLLINEAR_COSINE = 0.99
+FD_STEP = 1e-4  # unit-box step of the finite differences
+NOISE = {"multiplicative": 0.05, "additive": 2e-4}
+
+
+def stiff_cases() -> list[dict]:
+    """The stiff problems: preset, parameter changes, coefficients (albedos, R G B)."""
+    from clothlab.examples import YARN_COLOURS
+
+    denim = YARN_COLOURS["cotton-denim"]
+    return [
+        {"name": "silk charmeuse (beta 7.3, kappa 2)", "preset": "silk-charmeuse", "changes": {},
+         "coefficients": YARN_COLOURS["silk-charmeuse"]},
+        {"name": "polyester lining (filament, kappa -0.7)", "preset": "polyester-lining", "changes": {},
+         "coefficients": YARN_COLOURS["polyester-lining"]},
+        {"name": "narrow highlight (umax 2 deg, beta 50)", "preset": "cotton-denim",
+         "changes": {"warp.umax": 2.0, "weft.umax": 2.0, "beta": 50.0}, "coefficients": denim},
+        {"name": "weak weft (ks_weft = ks_warp / 20)", "preset": "cotton-denim", "changes": {},
+         "coefficients": {**denim, "ks_weft": tuple(v / 20.0 for v in denim["ks_warp"])}},
+    ]
+
+
+def residuals(problem, x) -> np.ndarray:
+    """Relative residuals (all values, all channels) at unit-box point ``x`` (coefficients by NNLS)."""
+    from clothlab.metrics import metric_residuals
+
+    solution = problem.solve(problem.from_unit(x))
+    return np.ravel(metric_residuals(problem.y, solution.prediction, problem.metric))
+
+
+def jacobian(problem, x, step: float = FD_STEP) -> np.ndarray:
+    """(n_residuals, k) central differences in the unit box (one-sided at a bound)."""
+    r0 = residuals(problem, x)
+    cols = []
+    for i in range(len(x)):
+        lo, hi = x.copy(), x.copy()
+        lo[i] = max(x[i] - step, 0.0)
+        hi[i] = min(x[i] + step, 1.0)
+        r_hi = residuals(problem, hi) if hi[i] != x[i] else r0
+        r_lo = residuals(problem, lo) if lo[i] != x[i] else r0
+        cols.append((r_hi - r_lo) / (hi[i] - lo[i]))
+    return np.stack(cols, axis=1)
+
+
+def conditioning(jac: np.ndarray, names) -> dict:
+    """Condition number, singular values, collinear column pairs and the smallest singular vector."""
+    s, vt = np.linalg.svd(jac, full_matrices=False)[1:]
+    norms = np.linalg.norm(jac, axis=0)
+    unit = jac / np.where(norms > 0, norms, 1.0)
+    cosine = unit.T @ unit
+    pairs = [(names[i], names[j], float(cosine[i, j])) for i in range(len(names)) for j in range(i + 1, len(names))
+             if abs(cosine[i, j]) > COLLINEAR_COSINE]
+    weakest = vt[-1]
+    carrying = [names[i] for i in np.argsort(-np.abs(weakest)) if abs(weakest[i]) > 0.3]
+    return {"condition": float(s[0] / s[-1]) if s[-1] > 0 else float("inf"), "singular_values": s.tolist(),
+            "zero_columns": [n for n, v in zip(names, norms, strict=True) if v == 0.0],
+            "collinear_pairs": pairs, "weakest_direction": dict(zip(names, weakest.tolist(), strict=True)),
+            "weakest_parameters": carrying}
+
+
+def _fit(problem, x0, global_algorithm, max_evals, seed):
+    from clothlab.fit.optimize import minimize
+
+    k = len(problem.free)
+    return minimize(problem, x0, np.zeros(k), np.ones(k), global_algorithm=global_algorithm,
+                    local_algorithm="LN_BOBYQA", max_evals=max_evals, seed=seed)
+
+
+def run_case(case: dict, *, seed: int = 0, perturbed: int = 3, max_evals: int = 3000) -> dict:
+    """Simulate, fit from the default and ``perturbed`` starts, and condition the best optimum."""
+    from clothlab.examples import START, free_parameters
+    from clothlab.fit.problem import FitProblem
+    from clothlab.models.irawan.model import IrawanModel
+    from clothlab.presets import get_preset
+    from clothlab.simulate import NoiseModel, simulate
+
+    started = time.perf_counter()
+    model = IrawanModel(get_preset(case["preset"]))
+    truth = model.resolve(case["changes"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        data = simulate(model, truth, case["coefficients"], noise=NoiseModel(**NOISE, seed=seed + 17))
+    free = free_parameters(case["preset"])
+    start = {**truth, **{k: START[k] for k in free}}
+    problem = FitProblem(model, data, free, start)
+    x_truth = problem.to_unit(truth)
+    truth_objective = problem(x_truth)
+    x_default = problem.to_unit(start)
+    rng = np.random.default_rng(seed)
+    starts = [("default (global + local)", x_default, "GN_CRS2_LM")]
+    for i in range(perturbed):
+        starts.append((f"perturbed {i + 1} (local)", np.clip(x_truth + rng.uniform(-0.15, 0.15, len(free)),
+                                                            0.0, 1.0), None))
+    fits = []
+    for label, x0, global_algorithm in starts:
+        result = _fit(problem, x0, global_algorithm, max_evals if global_algorithm else max_evals // 2, seed + 1)
+        params = problem.from_unit(result.x)
+        unit_error = np.abs(result.x - x_truth)
+        fits.append({"start": label, "objective": float(result.fun), "evaluations": int(result.nevals),
+                     "errors": {n: float(params[n] - truth[n]) for n in free},
+                     "unit_errors": dict(zip(free, unit_error.tolist(), strict=True)),
+                     "recovered": bool(unit_error.max() < 0.02), "x": result.x.tolist()})
+    best = min(fits, key=lambda f: f["objective"])
+    jac = jacobian(problem, np.asarray(best["x"]))
+    at_truth = conditioning(jacobian(problem, x_truth), list(free))
+    return {"name": case["name"], "preset": case["preset"], "changes": case["changes"], "free": list(free),
+            "truth": {n: truth[n] for n in free}, "truth_objective": float(truth_objective), "fits": fits,
+            "best_start": best["start"], **conditioning(jac, list(free)),
+            "at_truth": {k: at_truth[k] for k in ("condition", "collinear_pairs", "weakest_parameters")},
+            "wall_time_s": time.perf_counter() - started}
+
+
+def run_stiff(seed: int = 0, *, perturbed: int = 3, max_evals: int = 3000, cases=None, figures_dir=None) -> dict:
+    """Run every stiff case; returns {"cases": [...]} (``figures_dir`` is accepted for symmetry, unused)."""
+    del figures_dir
+    cases = cases or stiff_cases()
+    return {"seed": seed, "max_evals": max_evals,
+            "cases": [run_case(c, seed=seed, perturbed=perturbed, max_evals=max_evals) for c in cases]}
+
+
+def print_stiff(result: dict) -> None:
+    print(f"\n== stiff fits (noisy simulated data, seed {result['seed']}; recovered = every free parameter within "
+          "2 % of its box range) ==")
+    for case in result["cases"]:
+        print(f"\n  {case['name']}: condition number of the residual Jacobian (unit box) {case['condition']:.3g} "
+              f"(at the truth {case['at_truth']['condition']:.3g}); objective at the truth "
+              f"{case['truth_objective']:.4e}")
+        print(f"    weakest direction carried by: {', '.join(case['weakest_parameters']) or '-'}; collinear pairs "
+              f"(|cos| > {COLLINEAR_COSINE}): " + (", ".join(f"{a}/{b} {c:+.3f}" for a, b, c in case["collinear_pairs"])
+                                                   or "none"))
+        if case["zero_columns"]:
+            print(f"    parameters with no effect at the optimum: {', '.join(case['zero_columns'])}")
+        header = "    " + f"{'start':26s} {'objective':>11s} {'ok':>3s} " + " ".join(f"{n:>11s}" for n in case["free"])
+        print(header)
+        print("    " + f"{'truth':26s} {'':11s} {'':3s} " + " ".join(f"{case['truth'][n]:11.4g}" for n in case["free"]))
+        for f in case["fits"]:
+            print("    " + f"{f['start']:26s} {f['objective']:11.4e} {'yes' if f['recovered'] else 'no':>3s} "
+                  + " ".join(f"{f['errors'][n]:+11.3g}" for n in case["free"]))
