@@ -134,9 +134,10 @@ def sweep_extremes(parameter_sets, wi, wo, rule, max_examples: int = 5) -> dict:
         scale = np.maximum(np.abs(forward), np.abs(backward))
         with np.errstate(invalid="ignore"):
             rel = np.where(scale > 0.0, np.abs(forward - backward) / np.where(scale > 0.0, scale, 1.0), 0.0)
-        rel = np.where(np.isfinite(rel), rel, np.inf)
+        rel = np.where(np.isfinite(forward) & np.isfinite(backward) & np.isfinite(rel), rel, np.inf)
         bad["reciprocity"] = rel > RECIPROCITY_RTOL
-        worst_reciprocity = max(worst_reciprocity, float(rel.max()))
+        finite_rel = rel[np.isfinite(rel)]
+        worst_reciprocity = max(worst_reciprocity, float(finite_rel.max(initial=0.0)))
         for key, mask in bad.items():
             hits = np.flatnonzero(mask)
             counts[key] += hits.size
