@@ -1,0 +1,186 @@
+"""Build report directories from saved fit directories (files in, files out; no model evaluation).
+
+``build_report(fits/<name>)``  -> ``reports/<name>/``: index.html, summary.json and the PNG figures.
+``build_comparison([...])``    -> ``reports/comparison/``: one table row per fit (the paper's sec. 8 list:
+median / 80th / 95th percentile relative error) next to the paper's published figures, and a bar chart.
+
+Writes are atomic (DESIGN.md principle 6): everything goes into a hidden temporary directory next to the
+target, renamed into place at the end (:func:`clothlab.atomic.atomic_directory`); an existing report is
+replaced only with ``force=True``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from clothlab.atomic import atomic_directory
+from clothlab.errors import InputError
+from clothlab.report import html, plots
+from clothlab.report.data import (
+    PAPER_RELATIVE_ERRORS,
+    PAPER_SOURCE,
+    FitRecord,
+    error_percentiles,
+    fabric_name,
+    is_simulated,
+    is_usable_dir_name,
+    load_fit_dir,
+    paper_fabric,
+    percentile_key,
+)
+
+PNG_DPI = 110
+#: Relative tolerance when the errors recorded in fit.json are compared with those recomputed here.
+ERROR_AGREEMENT_RTOL = 1e-3
+
+
+def save_figure(fig, path) -> None:
+    """Save a figure as PNG at :data:`PNG_DPI` and release its memory."""
+    fig.savefig(path, dpi=PNG_DPI)
+    fig.clear()
+
+
+def _figure_jobs(record: FitRecord, percentiles) -> list[tuple[str, object]]:
+    """(name, zero-argument figure builder) for each figure the fit's files allow, in page order."""
+    jobs = [("hemispheres", lambda: plots.plot_hemisphere_comparison(record.predictions))]
+    if record.slices is not None:
+        jobs.append(("slices", lambda: plots.plot_incidence_slices(record.predictions, record.slices)))
+    jobs.append(("error_histogram", lambda: plots.plot_error_histogram(record.predictions, percentiles)))
+    if record.fit.get("parameters"):
+        jobs.append(("parameters", lambda: plots.plot_parameters(record.fit)))
+    if record.trace is not None:
+        jobs.append(("trace", lambda: plots.plot_fit_trace(record.trace)))
+    # Hook: a posterior corner plot goes here once posterior.json has a settled layout.
+    return jobs
+
+
+def _finite_json(value):
+    """A JSON-safe copy: non-finite floats become None (summary.json is strict JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): _finite_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_json(v) for v in value]
+    return value
+
+
+def _agreement_notes(recorded, computed: dict, percentiles) -> list[str]:
+    """Notes where fit.json's recorded overall errors differ from the ones recomputed from predictions.csv."""
+    recorded = (recorded or {}).get("overall") if isinstance(recorded, dict) else None
+    if not isinstance(recorded, dict):
+        return []
+    notes = []
+    for q in percentiles:
+        key = percentile_key(q)
+        old, new = recorded.get(key), computed["overall"].get(key)
+        if isinstance(old, int | float) and isinstance(new, int | float) and math.isfinite(new):
+            if abs(old - new) > ERROR_AGREEMENT_RTOL * max(abs(new), 1e-12):
+                notes.append(f"fit.json records overall {key} = {old:.4g} but predictions.csv gives {new:.4g}; "
+                             "the tables show the recomputed value.")
+    return notes
+
+
+def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percentiles=(50, 80, 95)) -> Path:
+    """Write ``<reports_dir>/<fit name>/`` (index.html, summary.json, PNGs) from a fit directory.
+
+    Returns the report directory.  Raises :class:`InputError` naming the file if fit.json or
+    predictions.csv (or a present optional file) is missing or corrupt, and
+    :class:`~clothlab.errors.ResultExistsError` if the report exists and ``force`` is false.  On any
+    failure no partial report and no temporary directory is left behind.
+    """
+    percentiles = tuple(percentiles)
+    record = load_fit_dir(fit_dir)
+    errors = error_percentiles(record.predictions, record.channels, percentiles)
+    notes = list(record.notes) + _agreement_notes(record.fit.get("errors"), errors, percentiles)
+    dest = Path(reports_dir) / record.name
+
+    with atomic_directory(dest, force=force) as tmp:
+        figures = {}
+        for name, build in _figure_jobs(record, percentiles):
+            filename = f"{name}.png"
+            save_figure(build(), tmp / filename)
+            figures[name] = filename
+        fit = record.fit
+        paper_key = paper_fabric(fit)
+        summary = {
+            "name": record.name,
+            "fit_dir": str(record.path),
+            "fabric": fabric_name(fit),
+            "model": fit.get("model"),
+            "measurement": {**(fit.get("measurement") or {}),
+                            "simulated": is_simulated((fit.get("measurement") or {}).get("provenance"))},
+            "metric": "relative",
+            "percentiles": list(percentiles),
+            "errors": errors,
+            "errors_recorded": fit.get("errors"),
+            "paper_errors_percent": (None if paper_key is None else
+                                     {"fabric": paper_key, "p50": PAPER_RELATIVE_ERRORS[paper_key][0],
+                                      "p80": PAPER_RELATIVE_ERRORS[paper_key][1], "source": PAPER_SOURCE}),
+            "parameters": fit.get("parameters"),
+            "coefficients": fit.get("coefficients"),
+            "timing": {"evaluations": fit.get("evaluations"), "wall_time_s": fit.get("wall_time_s"),
+                       "objective": fit.get("objective"), "seed": fit.get("seed"),
+                       "optimizer": fit.get("optimizer")},
+            "warnings": fit.get("warnings") or [],
+            "notes": notes,
+            "figures": figures,
+            "posterior_present": record.posterior is not None,
+        }
+        (tmp / "summary.json").write_text(
+            json.dumps(_finite_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        page = html.render_report_html(fit, figures, {"errors": errors, "percentiles": percentiles,
+                                                      "notes": notes, "posterior": record.posterior})
+        (tmp / "index.html").write_text(page, encoding="utf-8")
+    return dest
+
+
+def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
+    fit = record.fit
+    overall = error_percentiles(record.predictions, record.channels, (50, 80, 95))["overall"]
+    quadrature = (fit.get("model") or {}).get("quadrature") or {}
+    paper_key = paper_fabric(fit)
+    report = reports_dir / record.name / "index.html"
+    return {
+        "name": record.name,
+        "fabric": fabric_name(fit),
+        "model": (fit.get("model") or {}).get("kind"),
+        "quadrature": " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or None,
+        "p50": overall["p50"], "p80": overall["p80"], "p95": overall["p95"], "n": overall["n"],
+        "free": sum(1 for e in (fit.get("parameters") or {}).values() if e.get("free", True)),
+        "evaluations": fit.get("evaluations"),
+        "wall_time_s": fit.get("wall_time_s"),
+        "simulated": is_simulated((fit.get("measurement") or {}).get("provenance")),
+        "paper": PAPER_RELATIVE_ERRORS.get(paper_key),
+        "paper_fabric": paper_key,
+        "link": f"../{record.name}/index.html" if report.exists() and dest.parent == reports_dir else None,
+    }
+
+
+def build_comparison(fit_dirs, reports_dir="reports", name: str = "comparison", force: bool = False) -> Path:
+    """Write ``<reports_dir>/<name>/`` (index.html, comparison.png, summary.json) comparing several fits.
+
+    One row per fit: fabric, model kind, quadrature, median / 80th / 95th percentile relative error,
+    free parameter count, evaluations, wall time, and the paper's published median / 80th figures on
+    real measurements where the fabric matches (Irawan & Marschner 2012, sec. 8).  Returns the directory.
+    """
+    fit_dirs = list(fit_dirs)
+    if not fit_dirs:
+        raise InputError("no fit directories given; expected one or more fits/<name>/ directories")
+    reports_dir = Path(reports_dir)
+    if not is_usable_dir_name(name):
+        raise InputError(f"comparison name {name!r} is not usable as a directory name; expected one path "
+                         "component without '/' or '\\'", field="name")
+    dest = reports_dir / name
+    rows = [_comparison_row(load_fit_dir(d), reports_dir, dest) for d in fit_dirs]
+    with atomic_directory(dest, force=force) as tmp:
+        chart = [{"label": r["name"], "p50": r["p50"], "p80": r["p80"], "paper": r["paper"]} for r in rows]
+        save_figure(plots.plot_error_comparison(chart), tmp / "comparison.png")
+        figures = {"comparison": "comparison.png"}
+        summary = {"name": name, "fits": [str(d) for d in fit_dirs], "rows": rows, "paper_source": PAPER_SOURCE}
+        (tmp / "summary.json").write_text(
+            json.dumps(_finite_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        (tmp / "index.html").write_text(html.render_comparison_html(rows, figures, title=name), encoding="utf-8")
+    return dest

@@ -1,0 +1,299 @@
+"""Reading a saved fit directory for the report (files only: the report never evaluates a model).
+
+Layout of ``fits/<name>/`` (written by the fit code):
+
+- ``fit.json``        - parameters, coefficients, errors, optimiser facts (required)
+- ``predictions.csv`` - theta_i, phi_i, theta_o, phi_o (deg, clothlab convention: phi counter-clockwise from
+  the weft +x, warp is +y), then per channel c ``measured_<c>``, ``model_<c>`` and optionally ``sigma_<c>``,
+  ``diffuse_<c>``, ``specular_warp_<c>``, ``specular_weft_<c>``; BRDF in 1/sr (required)
+- ``slices.csv``      - theta_o, phi_o, signed_theta_i (deg; positive on the mirror side, phi_o + 180),
+  ``model_<c>``: dense model curves in each exitant direction's incidence plane (optional)
+- ``trace.csv``       - evaluation, time_s, value, best, stage (optional)
+- ``posterior.json``  - posterior summary (optional; later work)
+
+The relative error is the paper's metric (Irawan & Marschner 2012, sec. 8: median and 80th-percentile
+relative error per fabric): ``(model - measured) / measured`` per sample and channel.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import InputError
+
+DIRECTION_COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
+SLICE_COLUMNS = ("theta_o", "phi_o", "signed_theta_i")
+TRACE_COLUMNS = ("evaluation", "time_s", "value", "best", "stage")
+#: Decimal places (degrees) to which exitant directions are rounded when rows are grouped by them.
+EXITANT_DECIMALS = 3
+
+
+@dataclass
+class FitRecord:
+    """Everything a report reads from one fit directory.  Tables are dicts column name -> (N,) array."""
+
+    path: Path
+    fit: dict
+    predictions: dict[str, np.ndarray]
+    channels: tuple[str, ...]
+    slices: dict[str, np.ndarray] | None = None
+    trace: dict[str, np.ndarray] | None = None
+    posterior: dict | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.fit["name"]
+
+
+def read_csv_table(path, *, required=(), text_columns=()) -> dict[str, np.ndarray]:
+    """Read a CSV with a header row into {column: (N,) float64 array} (``text_columns`` stay str).
+
+    Empty cells and 'nan' read as NaN.  Raises :class:`InputError` naming the file, line and column for a
+    missing file, a missing required column, a ragged row or a non-numeric value.
+    """
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            rows = list(csv.reader(handle))
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read the file ({exc})", path=path) from None
+    rows = [(number, row) for number, row in enumerate(rows, start=1) if any(cell.strip() for cell in row)]
+    if not rows:
+        raise InputError("the file is empty; expected a header row and data rows", path=path)
+    header_line, header = rows[0]
+    header = [cell.strip() for cell in header]
+    if len(set(header)) != len(header):
+        raise InputError(f"duplicate column names in the header {header}", path=path, line=header_line)
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise InputError(f"missing column(s) {missing}; the header has {header}", path=path, line=header_line)
+    if len(rows) == 1:
+        raise InputError("the file has a header but no data rows", path=path)
+    columns: dict[str, list] = {name: [] for name in header}
+    for number, row in rows[1:]:
+        if len(row) != len(header):
+            raise InputError(f"row has {len(row)} fields, the header has {len(header)}", path=path, line=number)
+        for name, cell in zip(header, row, strict=True):
+            cell = cell.strip()
+            if name in text_columns:
+                columns[name].append(cell)
+                continue
+            try:
+                columns[name].append(float(cell) if cell else math.nan)
+            except ValueError:
+                raise InputError(f"value {cell!r} is not a number", path=path, line=number, field=name) from None
+    return {
+        name: np.asarray(values, dtype=str if name in text_columns else np.float64)
+        for name, values in columns.items()
+    }
+
+
+def read_json(path) -> dict:
+    """Read a JSON object; :class:`InputError` naming the file (and line) if missing or malformed."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the file ({exc})", path=path) from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"invalid JSON: {exc.msg} (column {exc.colno})", path=path, line=exc.lineno) from None
+    if not isinstance(data, dict):
+        raise InputError(f"expected a JSON object, found {type(data).__name__}", path=path)
+    return data
+
+
+def channels_of(table: dict) -> tuple[str, ...]:
+    """Channel names c for which both ``measured_<c>`` and ``model_<c>`` columns exist, in column order."""
+    return tuple(
+        name[len("measured_"):]
+        for name in table
+        if name.startswith("measured_") and f"model_{name[len('measured_'):]}" in table
+    )
+
+
+def is_usable_dir_name(name) -> bool:
+    """True for a non-empty name that is one path component (no '/' or '\\', not '.' or '..')."""
+    return isinstance(name, str) and bool(name.strip()) and name not in (".", "..") and not any(
+        c in name for c in "/\\")
+
+
+def _check_fit_json(fit: dict, path: Path) -> None:
+    name = fit.get("name")
+    if not is_usable_dir_name(name):
+        raise InputError(f"name {name!r} is not usable as a directory name; expected a non-empty name "
+                         "without '/' or '\\'", path=path, field="name")
+    for key in ("parameters", "coefficients", "errors", "model", "measurement", "config", "objective",
+                "optimizer", "versions"):
+        if key in fit and fit[key] is not None and not isinstance(fit[key], dict):
+            raise InputError(f"expected an object, found {type(fit[key]).__name__}", path=path, field=key)
+    for pname, entry in (fit.get("parameters") or {}).items():
+        if not isinstance(entry, dict) or "value" not in entry:
+            raise InputError("expected an object with at least a 'value'", path=path, field=f"parameters.{pname}")
+    if "warnings" in fit and not isinstance(fit["warnings"], list):
+        raise InputError("expected a list of strings", path=path, field="warnings")
+
+
+def load_fit_dir(fit_dir) -> FitRecord:
+    """Load a fit directory; :class:`InputError` naming the file if a required one is missing or corrupt."""
+    fit_dir = Path(fit_dir)
+    if not fit_dir.is_dir():
+        raise InputError("not a directory; expected a fit directory such as fits/<name>/ with fit.json and "
+                         "predictions.csv", path=fit_dir)
+    fit_path = fit_dir / "fit.json"
+    fit = read_json(fit_path)
+    _check_fit_json(fit, fit_path)
+
+    pred_path = fit_dir / "predictions.csv"
+    predictions = read_csv_table(pred_path, required=DIRECTION_COLUMNS)
+    found = channels_of(predictions)
+    declared = (fit.get("measurement") or {}).get("channels")
+    if declared:
+        absent = [f"{kind}_{c}" for c in declared for kind in ("measured", "model")
+                  if f"{kind}_{c}" not in predictions]
+        if absent:
+            raise InputError(f"fit.json declares channels {list(declared)} but column(s) {absent} are missing",
+                             path=pred_path, line=1)
+        channels = tuple(declared)
+    elif found:
+        channels = found
+    else:
+        raise InputError(f"no channel columns: expected pairs measured_<c>, model_<c>; the header has "
+                         f"{list(predictions)}", path=pred_path, line=1)
+
+    record = FitRecord(fit_dir, fit, predictions, channels)
+    slices_path, trace_path, posterior_path = (fit_dir / n for n in ("slices.csv", "trace.csv", "posterior.json"))
+    if slices_path.exists():
+        record.slices = read_csv_table(slices_path, required=SLICE_COLUMNS)
+    else:
+        record.notes.append("slices.csv is absent: no incidence-plane slice plot.")
+    if trace_path.exists():
+        record.trace = read_csv_table(trace_path, required=TRACE_COLUMNS, text_columns=("stage",))
+    else:
+        record.notes.append("trace.csv is absent: no optimiser trace plot.")
+    if posterior_path.exists():  # hook for the posterior (emcee) work
+        record.posterior = read_json(posterior_path)
+    return record
+
+
+def luminance(table: dict, prefix: str, channels) -> np.ndarray:
+    """Channel mean of ``<prefix>_<c>`` columns: the single value shown for RGB data."""
+    return np.mean([table[f"{prefix}_{c}"] for c in channels], axis=0)
+
+
+def channel_values(table: dict, prefix: str, channel: str, channels) -> np.ndarray:
+    """``<prefix>_<channel>``, or the channel mean when ``channel == 'luminance'``."""
+    if channel == "luminance":
+        return luminance(table, prefix, channels)
+    key = f"{prefix}_{channel}"
+    if key not in table:
+        raise InputError(f"no column {key!r}; channels are {list(channels)} or 'luminance'", field="channel")
+    return np.asarray(table[key], dtype=np.float64)
+
+
+def signed_relative_error(measured, model) -> np.ndarray:
+    """(model - measured) / measured; NaN where measured <= 0 or either is not finite (sec. 8 metric)."""
+    measured = np.asarray(measured, dtype=np.float64)
+    model = np.asarray(model, dtype=np.float64)
+    ok = np.isfinite(measured) & np.isfinite(model) & (measured > 0)
+    out = np.full(np.broadcast(measured, model).shape, np.nan)
+    np.divide(model - measured, measured, out=out, where=ok)
+    return out
+
+
+def percentile_key(q: float) -> str:
+    """'p50' for 50, 'p97.5' for 97.5: the key under which a percentile is stored."""
+    return f"p{q:g}"
+
+
+def error_percentiles(table: dict, channels, percentiles=(50, 80, 95)) -> dict:
+    """Percentiles and mean of |relative error| (fractions) of a predictions table, fit.json's ``errors``.
+
+    ``overall`` pools every (sample, channel) value, ``per_channel`` has one entry per channel; samples
+    with measured <= 0 or non-finite values are skipped (``n`` counts the rest).  Computed by
+    :func:`clothlab.metrics.error_percentiles` (Irawan & Marschner 2012, sec. 8).
+    """
+    from clothlab.metrics import error_percentiles as percentiles_of
+
+    measured = np.stack([table[f"measured_{c}"] for c in channels], axis=1)
+    model = np.stack([table[f"model_{c}"] for c in channels], axis=1)
+    return percentiles_of(measured, model, percentiles, list(channels))
+
+
+def exitant_groups(table: dict) -> list[tuple[float, float, np.ndarray]]:
+    """[(theta_o, phi_o, row indices)] for each distinct exitant direction, sorted by theta_o then phi_o."""
+    theta = np.round(np.asarray(table["theta_o"], dtype=np.float64), EXITANT_DECIMALS)
+    phi = np.round(np.asarray(table["phi_o"], dtype=np.float64), EXITANT_DECIMALS)
+    keys, inverse = np.unique(np.stack([theta, phi], axis=1), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    return [(float(t), float(p), np.flatnonzero(inverse == k)) for k, (t, p) in enumerate(keys)]
+
+
+#: Published fit quality on the real measurements: (median, 80th percentile) relative error in percent,
+#: Irawan & Marschner 2012, sec. 8.  Keys are clothlab's fabric / preset names.
+PAPER_RELATIVE_ERRORS = {
+    "cotton-twill": (21.0, 36.0),
+    "cotton-denim": (18.0, 34.0),
+    "wool-gabardine": (12.0, 27.0),
+    "polyester-lining": (19.0, 39.0),
+    "silk-charmeuse": (40.0, 69.0),
+    "silk-shantung": (28.0, 54.0),
+}
+PAPER_SOURCE = "Irawan & Marschner 2012, sec. 8 (their fits to real measurements)"
+
+
+def fabric_name(fit: dict) -> str:
+    """The fabric a fit is about: config 'name', else the weave preset, else the fit name."""
+    config_name = (fit.get("config") or {}).get("name")
+    if isinstance(config_name, str) and config_name:
+        return config_name
+    weave = (fit.get("model") or {}).get("weave")
+    if isinstance(weave, str) and weave.startswith("preset:"):
+        return weave[len("preset:"):]
+    return str(fit.get("name", ""))
+
+
+def paper_fabric(fit: dict) -> str | None:
+    """The key of :data:`PAPER_RELATIVE_ERRORS` whose fabric this fit is about, or None.
+
+    Matches the normalised (lower case, '-' for spaces and '_') config name, fit name or weave preset.
+    """
+    weave = str((fit.get("model") or {}).get("weave") or "").removeprefix("preset:")
+    candidates = ((fit.get("config") or {}).get("name"), fit.get("name"), weave)
+    for candidate in candidates:
+        if not isinstance(candidate, str):
+            continue
+        normal = "-".join(candidate.lower().replace("_", " ").replace("-", " ").split())
+        for key in PAPER_RELATIVE_ERRORS:
+            if key in normal:
+                return key
+    return None
+
+
+def is_simulated(provenance) -> bool:
+    """True when measurement provenance marks the data as simulated.
+
+    Accepted forms: ``simulated: true``, or a 'kind' / 'type' / 'source' / 'origin' / 'instrument' value
+    containing 'simulat' (e.g. 'simulated', 'clothlab simulate').
+    """
+    if not isinstance(provenance, dict):
+        return False
+    flag = provenance.get("simulated")
+    if isinstance(flag, bool):
+        return flag
+    if isinstance(flag, str) and flag.strip().lower() in ("true", "yes", "1"):
+        return True
+    return any(isinstance(provenance.get(key), str) and "simulat" in provenance[key].lower()
+               for key in ("kind", "type", "source", "origin", "instrument"))

@@ -1,0 +1,309 @@
+"""HTML pages of the report: one page per fit, one comparison page for several fits.
+
+Pages are self-contained (inline CSS, no scripts, no external assets); figures are PNG files next to the
+page, referenced by file name.  Every piece of text from a fit file goes through :func:`html.escape`.
+Relative errors are stored as fractions and shown in percent, like the paper's sec. 8 figures.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+
+from clothlab.report.data import (
+    PAPER_RELATIVE_ERRORS,
+    PAPER_SOURCE,
+    fabric_name,
+    is_simulated,
+    paper_fabric,
+    percentile_key,
+)
+
+CSS = """
+body { font-family: system-ui, -apple-system, 'Segoe UI', sans-serif; margin: 1.5em auto; max-width: 1100px;
+       color: #222; line-height: 1.4; padding: 0 1em; }
+h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.15em; margin-top: 1.6em;
+     border-bottom: 1px solid #ccc; padding-bottom: 0.15em; }
+table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.9em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }
+th { background: #f2f2f2; } td.num { text-align: right; font-variant-numeric: tabular-nums; }
+tr.atbound td { background: #fdecea; } .warn { color: #b00020; font-weight: bold; }
+.banner { background: #b00020; color: white; padding: 0.5em 1em; font-weight: bold; font-size: 1.1em;
+          border-radius: 4px; margin: 0.6em 0; }
+.note { color: #555; font-size: 0.9em; } figure { margin: 1em 0; } figure img { max-width: 100%; }
+figcaption { font-size: 0.9em; color: #444; } pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto;
+font-size: 0.85em; } ul.warnings li { color: #8a4b00; }
+"""
+
+#: Captions of the figures a fit report may hold (file names come from the caller).
+FIGURE_CAPTIONS = {
+    "hemispheres": "Measured and model BRDF and their relative error. Each incident hemisphere is projected "
+                   "onto the tangent plane with the warp direction vertical (Irawan & Marschner 2012, "
+                   "sec. 4.1); one row per exitant direction (\u00d7), \u25cb marks the mirror direction. "
+                   "RGB data are shown as the channel mean.",
+    "slices": "Model BRDF in the incidence plane of each exitant direction, with the measured points that "
+              "lie within a few degrees of that plane.",
+    "error_histogram": "Distribution of the relative error |model \u2212 measured| / measured, all channels "
+                       "pooled, with the percentile lines.",
+    "parameters": "Fitted parameters within their fit bounds, with the start value (and the true value "
+                  "for simulated data).",
+    "trace": "Optimiser trace: objective of each evaluation and best so far, by stage.",
+    "comparison": "Median and 80th-percentile relative error per fit; hatched bars: the paper's published "
+                  "figures on its real measurements.",
+}
+
+
+def esc(value) -> str:
+    """Escaped text of any value (None shows as an em dash)."""
+    return "\u2014" if value is None else html.escape(str(value), quote=True)
+
+
+def fmt_number(value, digits: int = 4) -> str:
+    """A number with ``digits`` significant digits, escaped; non-numbers as escaped text."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return esc(value)
+    if isinstance(value, int):
+        return str(value)
+    return "\u2014" if not math.isfinite(value) else f"{value:.{digits}g}"
+
+
+def fmt_percent(fraction) -> str:
+    """A relative error stored as a fraction, shown in percent with one decimal ('21.0 %')."""
+    if not isinstance(fraction, int | float) or isinstance(fraction, bool) or not math.isfinite(fraction):
+        return "\u2014"
+    return f"{100.0 * fraction:.1f} %"
+
+
+def _table(header, rows, *, row_classes=None) -> str:
+    """rows hold already-escaped cell HTML; a cell given as ('num', html) is right-aligned."""
+    out = ["<table>", "<tr>" + "".join(f"<th>{h}</th>" for h in header) + "</tr>"]
+    for index, row in enumerate(rows):
+        css = f' class="{row_classes[index]}"' if row_classes and row_classes[index] else ""
+        cells = []
+        for cell in row:
+            if isinstance(cell, tuple):
+                cells.append(f'<td class="{cell[0]}">{cell[1]}</td>')
+            else:
+                cells.append(f"<td>{cell}</td>")
+        out.append(f"<tr{css}>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _key_values(mapping) -> str:
+    if not isinstance(mapping, dict) or not mapping:
+        return "\u2014"
+    return "; ".join(f"{esc(k)} = {esc(v)}" for k, v in mapping.items())
+
+
+def _page(title: str, body: list[str]) -> str:
+    return "\n".join([
+        "<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>{esc(title)}</title>", f"<style>{CSS}</style>", "</head>", "<body>", *body, "</body>",
+        "</html>", "",
+    ])
+
+
+def _header_section(fit: dict) -> list[str]:
+    model = fit.get("model") or {}
+    measurement = fit.get("measurement") or {}
+    provenance = measurement.get("provenance") or {}
+    quadrature = model.get("quadrature") or {}
+    quad = " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or None
+    out = [f"<h1>clothlab fit report: {esc(fit.get('name'))}</h1>"]
+    if is_simulated(provenance):
+        out.append('<div class="banner">SIMULATED data: this fit is to a simulated measurement, '
+                   "not to a real one.</div>")
+    channels = measurement.get("channels")
+    rows = [
+        ("fabric", esc(fabric_name(fit))),
+        ("model", esc(model.get("kind"))),
+        ("weave", esc(model.get("weave"))),
+        ("quadrature", esc(quad)),
+        ("measurement", esc(measurement.get("path"))),
+        ("samples", fmt_number(measurement.get("n"))),
+        ("channels", esc(", ".join(map(str, channels)) if channels else None)),
+        ("provenance", _key_values(provenance)),
+        ("metric", esc(fit.get("metric"))),
+        ("fit created", esc(fit.get("created"))),
+    ]
+    out.append(_table(["", ""], [(f"<b>{k}</b>", v) for k, v in rows]))
+    return out
+
+
+def _error_section(fit: dict, errors: dict, percentiles) -> list[str]:
+    header = [f"{q:g}th percentile" if q != 50 else "median (50th)" for q in percentiles] + ["mean", "n"]
+    rows = []
+    entries = [("overall", errors.get("overall") or {})]
+    entries += [(f"channel {c}", e) for c, e in (errors.get("per_channel") or {}).items()]
+    for label, entry in entries:
+        rows.append([esc(label)] + [("num", fmt_percent(entry.get(percentile_key(q)))) for q in percentiles]
+                    + [("num", fmt_percent(entry.get("mean"))), ("num", fmt_number(entry.get("n")))])
+    out = ["<h2>Relative error</h2>",
+           '<p class="note">|model \u2212 measured| / measured over all measured directions, computed from '
+           "predictions.csv (the metric of Irawan &amp; Marschner 2012, sec. 8).</p>",
+           _table(["", *header], rows)]
+    key = paper_fabric(fit)
+    if key:
+        median, p80 = PAPER_RELATIVE_ERRORS[key]
+        out.append(f'<p class="note">For comparison, the paper\'s figures for {esc(key)} on its real '
+                   f"measurements: median {median:g} %, 80th percentile {p80:g} % ({esc(PAPER_SOURCE)}).</p>")
+    return out
+
+
+def _parameter_section(fit: dict) -> list[str]:
+    parameters = fit.get("parameters") or {}
+    with_truth = any(isinstance(e, dict) and e.get("truth") is not None for e in parameters.values())
+    header = ["parameter", "value", "unit", "free", "lower", "upper", "start"] + (["truth"] if with_truth else [])
+    header.append("status")
+    rows, classes = [], []
+    for name, entry in parameters.items():
+        at_bound = entry.get("at_bound")
+        status = f'<span class="warn">\u26a0 at {esc(at_bound)} bound</span>' if at_bound else ""
+        row = [f"<code>{esc(name)}</code>", ("num", fmt_number(entry.get("value"))), esc(entry.get("unit") or ""),
+               "free" if entry.get("free", True) else "fixed", ("num", fmt_number(entry.get("lower"))),
+               ("num", fmt_number(entry.get("upper"))), ("num", fmt_number(entry.get("start")))]
+        if with_truth:
+            row.append(("num", fmt_number(entry.get("truth"))))
+        row.append(status)
+        rows.append(row)
+        classes.append("atbound" if at_bound else "")
+    out = ["<h2>Parameters</h2>", _table(header, rows, row_classes=classes)]
+    if any(classes):
+        out.append('<p class="note warn">Parameters at a bound are weakly identified or constrained by the '
+                   "bound: widen the bound or fix the parameter, and do not read the value as measured.</p>")
+    return out
+
+
+def _coefficient_section(fit: dict) -> list[str]:
+    coefficients = fit.get("coefficients") or {}
+    if not coefficients:
+        return []
+    channels = list(dict.fromkeys(c for v in coefficients.values() if isinstance(v, dict) for c in v))
+    rows = []
+    for name, values in coefficients.items():
+        if isinstance(values, dict):
+            rows.append([f"<code>{esc(name)}</code>"] + [("num", fmt_number(values.get(c))) for c in channels])
+        else:
+            rows.append([f"<code>{esc(name)}</code>", ("num", fmt_number(values))] + [""] * (len(channels) - 1))
+    return ["<h2>Linear coefficients</h2>",
+            '<p class="note">Diffuse and specular weights per channel, solved by linear least squares.</p>',
+            _table(["coefficient", *map(esc, channels or ["value"])], rows)]
+
+
+def _warning_section(fit: dict, notes) -> list[str]:
+    warnings = [str(w) for w in fit.get("warnings") or []]
+    out = []
+    if warnings:
+        out += ["<h2>Warnings from the fit</h2>", '<ul class="warnings">']
+        out += [f"<li>{esc(w)}</li>" for w in warnings]
+        out.append("</ul>")
+    if notes:
+        out += ["<h2>Report notes</h2>", "<ul>"] + [f"<li>{esc(n)}</li>" for n in notes] + ["</ul>"]
+    return out
+
+
+def _figure_section(figures: dict) -> list[str]:
+    if not figures:
+        return []
+    out = ["<h2>Figures</h2>"]
+    for name, filename in figures.items():
+        caption = FIGURE_CAPTIONS.get(name, name)
+        out.append(f'<figure id="fig-{esc(name)}"><img src="{esc(filename)}" alt="{esc(name)}">'
+                   f"<figcaption>{esc(caption)}</figcaption></figure>")
+    return out
+
+
+def _posterior_section(posterior) -> list[str]:
+    """Hook for the posterior (emcee) work: a table of per-parameter summaries when the shape allows."""
+    if not posterior:
+        return []
+    out = ["<h2>Posterior</h2>"]
+    summaries = posterior.get("parameters") if isinstance(posterior.get("parameters"), dict) else None
+    if summaries and all(isinstance(v, dict) for v in summaries.values()):
+        keys = list(dict.fromkeys(k for v in summaries.values() for k in v))
+        rows = [[f"<code>{esc(n)}</code>"] + [("num", fmt_number(v.get(k))) for k in keys]
+                for n, v in summaries.items()]
+        out.append(_table(["parameter", *map(esc, keys)], rows))
+    else:
+        out.append('<p class="note">posterior.json is present; its contents are not rendered yet.</p>')
+    return out
+
+
+def _facts_section(fit: dict) -> list[str]:
+    objective = fit.get("objective") or {}
+    wall = fit.get("wall_time_s")
+    rows = [
+        ("evaluations", fmt_number(fit.get("evaluations"))),
+        ("wall time", f"{fmt_number(wall)} s" if wall is not None else "\u2014"),
+        ("objective start \u2192 final",
+         f"{fmt_number(objective.get('start'))} \u2192 {fmt_number(objective.get('final'))}"),
+        ("seed", fmt_number(fit.get("seed"))),
+        ("optimizer", _key_values(fit.get("optimizer"))),
+        ("clothlab version", esc(fit.get("clothlab_version"))),
+        ("package versions", _key_values(fit.get("versions"))),
+        ("config hash", f"<code>{esc(fit.get('config_hash'))}</code>"),
+    ]
+    out = ["<h2>Fit facts</h2>", _table(["", ""], [(f"<b>{k}</b>", v) for k, v in rows])]
+    if fit.get("config"):
+        config = json.dumps(fit["config"], indent=2, sort_keys=True, default=str)
+        out.append(f"<details><summary>configuration (fabric.yaml as validated)</summary><pre>{esc(config)}"
+                   "</pre></details>")
+    return out
+
+
+def render_report_html(fit: dict, figures: dict, tables: dict) -> str:
+    """The report page of one fit.
+
+    fit : the parsed fit.json.   figures : {figure name: PNG file name next to the page}, in page order
+    (known names get captions from :data:`FIGURE_CAPTIONS`).
+    tables : ``errors`` (fit.json 'errors' format, fractions; required), ``percentiles`` (default
+    (50, 80, 95)), ``notes`` (list of report notes), ``posterior`` (parsed posterior.json or None).
+    """
+    percentiles = tuple(tables.get("percentiles", (50, 80, 95)))
+    body = _header_section(fit)
+    body += _error_section(fit, tables["errors"], percentiles)
+    body += _parameter_section(fit)
+    body += _coefficient_section(fit)
+    body += _warning_section(fit, tables.get("notes") or [])
+    body += _figure_section(figures)
+    body += _posterior_section(tables.get("posterior"))
+    body += _facts_section(fit)
+    return _page(f"clothlab report: {fit.get('name')}", body)
+
+
+def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "comparison") -> str:
+    """A table with one row per fit (like the paper's sec. 8 list) and the comparison figure(s).
+
+    rows : dicts with name, fabric, model, quadrature, p50, p80, p95 (fractions), free (count),
+    evaluations, wall_time_s, simulated (bool), link (relative URL of the fit's report or None) and
+    paper = (median %, 80th %) or None.
+    """
+    header = ["fit", "fabric", "model", "quadrature", "median", "80th pct.", "95th pct.", "free params",
+              "evaluations", "wall time (s)", "paper median*", "paper 80th*"]
+    table_rows = []
+    for row in rows:
+        name = esc(row["name"])
+        if row.get("link"):
+            name = f'<a href="{esc(row["link"])}">{name}</a>'
+        if row.get("simulated"):
+            name += ' <span class="warn">(SIMULATED)</span>'
+        paper = row.get("paper")
+        table_rows.append([
+            name, esc(row.get("fabric")), esc(row.get("model")), esc(row.get("quadrature")),
+            ("num", fmt_percent(row.get("p50"))), ("num", fmt_percent(row.get("p80"))),
+            ("num", fmt_percent(row.get("p95"))), ("num", fmt_number(row.get("free"))),
+            ("num", fmt_number(row.get("evaluations"))), ("num", fmt_number(row.get("wall_time_s"))),
+            ("num", f"{paper[0]:g} %" if paper else "\u2014"), ("num", f"{paper[1]:g} %" if paper else "\u2014"),
+        ])
+    body = [f"<h1>clothlab comparison: {esc(title)}</h1>",
+            '<p class="note">Relative error |model \u2212 measured| / measured, recomputed from each fit\'s '
+            "predictions.csv.</p>",
+            _table(header, table_rows),
+            f'<p class="note">* The paper\'s published figures on its real measurements ({esc(PAPER_SOURCE)}), '
+            "shown where the fabric name matches; the paper chose parameters partly by hand and did not "
+            "minimise these metrics.</p>"]
+    body += _figure_section(figures)
+    return _page(f"clothlab comparison: {title}", body)
