@@ -1,0 +1,85 @@
+"""clothlab.report on synthetic fit directories (tests/test_report.py writes them from numpy only)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_report import CHANNELS, write_synthetic_fit_dir
+
+from clothlab.errors import InputError, ResultExistsError
+from clothlab.report import build as report_build
+from clothlab.report.build import build_comparison, build_report
+from clothlab.report.data import read_csv_table
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _independent_percentiles(fit_dir):
+    table = read_csv_table(fit_dir / "predictions.csv")
+    rel = np.concatenate([np.abs(table[f"model_{c}"] - table[f"measured_{c}"]) / table[f"measured_{c}"]
+                          for c in CHANNELS])
+    return {q: float(np.percentile(rel, q)) for q in (50, 80, 95)}
+
+
+def test_report_page_figures_and_summary(tmp_path):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits")
+    out = build_report(fit_dir, tmp_path / "reports")
+    html = (out / "index.html").read_text()
+    for word in ("warp.umax", "warp.kappa", "SIMULATED", "ks_warp"):
+        assert word in html
+    expected = _independent_percentiles(fit_dir)
+    for q in (50, 80):
+        assert f"{100 * expected[q]:.1f}" in html, q
+    pngs = sorted(out.glob("*.png"))
+    assert len(pngs) >= 4
+    for png in pngs:
+        data = png.read_bytes()
+        assert data[:8] == PNG and len(data) > 1000
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["errors"]["overall"]["p50"] == pytest.approx(expected[50], rel=1e-9)
+    assert "&lt;check&gt;" in html and "<check>" not in html  # warnings are escaped
+
+
+def test_report_refuses_overwrite_and_force_replaces(tmp_path):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits")
+    out = build_report(fit_dir, tmp_path / "reports")
+    (out / "marker").write_text("old")
+    with pytest.raises(ResultExistsError):
+        build_report(fit_dir, tmp_path / "reports")
+    assert (out / "marker").exists()
+    build_report(fit_dir, tmp_path / "reports", force=True)
+    assert not (out / "marker").exists() and (out / "index.html").is_file()
+
+
+def test_failure_midway_leaves_nothing_half_written(tmp_path, monkeypatch):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits")
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("plotting failed")
+
+    monkeypatch.setattr(report_build.plots, "plot_fit_trace", boom)
+    with pytest.raises(RuntimeError, match="plotting failed"):
+        build_report(fit_dir, tmp_path / "reports")
+    reports = tmp_path / "reports"
+    assert not reports.exists() or not any(reports.iterdir())
+
+
+def test_comparison_lists_every_fit_and_the_paper_figures(tmp_path):
+    dirs = [write_synthetic_fit_dir(tmp_path / "fits", name=n, fabric=f, seed=i)
+            for i, (n, f) in enumerate([("a-denim", "cotton-denim"), ("b-twill", "cotton-twill")])]
+    out = build_comparison(dirs, tmp_path / "reports")
+    html = (out / "index.html").read_text()
+    assert "a-denim" in html and "b-twill" in html
+    assert "18" in html and "34" in html  # the paper's denim median / 80th percentile (sec. 8)
+
+
+def test_missing_or_corrupt_fit_json_is_named(tmp_path):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits")
+    (fit_dir / "fit.json").write_text("{not json")
+    with pytest.raises(InputError, match="fit.json"):
+        build_report(fit_dir, tmp_path / "reports")
+    (fit_dir / "fit.json").unlink()
+    with pytest.raises(InputError, match="fit.json"):
+        build_report(fit_dir, tmp_path / "reports")
