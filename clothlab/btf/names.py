@@ -1,0 +1,285 @@
+"""Angles of BTF images: from Bonn UBO2003 / UTIA file names or from a manifest (formats.md, "BTF image stacks").
+
+File-name layouts (one image per light/view pair, angles in degrees):
+
+- Bonn UBO2003: ``tv030_pv030/00008 tl000 pl000 tv030 pv030.jpg``
+- UTIA:         ``tv000_pv000/tl000_pl000_tv000_pv000.png`` (or ``.exr``)
+
+``tl``/``pl`` are the light (incident) polar angle / azimuth, ``tv``/``pv`` the view (exitant) ones.  The
+four fields may be separated by spaces or underscores; clothlab's own writer may add a decimal part
+(``tl022.5``).  A parent directory named ``tvNNN_pvNNN`` must agree with the file name.
+
+Azimuth convention assumed for the names (stated, not documented by the databases themselves): phi is
+measured counter-clockwise, seen from above the sample (from the camera), from the image's +column
+direction ("image right"); phi = 90 deg points to the image top.  With the warp along the image's vertical
+axis (the default, ``warp_axis="vertical"``, image top = +y = warp) image right is the weft (+x), so the
+names' azimuths already are clothlab azimuths (zero = weft, counter-clockwise).  With
+``warp_axis="horizontal"`` (image right = warp) the zero is the warp: phi_clothlab = phi_name + 90 deg.
+
+Manifests list ``file -> theta_i, phi_i, theta_o, phi_o`` (degrees) and may declare their azimuth convention
+relative to the fabric (``zero``: weft | x | warp | y, ``sense``: ccw | cw) and the image axis that carries
+the warp (``warp_axis``: vertical | horizontal):
+
+YAML::
+
+    clothlab_btf_manifest: 1
+    warp_axis: vertical
+    azimuth: {zero: weft, sense: ccw}
+    images:
+      - {file: tv000_pv000/tl000_pl000_tv000_pv000.exr, theta_i: 0, phi_i: 0, theta_o: 0, phi_o: 0}
+
+CSV (``# key: value`` lines before the header)::
+
+    # warp_axis: vertical
+    # azimuth_zero: weft
+    # azimuth_sense: ccw
+    file,theta_i,phi_i,theta_o,phi_o
+    tv000_pv000/tl000_pl000_tv000_pv000.exr,0,0,0,0
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import InputError
+from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_to_clothlab
+
+#: Image file suffixes a stack may hold (lower case).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
+#: Manifest file names looked for inside a stack directory, in this order.
+MANIFEST_NAMES = ("manifest.yaml", "manifest.yml", "manifest.csv")
+WARP_AXES = ("vertical", "horizontal")
+ANGLE_FIELDS = ("theta_i", "phi_i", "theta_o", "phi_o")
+
+_NUMBER = r"(\d+(?:\.\d+)?)"
+_ANGLES = re.compile(rf"tl{_NUMBER}[ _]+pl{_NUMBER}[ _]+tv{_NUMBER}[ _]+pv{_NUMBER}", re.IGNORECASE)
+_VIEW_DIR = re.compile(rf"^tv{_NUMBER}[ _]+pv{_NUMBER}$", re.IGNORECASE)
+_DUPLICATE_DIGITS = 6  # angle sets equal to 1e-6 deg are duplicates
+
+
+@dataclass(frozen=True)
+class BtfEntry:
+    """One image of a stack: its path and the light/view directions in clothlab's convention (degrees)."""
+
+    path: Path
+    theta_i: float
+    phi_i: float
+    theta_o: float
+    phi_o: float
+
+    @property
+    def angles(self) -> tuple[float, float, float, float]:
+        return (self.theta_i, self.phi_i, self.theta_o, self.phi_o)
+
+
+def parse_angles(name: str) -> tuple[float, float, float, float] | None:
+    """(theta_i, phi_i, theta_o, phi_o) in degrees as written in a Bonn/UTIA file name, or None."""
+    match = _ANGLES.search(Path(name).name)
+    return None if match is None else tuple(float(g) for g in match.groups())
+
+
+def name_convention(warp_axis: str) -> dict:
+    """The fabric-relative azimuth convention of Bonn/UTIA names for a given warp image axis (see module doc)."""
+    _check_warp_axis(warp_axis, None)
+    return {"zero": "weft" if warp_axis == "vertical" else "warp", "sense": "ccw"}
+
+
+def format_angle(value: float) -> str:
+    """An angle for a file name: ``030`` for integer degrees, ``022.5`` otherwise (at most 4 decimals)."""
+    value = round(float(value), 4)
+    if value < 0:
+        raise ValueError(f"angles in BTF names are non-negative degrees, got {value}")
+    if value == int(value):
+        return f"{int(value):03d}"
+    return f"{value:08.4f}".rstrip("0")
+
+
+def is_image(path: Path) -> bool:
+    return path.suffix.lower() in IMAGE_SUFFIXES and not path.name.startswith(".")
+
+
+def find_manifest(directory: Path) -> Path | None:
+    """The manifest inside a stack directory (:data:`MANIFEST_NAMES`), or None."""
+    for name in MANIFEST_NAMES:
+        if (directory / name).is_file():
+            return directory / name
+    return None
+
+
+def entries_from_names(directory, *, warp_axis: str = "vertical") -> list[BtfEntry]:
+    """Entries of every image below ``directory`` whose names carry the angles (sorted by path)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise InputError("BTF stack directory not found", path=directory)
+    convention = name_convention(warp_axis)
+    entries = []
+    for path in sorted(p for p in directory.rglob("*") if p.is_file() and is_image(p)):
+        rel = path.relative_to(directory)
+        if any(part.startswith(".") for part in rel.parts):
+            continue
+        angles = parse_angles(path.name)
+        if angles is None:
+            raise InputError(
+                "cannot read the angles from the file name: expected 'tlNNN plNNN tvNNN pvNNN' (spaces or "
+                "underscores, Bonn UBO2003 / UTIA naming) or a manifest.yaml / manifest.csv in the stack "
+                "directory", path=path)
+        view_dir = _VIEW_DIR.match(path.parent.name)
+        if view_dir is not None and path.parent != directory:
+            tv, pv = (float(g) for g in view_dir.groups())
+            if (tv, pv) != angles[2:]:
+                raise InputError(
+                    f"view angles in the file name (tv {angles[2]:g}, pv {angles[3]:g}) disagree with its "
+                    f"directory '{path.parent.name}' (tv {tv:g}, pv {pv:g})", path=path)
+        entries.append(_entry(path, angles, convention, path))
+    if not entries:
+        raise InputError(
+            f"no images ({', '.join(IMAGE_SUFFIXES)}) found in the BTF stack directory", path=directory)
+    check_duplicates(entries)
+    return entries
+
+
+def read_manifest(path) -> tuple[list[BtfEntry], str]:
+    """Entries (clothlab convention) and the warp image axis declared by a YAML or CSV manifest."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("BTF manifest not found", path=path)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        header, rows = _read_yaml_manifest(path)
+    elif path.suffix.lower() == ".csv":
+        header, rows = _read_csv_manifest(path)
+    else:
+        raise InputError(f"unknown manifest type '{path.suffix}': expected .yaml, .yml or .csv", path=path)
+    warp_axis = str(header.get("warp_axis", "vertical")).strip().lower()
+    _check_warp_axis(warp_axis, path)
+    zero = str(header.get("azimuth_zero", "weft")).strip().lower()
+    sense = str(header.get("azimuth_sense", "ccw")).strip().lower()
+    if zero not in AZIMUTH_ZERO:
+        raise InputError(f"azimuth zero '{zero}' is not one of {', '.join(AZIMUTH_ZERO)}", path=path,
+                         field="azimuth.zero")
+    if sense not in AZIMUTH_SENSE:
+        raise InputError(f"azimuth sense '{sense}' is not one of {', '.join(AZIMUTH_SENSE)}", path=path,
+                         field="azimuth.sense")
+    convention = {"zero": zero, "sense": sense}
+    entries = []
+    root = path.parent
+    for line, row in rows:
+        name = row.get("file")
+        if name is None or not str(name).strip():
+            raise InputError("manifest row has no 'file'", path=path, line=line, field="file")
+        angles = []
+        for field_name in ANGLE_FIELDS:
+            value = row.get(field_name)
+            try:
+                angle = float(value)
+            except (TypeError, ValueError):
+                raise InputError(f"expected an angle in degrees, found {value!r}", path=path, line=line,
+                                 field=field_name) from None
+            angles.append(angle)
+        image = root / str(name).strip()
+        entries.append(_entry(image, tuple(angles), convention, path, line=line))
+    if not entries:
+        raise InputError("manifest lists no images", path=path)
+    check_duplicates(entries)
+    return entries, warp_axis
+
+
+def check_duplicates(entries: list[BtfEntry]) -> None:
+    """InputError naming both files when two entries carry the same four angles."""
+    seen: dict[tuple, Path] = {}
+    for entry in entries:
+        key = tuple(round(a, _DUPLICATE_DIGITS) for a in entry.angles)
+        if key in seen:
+            raise InputError(
+                f"duplicate angle set (theta_i, phi_i, theta_o, phi_o) = {tuple(float(a) for a in key)} deg, "
+                f"also carried by {seen[key]}", path=entry.path)
+        seen[key] = entry.path
+
+
+def _entry(path: Path, angles, convention: dict, source: Path, line: int | None = None) -> BtfEntry:
+    theta_i, phi_i, theta_o, phi_o = angles
+    for name, value in zip(ANGLE_FIELDS, angles, strict=True):
+        if not math.isfinite(value):
+            raise InputError(f"angle {name} is {value}; expected a finite number of degrees", path=source,
+                             line=line, field=name)
+    for name, value in (("theta_i", theta_i), ("theta_o", theta_o)):
+        if not 0.0 <= value <= 90.0:
+            raise InputError(f"{name} = {value:g} deg lies outside [0, 90] deg", path=source, line=line,
+                             field=name)
+    phi_i, phi_o = (float(azimuth_to_clothlab(p, **convention)) for p in (phi_i, phi_o))
+    return BtfEntry(path, float(theta_i), phi_i, float(theta_o), phi_o)
+
+
+def _check_warp_axis(warp_axis: str, path) -> None:
+    if warp_axis not in WARP_AXES:
+        raise InputError(f"warp_axis '{warp_axis}' is not one of {', '.join(WARP_AXES)}", path=path,
+                         field="warp_axis")
+
+
+def _read_yaml_manifest(path: Path) -> tuple[dict, list[tuple[int | None, dict]]]:
+    import yaml
+
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(f"not valid YAML: {exc}", path=path,
+                         line=None if mark is None else mark.line + 1) from None
+    if not isinstance(data, dict) or not isinstance(data.get("images"), list):
+        raise InputError("expected a mapping with an 'images' list of {file, theta_i, phi_i, theta_o, phi_o}",
+                         path=path, field="images")
+    azimuth = data.get("azimuth") or {}
+    if not isinstance(azimuth, dict):
+        raise InputError(f"expected a mapping {{zero, sense}}, found {azimuth!r}", path=path, field="azimuth")
+    header = {"warp_axis": data.get("warp_axis", "vertical"), "azimuth_zero": azimuth.get("zero", "weft"),
+              "azimuth_sense": azimuth.get("sense", "ccw")}
+    rows = []
+    for index, row in enumerate(data["images"]):
+        if not isinstance(row, dict):
+            raise InputError(f"images[{index}] is {row!r}; expected a mapping with file and four angles",
+                             path=path, field=f"images[{index}]")
+        rows.append((None, row))
+    return header, rows
+
+
+def _read_csv_manifest(path: Path) -> tuple[dict, list[tuple[int | None, dict]]]:
+    header: dict = {}
+    lines = path.read_text(encoding="utf-8").splitlines()
+    body_start = 0
+    for number, text in enumerate(lines):
+        stripped = text.strip()
+        if stripped.startswith("#"):
+            key, sep, value = stripped.lstrip("#").partition(":")
+            if sep:
+                header[key.strip().lower()] = value.strip()
+            continue
+        if stripped:
+            body_start = number
+            break
+    else:
+        raise InputError("manifest has no header row 'file,theta_i,phi_i,theta_o,phi_o'", path=path)
+    reader = csv.reader(lines[body_start:])
+    columns = [c.strip().lower() for c in next(reader)]
+    missing = [c for c in ("file", *ANGLE_FIELDS) if c not in columns]
+    if missing:
+        raise InputError(f"header lacks column(s) {', '.join(missing)}; found {', '.join(columns)}", path=path,
+                         line=body_start + 1)
+    rows = []
+    for offset, values in enumerate(reader, start=2):
+        if not values or not "".join(values).strip() or values[0].lstrip().startswith("#"):
+            continue
+        if len(values) != len(columns):
+            raise InputError(f"expected {len(columns)} fields, found {len(values)}", path=path,
+                             line=body_start + offset)
+        rows.append((body_start + offset, dict(zip(columns, values, strict=True))))
+    return header, rows
+
+
+def angle_table(entries: list[BtfEntry]) -> np.ndarray:
+    """(N, 4) float64 array of (theta_i, phi_i, theta_o, phi_o) in degrees."""
+    return np.array([e.angles for e in entries], dtype=np.float64).reshape(-1, 4)
