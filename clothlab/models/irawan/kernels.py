@@ -153,3 +153,94 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta):
             acc += wk * a * (radius + a * cv) * ci * cr / (ci + cr)
         out[n] = acc * fade / (length * rho_yz)
     return out
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Pointwise kernels of the texture model (sec. 7.2, Algorithms 3-4): the integrand at one node per point
+# *and* the position of the ideal specular point, which the texture needs for the band chi of eq. 12.
+
+
+@njit(cache=True)
+def staple_points(wi, wo, u, umax, psi, kappa, w, l):
+    """G_v A at u[n] and the specular v(u) of eq. 3 (+ root) for each point n (Algorithm 3).
+
+    wi, wo: (N, 3) or (1, 3) yarn-frame directions (one row: shared by all points); u, umax: (N,) radians.
+    Returns (value, v): value 0 (and v 0) where |u| > umax, |D| > 1, |v| >= pi/2 or a cosine is <= 0.
+    """
+    n_pts = u.shape[0]
+    value = np.zeros(n_pts)
+    vpos = np.zeros(n_pts)
+    shared = wi.shape[0] == 1
+    cot_psi = math.cos(psi) / math.sin(psi)
+    abs_sin_psi = abs(math.sin(psi))
+    a = 0.5 * w
+    for n in range(n_pts):
+        row = 0 if shared else n
+        wix, wiy, wiz = wi[row, 0], wi[row, 1], wi[row, 2]
+        wox, woy, woz = wo[row, 0], wo[row, 1], wo[row, 2]
+        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
+        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0 or abs(u[n]) > umax[n]:
+            continue
+        hx, hy, hz = sx / length, sy / length, sz / length
+        su = math.sin(u[n])
+        cu = math.cos(u[n])
+        r = spine_radius_scalar(u[n], umax[n], kappa, w, l)
+        g = staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, su, cu, r, cot_psi, abs_sin_psi, a)
+        if g <= 0.0:
+            continue
+        # the same root as staple_value: cos v, sin v of the +arccos(D) solution (yarn.py docstring)
+        b = hy * su + hz * cu
+        rho = math.sqrt(hx * hx + b * b)
+        d = (hy * cu - hz * su) * cot_psi / rho
+        root = math.sqrt(max(1.0 - d * d, 0.0))
+        value[n] = g
+        vpos[n] = math.atan2((hx * root - b * d) / rho, (hx * d + b * root) / rho)
+    return value, vpos
+
+
+@njit(cache=True)
+def filament_points(wi, wo, v, umax, kappa, w, l, delta):
+    """G_u A_s at v[n] and the specular u of eq. 4 for each point n (Algorithm 4).
+
+    wi, wo: (N, 3) or (1, 3) yarn-frame directions (one row: shared); v, umax: (N,) radians.
+    Returns (value, u): value 0 where |v| > pi/2, |u| >= umax or a cosine is <= 0 (u is returned anyway).
+    Same integrand as :func:`filament_quadrature` (eqs. 4, 6, 8, 9, bounded form).
+    """
+    n_pts = v.shape[0]
+    value = np.zeros(n_pts)
+    upos = np.zeros(n_pts)
+    shared = wi.shape[0] == 1
+    a = 0.5 * w
+    for n in range(n_pts):
+        row = 0 if shared else n
+        wix, wiy, wiz = wi[row, 0], wi[row, 1], wi[row, 2]
+        wox, woy, woz = wo[row, 0], wo[row, 1], wo[row, 2]
+        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
+        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+            continue
+        hy, hz = sy / length, sz / length
+        uu = math.atan(hy / hz)
+        upos[n] = uu
+        um = umax[n]
+        if abs(uu) >= um or abs(v[n]) > 0.5 * math.pi:
+            continue
+        fade = 1.0
+        if delta > 0.0:
+            x = min(max((abs(uu) - (1.0 - delta) * um) / (delta * um), 0.0), 1.0)
+            fade = 1.0 - x * x * (3.0 - 2.0 * x)
+        rho_yz = math.sqrt(hy * hy + hz * hz)
+        if fade <= 0.0 or rho_yz <= 0.0:
+            continue
+        su = math.sin(uu)
+        cu = math.cos(uu)
+        sv = math.sin(v[n])
+        cv = math.cos(v[n])
+        ci = wix * sv + (wiy * su + wiz * cu) * cv
+        cr = wox * sv + (woy * su + woz * cu) * cv
+        if ci <= 0.0 or cr <= 0.0:
+            continue
+        radius = spine_radius_scalar(uu, um, kappa, w, l)
+        value[n] = a * (radius + a * cv) * ci * cr / (ci + cr) * fade / (length * rho_yz)
+    return value, upos
