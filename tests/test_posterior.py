@@ -188,8 +188,8 @@ def test_coverage_full_six_fabrics():
 def test_identifiability_flags():
     """Data with a million-fold sigma say nothing: the posterior spans the prior and both parameters are flagged;
     with the real sigma they are determined; an optimum at a bound is flagged as such."""
-    problem, truth = _problem(sigma_scale=1e6)
-    post = run_posterior(problem, truth, seed=3, walkers=8, steps=300, max_steps=300, check_every=100,
+    problem, truth = _problem(sigma_scale=1e6, every=15)
+    post = run_posterior(problem, truth, seed=3, walkers=8, steps=250, max_steps=250, check_every=50,
                          progress=False)
     assert set(post.not_determined()) == {"warp.umax", "beta"}
     assert any("spans" in r for r in post.identifiability()["warp.umax"])

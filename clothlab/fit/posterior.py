@@ -191,10 +191,16 @@ class _ChainState:
     last_log_prob: np.ndarray  # (W,)
     random_state: tuple
     tau_history: dict = field(default_factory=dict)  # steps -> (D,) tau
+    elapsed: float = 0.0  # sampling seconds of earlier sessions (resumed runs)
+    started: float = field(default_factory=time.perf_counter)  # start of this session (perf_counter)
 
     @property
     def steps(self) -> int:
         return self.chain.shape[0]
+
+    def session(self) -> float:
+        """Seconds since this session started."""
+        return time.perf_counter() - self.started
 
 
 def _save_checkpoint(path: Path, fingerprint: str, st: _ChainState) -> None:
@@ -206,7 +212,7 @@ def _save_checkpoint(path: Path, fingerprint: str, st: _ChainState) -> None:
     np.savez(buf, fingerprint=np.array(fingerprint), initial=st.initial, chain=st.chain, log_prob=st.log_prob,
              coords=st.coords, last_log_prob=st.last_log_prob, rs_name=np.array(name), rs_keys=keys,
              rs_pos=np.array(pos), rs_has_gauss=np.array(has_gauss), rs_cached=np.array(cached),
-             tau_steps=steps_done, tau_values=taus)
+             tau_steps=steps_done, tau_values=taus, elapsed=np.array(st.elapsed + st.session()))
     atomic_write_bytes(path, buf.getvalue())
 
 
@@ -226,7 +232,7 @@ def _load_checkpoint(path: Path, fingerprint: str) -> _ChainState:
     rs = (str(data["rs_name"]), data["rs_keys"], int(data["rs_pos"]), int(data["rs_has_gauss"]),
           float(data["rs_cached"]))
     return _ChainState(data["initial"], data["chain"], data["log_prob"], data["coords"], data["last_log_prob"],
-                       rs, tau)
+                       rs, tau, float(data["elapsed"]))
 
 
 # ---------------------------------------------------------------------------------------------- sampling
@@ -330,6 +336,7 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
         resumed_from = st.steps
     else:
         st = _initial_state(like, x_opt, walkers, seed)
+    st.started = started
 
     sampler = emcee.EnsembleSampler(walkers, like.ndim, like, vectorize=True, moves=moves)
     bar = _Progress(progress, steps, max_steps)
@@ -402,12 +409,13 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
     bar.close()
     return _summarise(problem, like, optimum_params, x_opt, st, seed=seed, walkers=walkers, min_steps=steps,
                       max_steps=max_steps, tol_factor=tol_factor, check_every=check_every, stop_reason=stop_reason,
-                      wall_time=time.perf_counter() - started, resumed_from=resumed_from, notes=notes)
+                      wall_time=st.elapsed + st.session(), resumed_from=resumed_from, notes=notes,
+                      moves_text="emcee default (stretch move, a = 2)" if moves is None else repr(moves))
 
 
 # ---------------------------------------------------------------------------------------------- results
 def _summarise(problem, like, optimum_params, x_opt, st, *, seed, walkers, min_steps, max_steps, tol_factor,
-               check_every, stop_reason, wall_time, resumed_from, notes) -> PosteriorResult:
+               check_every, stop_reason, wall_time, resumed_from, notes, moves_text) -> PosteriorResult:
     n = st.steps
     if n < 2:
         raise ValueError("the posterior run stopped before two steps were sampled (max_seconds too small?)")
@@ -429,7 +437,8 @@ def _summarise(problem, like, optimum_params, x_opt, st, *, seed, walkers, min_s
                            steps=n, walkers=walkers, wall_time=wall_time, seed=seed, noise=like.noise,
                            likelihood=like.description, optimum=dict(optimum_params), optimum_unit=x_opt,
                            min_steps=min_steps, max_steps=max_steps, tol_factor=tol_factor, check_every=check_every,
-                           stop_reason=stop_reason, resumed_from=resumed_from, warnings=notes, _like=like)
+                           stop_reason=stop_reason, resumed_from=resumed_from, warnings=notes, _like=like,
+                           moves=moves_text)
 
 
 def _to_declared(problem, like, unit: np.ndarray) -> np.ndarray:
@@ -479,6 +488,7 @@ class PosteriorResult:
     check_every: int
     stop_reason: str | None
     resumed_from: int
+    moves: str = "emcee default (stretch move, a = 2)"
     warnings: list = field(default_factory=list)
     _like: object = None
 
@@ -574,7 +584,7 @@ class PosteriorResult:
                 warn.append(f"{name}: not determined by these data ({'; '.join(reasons)})")
         return {
             "method": "emcee EnsembleSampler (vectorised log-probability)",
-            "moves": "emcee default (stretch move, a = 2)",
+            "moves": self.moves,
             "prior": PRIOR_TEXT,
             "likelihood": self.likelihood,
             "noise_model": self.noise,
@@ -584,6 +594,9 @@ class PosteriorResult:
             "correlation": {"names": list(self.names), "matrix": _finite(corr),
                             "coordinates": "sampled (unit-box) coordinates: log for log-scaled parameters"},
             "not_determined": [n for n, r in ident.items() if r],
+            "identifiability_rule": (f"not determined by these data: 95 % interval wider than {WIDE_FRACTION:.0%} "
+                                     f"of the prior range (unit-box coordinates), or > {PILE_FRACTION:.0%} of samples "
+                                     f"within {PILE_MARGIN:.0%} of the range from a bound, or optimum at a bound"),
             "convergence": {
                 "converged": self.converged, "stop_reason": self.stop_reason,
                 "rule": (f"{self.tol_factor:g} x max(tau) < steps and every tau changed < {100 * TAU_CHANGE:g} % "
@@ -599,6 +612,7 @@ class PosteriorResult:
             },
             "seed": self.seed,
             "wall_time_s": self.wall_time,
+            "wall_time_note": "sampling seconds summed over all sessions of a resumed run",
             "warnings": warn,
         }
 
