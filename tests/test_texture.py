@@ -437,3 +437,18 @@ def test_perlin_umax_modulation_along_yarns():
     wi, wo = directions(PAIRS[:1])
     comps = texture.components(np.full(4, seg.center_u), seg.center_v + np.array([0, 37, -91, 250]), wi, wo)
     assert np.all(np.isfinite(comps["specular_warp"]))
+
+
+def test_direction_shapes_broadcast_or_raise():
+    from clothlab.errors import ParameterError
+
+    texture = IrawanTexture(get_preset("polyester-lining"))
+    u, v = np.linspace(0, 1, 50), np.linspace(0.3, 2, 50)
+    wi = spherical_to_vector(30, 0)
+    wo = spherical_to_vector(np.full(50, 30.0), np.linspace(150, 210, 50))
+    a = texture.components(u, v, wi, wo, normalised=False)
+    b = texture.components(u, v, np.tile(wi, (50, 1)), wo, normalised=False)
+    for key in a:
+        assert np.array_equal(a[key], b[key])
+    with pytest.raises(ParameterError, match=r"wi \(3, 3\)"):
+        texture.components(u, v, np.zeros((3, 3)), wo)

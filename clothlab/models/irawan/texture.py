@@ -191,11 +191,13 @@ class IrawanTexture:
         points = self.locate(u, v)
         shape = points.x.shape
         n_pts = points.x.size
-        shared = wi.shape[0] == 1 and wo.shape[0] == 1
-        if not shared:
-            if wi.shape != (n_pts, 3) or wo.shape != (n_pts, 3):
+        for d in (wi, wo):
+            if d.ndim != 2 or d.shape[1] != 3 or d.shape[0] not in (1, n_pts):
                 raise ParameterError(f"directions must be (3,), (1, 3) or (N, 3) with N = {n_pts} texture "
                                      f"points; got wi {wi.shape}, wo {wo.shape}")
+        shared = wi.shape[0] == 1 and wo.shape[0] == 1
+        if not shared:
+            wi, wo = np.broadcast_to(wi, (n_pts, 3)), np.broadcast_to(wo, (n_pts, 3))
         front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         out = {}
         if "diffuse" in need:
