@@ -97,11 +97,60 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
     return out
 
 
+@njit(cache=True, inline="always")
+def filament_setup(wix, wiy, wiz, wox, woy, woz, umax, delta):
+    """Per-direction part of the filament integrand (eqs. 4, 6, 9): (ok, u, scale, p_i, p_o) with u the
+    specular inclination of eq. 4, scale = smoothstep fade / (|wi + wo| |(t x h)_x|) and p = w_y sin u + w_z cos u
+    (so that w.n = w_x sin v + p cos v)."""
+    sx, sy, sz = wix + wox, wiy + woy, wiz + woz
+    length = math.sqrt(sx * sx + sy * sy + sz * sz)
+    if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0
+    hy, hz = sy / length, sz / length
+    u = math.atan(hy / hz)
+    if abs(u) >= umax:
+        return False, u, 0.0, 0.0, 0.0
+    fade = 1.0
+    if delta > 0.0:
+        x = min(max((abs(u) - (1.0 - delta) * umax) / (delta * umax), 0.0), 1.0)
+        fade = 1.0 - x * x * (3.0 - 2.0 * x)
+    rho_yz = math.sqrt(hy * hy + hz * hz)
+    if fade <= 0.0 or rho_yz <= 0.0:
+        return False, u, 0.0, 0.0, 0.0
+    su = math.sin(u)
+    cu = math.cos(u)
+    return True, u, fade / (length * rho_yz), wiy * su + wiz * cu, woy * su + woz * cu
+
+
+@njit(cache=True, inline="always")
+def filament_node(wix, p_i, wox, p_o, sv, cv, a, radius):
+    """a (R + a cos v) c_i c_r / (c_i + c_r) at one v (eq. 8 with eq. 6's volume element); 0 if a cosine <= 0."""
+    ci = wix * sv + p_i * cv
+    cr = wox * sv + p_o * cv
+    if ci <= 0.0 or cr <= 0.0:
+        return 0.0
+    return a * (radius + a * cv) * ci * cr / (ci + cr)
+
+
+@njit(cache=True, inline="always")
+def positive_arc(x, p):
+    """The interval of v in (-pi/2, pi/2) where x sin v + p cos v > 0, as (lo, hi) (empty if lo >= hi):
+    dividing by cos v > 0, x tan v + p > 0."""
+    if x == 0.0:
+        return (-0.5 * math.pi, 0.5 * math.pi) if p > 0.0 else (0.0, 0.0)
+    v0 = math.atan(-p / x)
+    if x > 0.0:
+        return v0, 0.5 * math.pi
+    return -0.5 * math.pi, v0
+
+
 @njit(cache=True)
-def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta):
+def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc):
     """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eqs. 4, 6, 8, 9) for each direction pair n (yarn frame).
 
-    ``nodes`` / ``weights`` of shape (1, K) are shared by all directions (sin v, cos v computed once)."""
+    ``nodes`` / ``weights`` of shape (1, K) are shared by all directions (sin v, cos v computed once).
+    ``on_arc``: the nodes are unit nodes in [0, 1] mapped per direction onto the closed-form arc where both
+    clamped cosines of eq. 8 are positive (the only place the integrand is non-zero, and analytic inside)."""
     n_dir = wi.shape[0]
     n_nodes = nodes.shape[1]
     shared = nodes.shape[0] == 1
@@ -109,49 +158,40 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta):
     a = 0.5 * w
     sv_shared = np.empty(n_nodes)
     cv_shared = np.empty(n_nodes)
-    if shared:
+    if shared and not on_arc:
         for k in range(n_nodes):
             sv_shared[k] = math.sin(nodes[0, k])
             cv_shared[k] = math.cos(nodes[0, k])
     for n in range(n_dir):
-        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
-        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
-        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
-        length = math.sqrt(sx * sx + sy * sy + sz * sz)
-        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+        wix, wox = wi[n, 0], wo[n, 0]
+        ok, u, scale, p_i, p_o = filament_setup(wix, wi[n, 1], wi[n, 2], wox, wo[n, 1], wo[n, 2], umax, delta)
+        if not ok:
             continue
-        hy, hz = sy / length, sz / length
-        u = math.atan(hy / hz)
-        if abs(u) >= umax:
-            continue
-        fade = 1.0
-        if delta > 0.0:
-            x = min(max((abs(u) - (1.0 - delta) * umax) / (delta * umax), 0.0), 1.0)
-            fade = 1.0 - x * x * (3.0 - 2.0 * x)
-        rho_yz = math.sqrt(hy * hy + hz * hz)
-        if fade <= 0.0 or rho_yz <= 0.0:
-            continue
-        su = math.sin(u)
-        cu = math.cos(u)
         radius = spine_radius_scalar(u, umax, kappa, w, l)
-        pi_ = wiy * su + wiz * cu
-        po_ = woy * su + woz * cu
         row = 0 if shared else n
         acc = 0.0
-        for k in range(n_nodes):
-            wk = weights[row, k]
-            if wk == 0.0:
+        if on_arc:
+            lo_i, hi_i = positive_arc(wix, p_i)
+            lo_o, hi_o = positive_arc(wox, p_o)
+            lo, hi = max(lo_i, lo_o), min(hi_i, hi_o)
+            span = hi - lo
+            if span <= 0.0:
                 continue
-            if shared:
-                sv, cv = sv_shared[k], cv_shared[k]
-            else:
-                sv, cv = math.sin(nodes[n, k]), math.cos(nodes[n, k])
-            ci = wix * sv + pi_ * cv
-            cr = wox * sv + po_ * cv
-            if ci <= 0.0 or cr <= 0.0:
-                continue
-            acc += wk * a * (radius + a * cv) * ci * cr / (ci + cr)
-        out[n] = acc * fade / (length * rho_yz)
+            for k in range(n_nodes):
+                v = lo + span * nodes[row, k]
+                acc += weights[row, k] * filament_node(wix, p_i, wox, p_o, math.sin(v), math.cos(v), a, radius)
+            acc *= span
+        else:
+            for k in range(n_nodes):
+                wk = weights[row, k]
+                if wk == 0.0:
+                    continue
+                if shared:
+                    sv, cv = sv_shared[k], cv_shared[k]
+                else:
+                    sv, cv = math.sin(nodes[n, k]), math.cos(nodes[n, k])
+                acc += wk * filament_node(wix, p_i, wox, p_o, sv, cv, a, radius)
+        out[n] = acc * scale
     return out
 
 
@@ -214,33 +254,12 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta):
     a = 0.5 * w
     for n in range(n_pts):
         row = 0 if shared else n
-        wix, wiy, wiz = wi[row, 0], wi[row, 1], wi[row, 2]
-        wox, woy, woz = wo[row, 0], wo[row, 1], wo[row, 2]
-        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
-        length = math.sqrt(sx * sx + sy * sy + sz * sz)
-        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
-            continue
-        hy, hz = sy / length, sz / length
-        uu = math.atan(hy / hz)
+        wix, wox = wi[row, 0], wo[row, 0]
+        ok, uu, scale, p_i, p_o = filament_setup(wix, wi[row, 1], wi[row, 2], wox, wo[row, 1], wo[row, 2],
+                                                 umax[n], delta)
         upos[n] = uu
-        um = umax[n]
-        if abs(uu) >= um or abs(v[n]) > 0.5 * math.pi:
+        if not ok or abs(v[n]) > 0.5 * math.pi:
             continue
-        fade = 1.0
-        if delta > 0.0:
-            x = min(max((abs(uu) - (1.0 - delta) * um) / (delta * um), 0.0), 1.0)
-            fade = 1.0 - x * x * (3.0 - 2.0 * x)
-        rho_yz = math.sqrt(hy * hy + hz * hz)
-        if fade <= 0.0 or rho_yz <= 0.0:
-            continue
-        su = math.sin(uu)
-        cu = math.cos(uu)
-        sv = math.sin(v[n])
-        cv = math.cos(v[n])
-        ci = wix * sv + (wiy * su + wiz * cu) * cv
-        cr = wox * sv + (woy * su + woz * cu) * cv
-        if ci <= 0.0 or cr <= 0.0:
-            continue
-        radius = spine_radius_scalar(uu, um, kappa, w, l)
-        value[n] = a * (radius + a * cv) * ci * cr / (ci + cr) * fade / (length * rho_yz)
+        radius = spine_radius_scalar(uu, umax[n], kappa, w, l)
+        value[n] = filament_node(wix, p_i, wox, p_o, math.sin(v[n]), math.cos(v[n]), a, radius) * scale
     return value, upos

@@ -35,6 +35,7 @@ from clothlab.models.irawan.quadrature import (
     compact_breaks,
     interval_rule,
     piecewise_rule,
+    unit_rule,
 )
 
 
@@ -75,27 +76,36 @@ def _filament_breaks(wi, wo, h):
 def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
     from clothlab.models.irawan import kernels
 
-    def quadrature(rows, nodes, weights):
-        if staple:
-            return kernels.staple_quadrature(wi[rows], wo[rows], nodes, weights, psi, umax, kappa, w, l)
-        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta)
+    def staple_sum(rows, nodes, weights):
+        return kernels.staple_quadrature(wi[rows], wo[rows], nodes, weights, psi, umax, kappa, w, l)
+
+    def filament_sum(rows, nodes, weights, on_arc=False):
+        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta, on_arc)
 
     every = slice(None)
     if rule in ("trapezoid", "gauss"):
         lo, hi = (-umax, umax) if staple else (-0.5 * np.pi, 0.5 * np.pi)
         nodes, weights = interval_rule(rule, n, lo, hi)
-        return quadrature(every, nodes[None, :], weights[None, :])  # (1, K): shared by all directions
-    h, _ = half_vectors(wi, wo)
-    breaks = _staple_breaks(h, psi, umax) if staple else _filament_breaks(wi, wo, h)
-    value = quadrature(every, *piecewise_rule(breaks, n))
+        return (staple_sum if staple else filament_sum)(every, nodes[None, :], weights[None, :])
+    if rule not in ("support", "adaptive"):
+        raise ValueError(f"unknown quadrature rule {rule!r}")
+    if staple:
+        breaks = _staple_breaks(half_vectors(wi, wo)[0], psi, umax)
+
+        def evaluate(rows, m):
+            return staple_sum(rows, *piecewise_rule(breaks[rows], m))
+    else:
+        def evaluate(rows, m):  # Gauss-Legendre on the arc where both cosines of eq. 8 are positive
+            t, wt = unit_rule("gauss", m)
+            return filament_sum(rows, t[None, :], wt[None, :], on_arc=True)
+
+    value = evaluate(every, n)
     if rule == "support":
         return value
-    if rule != "adaptive":
-        raise ValueError(f"unknown quadrature rule {rule!r}")
     todo = np.arange(len(wi))
     while n < ADAPTIVE_MAX_NODES and todo.size:
         n *= 2
-        new = quadrature(todo, *piecewise_rule(breaks[todo], n))
+        new = evaluate(todo, n)
         changed = np.abs(new - value[todo]) > ADAPTIVE_RTOL * np.abs(new)
         value[todo] = new
         todo = todo[changed]
