@@ -223,20 +223,24 @@ def continuity_study(fast: bool, wi, wo, rules=RULES_CHECKED, refine: int = 12) 
 
 
 def psi_threshold_jump(wi, wo, rules=RULES_CHECKED + (("support", 32),)) -> list[dict]:
-    """The staple/filament switch at |psi| = PSI_FILAMENT_THRESHOLD: relative change of f across it
-    (psi = threshold (1 -/+ 1e-9)), per direction over the front-facing pairs with a significant value."""
+    """The staple/filament switch at each rule's own threshold (:func:`clothlab.models.irawan.yarn.staple_path`:
+    PSI_FILAMENT_THRESHOLD for support-aware rules, half the node spacing for fixed-node rules): relative change
+    of f across it (psi = threshold (1 -/+ 1e-9)), per direction over the front-facing pairs with a significant
+    value."""
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
 
-    edge = math.degrees(PSI_FILAMENT_THRESHOLD)
     base = {"alpha": 0.01, "beta": 4.0, "delta": 0.0, "warp.psi": 0.0, "warp.umax": 30.0, "warp.kappa": 0.0,
             "warp.w": 1.0, "warp.l": 3.0}
     out = []
     for rule in rules:
+        edge = math.degrees(PSI_FILAMENT_THRESHOLD)
+        if rule[0] in ("trapezoid", "gauss"):
+            edge = max(edge, base["warp.umax"] / max(rule[1] - 1, 1))
         below = _evaluate(wi, wo, {**base, "warp.psi": edge * (1 - 1e-9)}, rule)
         above = _evaluate(wi, wo, {**base, "warp.psi": edge * (1 + 1e-9)}, rule)
         sig = np.maximum(below, above) > 1e-3 * max(below.max(), above.max(), 1e-300)
         rel = np.abs(above - below)[sig] / np.maximum(below, above)[sig]
-        out.append({"rule": f"{rule[0]}-{rule[1]}", "directions": int(sig.sum()),
+        out.append({"rule": f"{rule[0]}-{rule[1]}", "threshold_deg": edge, "directions": int(sig.sum()),
                     "median_rel": float(np.median(rel)) if rel.size else 0.0,
                     "p80_rel": float(np.percentile(rel, 80)) if rel.size else 0.0,
                     "max_rel": float(rel.max()) if rel.size else 0.0,
@@ -313,7 +317,8 @@ def print_check(result: dict) -> None:
               f"{at:>10s}  {r['expected'] or '-'}; {r['direction_deg']}")
     print("\n== staple/filament switch at |psi| = threshold (relative change across it, significant values) ==")
     for r in result["psi_threshold"]:
-        print(f"  {r['rule']:13s} {r['directions']:4d} directions: median {r['median_rel']:.2e}, 80th "
+        print(f"  {r['rule']:13s} at {r['threshold_deg']:.4g} deg {r['directions']:4d} directions: "
+              f"median {r['median_rel']:.2e}, 80th "
               f"{r['p80_rel']:.2e}, max {r['max_rel']:.2e}; sum below {r['sum_below']:.5g}, above {r['sum_above']:.5g}")
     if "stiff" in result:
         from clothlab.stiff import print_stiff

@@ -70,6 +70,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="speed and accuracy figures, measured side by side in one run")
     p.add_argument("--quick", action="store_true", help="a reduced run (seconds instead of minutes)")
     p.add_argument("--json", type=Path, help="also write the figures as JSON")
+    p.add_argument("--figures", type=Path, help="directory for the benchmark plots (default reports/bench)")
+    p.add_argument("--sections", help="comma-separated subset of sections to run")
+
+    p = sub.add_parser("check", help="numerical stability study: extreme inputs, reciprocity, continuity, stiff fits")
+    p.add_argument("--full", action="store_true", help=">= 10^6 configurations and the stiff-fit study (minutes)")
+    p.add_argument("--json", type=Path, help="also write the findings as JSON")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--figures", type=Path, help="directory for plots")
     return parser
 
 
@@ -258,12 +266,27 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from clothlab.bench import run_benchmarks
+    from clothlab.bench import SECTIONS, run_benchmarks
 
-    return run_benchmarks(quick=args.quick, json_path=args.json)
+    sections = SECTIONS
+    if args.sections:
+        sections = tuple(s.strip() for s in args.sections.split(",") if s.strip())
+        unknown = [s for s in sections if s not in SECTIONS]
+        if unknown:
+            raise ConfigError(f"unknown bench section(s) {', '.join(unknown)}; choose from {', '.join(SECTIONS)}",
+                              field="--sections")
+    return run_benchmarks(quick=args.quick, json_path=args.json, figures_dir=args.figures, sections=sections)
 
 
-COMMANDS = {"fit": cmd_fit, "report": cmd_report, "eval": cmd_eval, "simulate": cmd_simulate, "bench": cmd_bench}
+def cmd_check(args) -> int:
+    from clothlab.check import run_check
+
+    run_check(full=args.full, json_path=args.json, seed=args.seed, figures_dir=args.figures)
+    return 0
+
+
+COMMANDS = {"fit": cmd_fit, "report": cmd_report, "eval": cmd_eval, "simulate": cmd_simulate, "bench": cmd_bench,
+            "check": cmd_check}
 
 
 if __name__ == "__main__":

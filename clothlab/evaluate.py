@@ -1,7 +1,10 @@
 """``clothlab eval``: a fitted or configured model at the directions of a CSV (the bridge to other tools).
 
 Input CSV: columns theta_i, phi_i, theta_o, phi_o in degrees, clothlab convention (phi counter-clockwise from
-the weft, :mod:`clothlab.frames`); other columns are ignored.  Output CSV: the four angles, then the BRDF
+the weft, :mod:`clothlab.frames`), and optionally u, v (texture coordinates in weave tiles: u along the weft,
+v along the warp): then the IM *texture* model (paper sec. 7.2, :mod:`clothlab.models.irawan.texture`) is
+evaluated at those points instead of the reflectance model.  Other columns are ignored.
+Output CSV: the four angles (and u, v), then the BRDF
 (1/sr) per channel for a fit directory, and with ``components`` one column ``<component>_<channel>`` per
 component and channel (the component times its fitted coefficient).  A fabric.yaml has no fitted
 coefficients: its output holds the components with unit coefficients (``<component>`` columns: diffuse
@@ -21,10 +24,11 @@ from clothlab.errors import GeometryWarning, InputError
 from clothlab.frames import spherical_to_vector
 
 ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
+TEXTURE = ("u", "v")
 
 
 def read_directions(path) -> dict[str, np.ndarray]:
-    """The four angle columns of a CSV (degrees), validated with file/line/column errors."""
+    """The four angle columns of a CSV (degrees) and, when present, u and v (tiles); file/line/column errors."""
     path = Path(path)
     if not path.is_file():
         raise InputError("directions file not found", path=path)
@@ -37,10 +41,13 @@ def read_directions(path) -> dict[str, np.ndarray]:
     if missing:
         raise InputError(f"missing column(s) {', '.join(missing)}; expected {', '.join(ANGLES)} in degrees",
                          path=path, line=rows[0][0])
-    idx = [header.index(c) for c in ANGLES]
-    out = np.empty((len(rows) - 1, 4))
+    names = ANGLES + tuple(c for c in TEXTURE if c in header)
+    if len(names) == len(ANGLES) + 1:
+        raise InputError("texture coordinates need both columns u and v", path=path, line=rows[0][0])
+    idx = [header.index(c) for c in names]
+    out = np.empty((len(rows) - 1, len(names)))
     for k, (line, row) in enumerate(rows[1:]):
-        for j, (col, i) in enumerate(zip(ANGLES, idx, strict=True)):
+        for j, (col, i) in enumerate(zip(names, idx, strict=True)):
             try:
                 value = float(row[i])
             except (IndexError, ValueError):
@@ -51,7 +58,7 @@ def read_directions(path) -> dict[str, np.ndarray]:
                 raise InputError(f"{col} = {value!r} deg is outside [0, 90]" if limit else f"{col} is not finite",
                                  path=path, line=line, field=col)
             out[k, j] = value
-    return dict(zip(ANGLES, out.T, strict=True))
+    return dict(zip(names, out.T, strict=True))
 
 
 def _model_source(source, rule, nodes):
@@ -87,7 +94,16 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
     wo = spherical_to_vector(angles["theta_o"], angles["phi_o"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
-        comps = model.components(wi, wo, params)
+        if "u" in angles:
+            if getattr(model, "kind", "") != "irawan":
+                raise InputError(f"u, v columns need the irawan texture model; this model is {model.kind!r}",
+                                 path=directions, field="u")
+            from clothlab.models.irawan.texture import IrawanTexture
+
+            texture = IrawanTexture(model.weave, model.quadrature)
+            comps = texture.components(angles["u"], angles["v"], wi, wo, params)
+        else:
+            comps = model.components(wi, wo, params)
     columns = dict(angles)
     if coefficients is not None:
         total = 0.0

@@ -112,17 +112,34 @@ def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
     return value
 
 
+def staple_path(psi, umax, rule, n, psi_threshold) -> bool:
+    """Whether |psi| is large enough for the staple integral (eq. 1) with this rule.
+
+    The staple support in u is |cos(u + gamma)| <= |sin psi| / rho, about 2 |sin psi| / rho wide near
+    psi = 0.  The support-aware rules resolve any width, so they switch to the filament integral (eq. 2, its
+    psi -> 0 limit) only below ``psi_threshold``.  Fixed-node rules (trapezoid, gauss) cannot: with node spacing
+    d = 2 umax / (n - 1) a narrower support falls between nodes or onto one with full weight (measured: the
+    trapezoid-11 staple sum just above 0.057 deg was 20x the filament value).  They switch below
+    max(psi_threshold, d / 2) instead, trading that artefact for the O(psi) staple-filament difference.
+    """
+    threshold = psi_threshold
+    if rule in ("trapezoid", "gauss"):
+        threshold = max(threshold, umax / max(n - 1, 1))
+    return abs(psi) >= threshold
+
+
 def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid", n=11, psi_threshold=1e-3):
     """I(wi, wo) = integral of G A (eq. 10) for one segment type; (N,) for (N, 3) yarn-frame directions.
 
-    Staple path when |psi| >= psi_threshold (radians), filament path otherwise (sec. 6.2).
+    Staple path when |psi| >= psi_threshold (radians), filament path otherwise (sec. 6.2); see
+    :func:`staple_path`.
     """
     wi = np.ascontiguousarray(wi, dtype=np.float64)
     wo = np.ascontiguousarray(wo, dtype=np.float64)
     out = np.zeros(len(wi))
     front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
     if front.size:
-        staple = abs(psi) >= psi_threshold
+        staple = staple_path(psi, umax, rule, n, psi_threshold)
         out[front] = _integrate(wi[front], wo[front], rule, n, staple, float(psi), float(umax), float(kappa),
                                 float(w), float(l), float(delta))
     return out
