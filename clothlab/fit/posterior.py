@@ -33,11 +33,14 @@ step, so a resumed run yields the same chain as an uninterrupted one.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
 import math
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -266,6 +269,29 @@ def _tau(chain: np.ndarray) -> np.ndarray:
     return np.asarray(emcee.autocorr.integrated_time(chain, c=5, tol=0), dtype=np.float64)
 
 
+@contextlib.contextmanager
+def _deferred_sigint():
+    """Turn a first SIGINT into a flag checked between MCMC steps (so no step is cut in half and emcee does not
+    print a traceback); a second SIGINT interrupts at once.  Only in the main thread under Python's default
+    handler; otherwise nothing changes."""
+    flag = {"hit": False}
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield flag
+        return
+
+    def handler(signum, frame):
+        if flag["hit"]:
+            raise KeyboardInterrupt
+        flag["hit"] = True
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 class _Progress:
     """A one-line progress display on stderr (rewritten in place at most every 0.5 s)."""
 
@@ -357,51 +383,54 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
             st.tau_history[m] = _tau(np.concatenate(chain_chunks)[:m])
         return st.tau_history[m]
 
-    try:
-        while True:
-            if n > 0 and (n % check_every == 0 or n >= max_steps):
-                tau = tau_at(n)
-                prev = n - check_every
-                settled = prev > 0 and np.all(np.abs(tau_at(prev) - tau) < TAU_CHANGE * tau)
-                bar.note = f"tau_max {np.max(tau):.1f} (needs {tol_factor * np.max(tau):.0f} steps)"
-                if path is not None:
-                    _save_checkpoint(path, fingerprint, snapshot())
-                if n >= steps and tol_factor * np.max(tau) < n and settled:
-                    stop_reason = "converged"
-                    break
-                if n >= max_steps:
-                    stop_reason = "max_steps"
-                    break
-            if max_seconds is not None and time.perf_counter() - started > max_seconds:
-                stop_reason = "max_seconds"
-                break
-            todo = min(check_every - n % check_every, max_steps - n)
-            # One list.append per completed step (atomic with respect to SIGINT): coordinates, log-probability
-            # and the random state after that step always travel together.
-            record: list = []
-            try:
-                for state in sampler.sample(emcee.State(st.coords, log_prob=st.last_log_prob,
-                                                        random_state=st.random_state),
-                                            iterations=todo, store=False, skip_initial_state_check=True):
-                    record.append((state.coords.copy(), state.log_prob.copy(), state.random_state))
-                    n = sum(len(c) for c in chain_chunks) + len(record)
-                    bar.show(n, lambda rec=record: _acceptance(np.concatenate(chain_chunks + [[r[0] for r in rec]]),
-                                                    st.initial))
-                    if on_step is not None:
-                        on_step(n)
-                    if max_seconds is not None and time.perf_counter() - started > max_seconds:
+    with _deferred_sigint() as sigint:
+        try:
+            while True:
+                if n > 0 and (n % check_every == 0 or n >= max_steps):
+                    tau = tau_at(n)
+                    prev = n - check_every
+                    settled = prev > 0 and np.all(np.abs(tau_at(prev) - tau) < TAU_CHANGE * tau)
+                    bar.note = f"tau_max {np.max(tau):.1f} (needs {tol_factor * np.max(tau):.0f} steps)"
+                    if path is not None:
+                        _save_checkpoint(path, fingerprint, snapshot())
+                    if n >= steps and tol_factor * np.max(tau) < n and settled:
+                        stop_reason = "converged"
                         break
-            finally:
-                if record:
-                    chain_chunks.append(np.array([r[0] for r in record]))
-                    lp_chunks.append(np.array([r[1] for r in record]))
-                    st.coords, st.last_log_prob, st.random_state = record[-1]
-                n = sum(len(c) for c in chain_chunks)
-    except KeyboardInterrupt:
-        if path is not None:
-            _save_checkpoint(path, fingerprint, snapshot())
-        bar.close()
-        raise
+                    if n >= max_steps:
+                        stop_reason = "max_steps"
+                        break
+                if max_seconds is not None and time.perf_counter() - started > max_seconds:
+                    stop_reason = "max_seconds"
+                    break
+                todo = min(check_every - n % check_every, max_steps - n)
+                # One list.append per completed step (atomic with respect to SIGINT): coordinates, log-probability
+                # and the random state after that step always travel together.
+                record: list = []
+                try:
+                    for state in sampler.sample(emcee.State(st.coords, log_prob=st.last_log_prob,
+                                                            random_state=st.random_state),
+                                                iterations=todo, store=False, skip_initial_state_check=True):
+                        record.append((state.coords.copy(), state.log_prob.copy(), state.random_state))
+                        n = sum(len(c) for c in chain_chunks) + len(record)
+                        bar.show(n, lambda rec=record: _acceptance(np.concatenate(chain_chunks + [[r[0] for r in rec]]),
+                                                        st.initial))
+                        if on_step is not None:
+                            on_step(n)
+                    if sigint["hit"]:
+                        raise KeyboardInterrupt
+                        if max_seconds is not None and time.perf_counter() - started > max_seconds:
+                            break
+                finally:
+                    if record:
+                        chain_chunks.append(np.array([r[0] for r in record]))
+                        lp_chunks.append(np.array([r[1] for r in record]))
+                        st.coords, st.last_log_prob, st.random_state = record[-1]
+                    n = sum(len(c) for c in chain_chunks)
+        except KeyboardInterrupt:
+            if path is not None:
+                _save_checkpoint(path, fingerprint, snapshot())
+            bar.close()
+            raise
     snapshot()
     if path is not None:
         _save_checkpoint(path, fingerprint, st)
