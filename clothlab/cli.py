@@ -35,6 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="optimiser seed (overrides the yaml)")
     p.add_argument("--fits-dir", type=Path, help="write under this directory instead of output.fits")
     p.add_argument("--report", action="store_true", help="also build reports/<name>/ afterwards")
+    p.add_argument("--posterior", action="store_true",
+                   help="also sample the posterior with emcee (fit.posterior settings, else the defaults); an "
+                        "interrupted run continues from its checkpoint when the same command is run again")
+    p.add_argument("--cv", type=int, metavar="K", help="k-fold cross-validated error percentiles (K >= 2)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     _add_quadrature_overrides(p)
 
@@ -120,20 +124,29 @@ class _Progress:
 
 
 def cmd_fit(args) -> int:
-    from clothlab.config import apply_overrides, load_config
+    from dataclasses import replace
+
+    from clothlab.config import PosteriorConfig, apply_overrides, load_config
     from clothlab.fit.runner import run_fit, save_fit
 
+    if args.cv is not None and args.cv < 2:
+        raise ConfigError(f"--cv needs at least 2 folds, got {args.cv}", field="--cv")
     configs = []
     for path in args.configs:
         cfg = apply_overrides(load_config(path), rule=args.rule, nodes=args.nodes, max_evals=args.max_evals,
                               seed=args.seed)
+        if args.cv is not None:
+            cfg = replace(cfg, fit=replace(cfg.fit, cv_folds=args.cv))
+        if args.posterior and cfg.fit.posterior is None:
+            walkers = max(32, 2 * len(cfg.fit.free) + 2)
+            cfg = replace(cfg, fit=replace(cfg.fit, posterior=PosteriorConfig(walkers=walkers)))
         dest = (args.fits_dir or cfg.output.fits) / cfg.name
         if dest.exists() and not args.force:
             raise ResultExistsError(f"{dest} exists; pass --force to replace it", path=dest)
         configs.append(cfg)
     for cfg in configs:
         progress = _Progress(cfg.name, cfg.fit.optimizer.max_evals, args.quiet)
-        result = run_fit(cfg, progress=progress)
+        result = run_fit(cfg, progress=progress, fits_dir=args.fits_dir, posterior_progress=not args.quiet)
         progress.done()
         out = save_fit(result, force=args.force, fits_dir=args.fits_dir)
         print(format_summary(result, out))

@@ -53,6 +53,8 @@ class FitResult:
     start_objective: float
     wall_time: float
     warnings: list = field(default_factory=list)
+    cross_validation: dict | None = None
+    posterior: object = None  # PosteriorResult (clothlab.fit.posterior) when sampled
 
     @property
     def name(self) -> str:
@@ -100,8 +102,21 @@ def multistart_minimize(problem, x0, opt, progress=None):
     return replace(best, trace=trace, nevals=offset, wall_time=time_offset)
 
 
-def run_fit(config, *, measurement=None, progress=None) -> FitResult:
-    """Fit the model of ``config`` to its measurement.  ``progress(row)`` is called after each evaluation."""
+def checkpoint_path(config, fits_dir=None):
+    """Where an interrupted posterior run keeps its chain: a hidden file next to fits/<name>/ (the fit
+    directory itself is only written, atomically, when everything is done)."""
+    root = fits_dir if fits_dir is not None else config.output.fits
+    return root / f".{config.name}.posterior-checkpoint.npz"
+
+
+def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir=None,
+            posterior_progress: bool = True) -> FitResult:
+    """Fit the model of ``config`` to its measurement.  ``progress(row)`` is called after each evaluation.
+
+    Then, when configured: k-fold cross-validation (``fit.cv_folds`` >= 2) and the emcee posterior
+    (``fit.posterior``, or ``posterior`` = a PosteriorConfig given here, e.g. by ``clothlab fit --posterior``),
+    resumable from its checkpoint (:func:`checkpoint_path`) if interrupted.
+    """
     from clothlab.models.irawan.model import geometry_warnings
 
     started = time.perf_counter()
@@ -127,8 +142,24 @@ def run_fit(config, *, measurement=None, progress=None) -> FitResult:
     for name, coef in coefficients.items():
         if np.all(coef == 0.0):
             notes.append(f"coefficient {name} is 0 in every channel: that component is not seen in the data")
-    return FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
-                     time.perf_counter() - started, notes)
+    result = FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
+                       time.perf_counter() - started, notes)
+    if config.fit.cv_folds >= 2:
+        from clothlab.fit.crossval import cross_validate
+
+        result.cross_validation = cross_validate(problem, params, k=config.fit.cv_folds, seed=opt.seed)
+    post = posterior or config.fit.posterior
+    if post is not None:
+        from clothlab.fit.posterior import run_posterior
+
+        path = checkpoint_path(config, fits_dir)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        result.posterior = run_posterior(problem, params, walkers=post.walkers, steps=post.steps,
+                                         max_steps=post.max_steps, seed=opt.seed, checkpoint_path=path,
+                                         progress=posterior_progress)
+        result.warnings += [w for w in result.posterior.to_json()["warnings"] if w not in result.warnings]
+    result.wall_time = time.perf_counter() - started
+    return result
 
 
 def collinearity_notes(design: np.ndarray, names, threshold: float = 0.999) -> list[str]:
@@ -207,6 +238,10 @@ def fit_summary(result: FitResult) -> dict:
         "optimizer": {"global": cfg.fit.optimizer.global_algorithm, "local": cfg.fit.optimizer.local_algorithm,
                       "max_evals": cfg.fit.optimizer.max_evals, "status": getattr(opt, "message", "")},
         "warnings": list(result.warnings),
+        "cross_validation": result.cross_validation,
+        "posterior": None if result.posterior is None else {
+            "file": "posterior.json", "not_determined": result.posterior.to_json()["not_determined"],
+            "converged": bool(result.posterior.converged)},
     }
 
 
@@ -265,6 +300,30 @@ def trace_table(result: FitResult, every: int = 10) -> dict:
             "value": [r.value for r in trace], "best": [r.best for r in trace], "stage": [r.stage for r in trace]}
 
 
+def posterior_files(result: FitResult) -> dict:
+    """posterior.json (summary, with posterior-predictive 5/50/95 % bands on the incidence-plane slices) and
+    posterior_samples.csv (thinned samples in declared units, at most 4,000 rows)."""
+    post = result.posterior
+    if post is None:
+        return {}
+    summary = post.to_json()
+    slices = slice_table(result)
+    wi, wo = _slice_directions(slices)
+    bands = post.predictive_bands(wi, wo)
+    summary["predictive_slices"] = {"theta_o": slices["theta_o"], "phi_o": slices["phi_o"],
+                                    "signed_theta_i": slices["signed_theta_i"], "bands": bands}
+    samples = post.samples[np.linspace(0, len(post.samples) - 1, min(len(post.samples), 4000)).astype(int)]
+    return {"posterior.json": summary,
+            "posterior_samples.csv": {name: samples[:, j] for j, name in enumerate(post.names)}}
+
+
+def _slice_directions(slices: dict):
+    signed = np.asarray(slices["signed_theta_i"])
+    phi_i = np.where(signed >= 0, np.asarray(slices["phi_o"]) + 180.0, slices["phi_o"]) % 360.0
+    return (spherical_to_vector(np.abs(signed), phi_i),
+            spherical_to_vector(np.asarray(slices["theta_o"]), np.asarray(slices["phi_o"])))
+
+
 def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
     """Write fits/<name>/ for ``result``; returns the directory."""
     from clothlab.fit.store import write_fit_directory
@@ -275,9 +334,10 @@ def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
     from clothlab.wvfile import format_wv
 
     config_text = cfg.path.read_text() if cfg.path is not None else None
+    extra = posterior_files(result)
     weave = result.problem.model.weave
     if cfg.model.kind == "irawan":
         weave = apply_parameters(weave, result.params)
     return write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
-                               weave_text=format_wv(weave), force=force)
+                               weave_text=format_wv(weave), extra=extra, force=force)

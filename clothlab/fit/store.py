@@ -12,6 +12,7 @@ CSV numbers carry 10 significant digits (figures, not a data archive: the measur
 - ``trace.csv``       evaluation, time_s, value, best, stage
 - ``fabric.yaml``     the configuration as given
 - ``weave.wv``        the weave with the fitted parameters (the fit directory is self-contained for eval)
+- ``posterior.json``, ``posterior_samples.csv``  when a posterior was sampled (:mod:`clothlab.fit.posterior`)
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ def _json_safe(value):
 
 
 def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, trace: dict, config_text: str | None,
-                        weave_text: str | None = None, force: bool = False) -> Path:
+                        weave_text: str | None = None, extra: dict | None = None, force: bool = False) -> Path:
     """Write the files of a fit result into ``dest`` atomically; refuses an existing dest without ``force``."""
     dest = Path(dest)
     with atomic_directory(dest, force=force) as tmp:
@@ -66,6 +67,11 @@ def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, tra
             (tmp / "fabric.yaml").write_text(config_text)
         if weave_text is not None:
             (tmp / "weave.wv").write_text(weave_text)
+        for name, content in (extra or {}).items():  # *.json: a JSON document; *.csv: a column table
+            if name.endswith(".json"):
+                (tmp / name).write_text(json.dumps(_json_safe(content), indent=1, allow_nan=False) + "\n")
+            else:
+                (tmp / name).write_text(_csv_text(list(content), [np.asarray(v).tolist() for v in content.values()]))
     return dest
 
 

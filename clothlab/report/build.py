@@ -15,6 +15,8 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
+
 from clothlab.atomic import atomic_directory
 from clothlab.errors import InputError
 from clothlab.report import html, plots
@@ -46,13 +48,19 @@ def _figure_jobs(record: FitRecord, percentiles) -> list[tuple[str, object]]:
     """(name, zero-argument figure builder) for each figure the fit's files allow, in page order."""
     jobs = [("hemispheres", lambda: plots.plot_hemisphere_comparison(record.predictions))]
     if record.slices is not None:
-        jobs.append(("slices", lambda: plots.plot_incidence_slices(record.predictions, record.slices)))
+        bands = ((record.posterior or {}).get("predictive_slices") or {}).get("bands")
+        if bands is not None and len(np.asarray(bands.get("p5", []))) != len(record.slices["theta_o"]):
+            bands = None
+        jobs.append(("slices", lambda: plots.plot_incidence_slices(record.predictions, record.slices,
+                                                                   bands=bands)))
     jobs.append(("error_histogram", lambda: plots.plot_error_histogram(record.predictions, percentiles)))
     if record.fit.get("parameters"):
         jobs.append(("parameters", lambda: plots.plot_parameters(record.fit)))
     if record.trace is not None:
         jobs.append(("trace", lambda: plots.plot_fit_trace(record.trace)))
-    # Hook: a posterior corner plot goes here once posterior.json has a settled layout.
+    if record.posterior_samples:
+        truths = {n: e.get("truth") for n, e in (record.posterior or {}).get("parameters", {}).items()}
+        jobs.append(("corner", lambda: plots.plot_corner(record.posterior_samples, truths)))
     return jobs
 
 

@@ -45,6 +45,7 @@ class FitRecord:
     slices: dict[str, np.ndarray] | None = None
     trace: dict[str, np.ndarray] | None = None
     posterior: dict | None = None
+    posterior_samples: dict[str, np.ndarray] | None = None
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -183,8 +184,11 @@ def load_fit_dir(fit_dir) -> FitRecord:
         record.trace = read_csv_table(trace_path, required=TRACE_COLUMNS, text_columns=("stage",))
     else:
         record.notes.append("trace.csv is absent: no optimiser trace plot.")
-    if posterior_path.exists():  # hook for the posterior (emcee) work
+    if posterior_path.exists():
         record.posterior = read_json(posterior_path)
+        samples_path = fit_dir / "posterior_samples.csv"
+        if samples_path.exists():
+            record.posterior_samples = read_csv_table(samples_path)
     return record
 
 

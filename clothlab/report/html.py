@@ -145,6 +145,15 @@ def _error_section(fit: dict, errors: dict, percentiles) -> list[str]:
            '<p class="note">|model \u2212 measured| / measured over all measured directions, computed from '
            "predictions.csv (the metric of Irawan &amp; Marschner 2012, sec. 8).</p>",
            _table(["", *header], rows)]
+    cv = fit.get("cross_validation")
+    if isinstance(cv, dict) and isinstance(cv.get("held_out"), dict):
+        qs = [q for q in (50, 80) if percentile_key(q) in cv["held_out"]]
+        cv_rows = [[esc(label)] + [("num", fmt_percent((entry or {}).get(percentile_key(q)))) for q in qs]
+                   for label, entry in (("in-sample (full fit)", cv.get("in_sample")),
+                                        (f"held out ({cv.get('k')}-fold cross-validation)", cv.get("held_out")))]
+        out += [f"<h3>In-sample vs cross-validated</h3><p class=\"note\">{esc(cv.get('split', ''))} "
+                f"{esc(cv.get('refit', ''))}</p>",
+                _table(["", *[f"{q}th percentile" if q != 50 else "median" for q in qs]], cv_rows)]
     key = paper_fabric(fit)
     if key:
         median, p80 = PAPER_RELATIVE_ERRORS[key]
@@ -217,18 +226,42 @@ def _figure_section(figures: dict) -> list[str]:
 
 
 def _posterior_section(posterior) -> list[str]:
-    """Hook for the posterior (emcee) work: a table of per-parameter summaries when the shape allows."""
+    """Posterior (emcee) summary: intervals, identifiability, convergence, correlations (posterior.json)."""
     if not posterior:
         return []
-    out = ["<h2>Posterior</h2>"]
-    summaries = posterior.get("parameters") if isinstance(posterior.get("parameters"), dict) else None
-    if summaries and all(isinstance(v, dict) for v in summaries.values()):
-        keys = list(dict.fromkeys(k for v in summaries.values() for k in v))
-        rows = [[f"<code>{esc(n)}</code>"] + [("num", fmt_number(v.get(k))) for k in keys]
-                for n, v in summaries.items()]
-        out.append(_table(["parameter", *map(esc, keys)], rows))
-    else:
-        out.append('<p class="note">posterior.json is present; its contents are not rendered yet.</p>')
+    params = posterior.get("parameters") or {}
+    conv = posterior.get("convergence") or {}
+    out = ["<h2>Posterior</h2>",
+           f'<p class="note">{esc(posterior.get("method", ""))}; prior: {esc(posterior.get("prior", ""))}; '
+           f'likelihood: {esc(posterior.get("likelihood", ""))}; coefficients: '
+           f'{esc(posterior.get("coefficients", ""))}.</p>']
+    undetermined = posterior.get("not_determined") or []
+    if undetermined:
+        out.append('<p class="warn"><b>Not determined by these data:</b> '
+                   + ", ".join(f"<code>{esc(n)}</code>" for n in undetermined)
+                   + f' ({esc(posterior.get("identifiability_rule", ""))}).</p>')
+    keys = ("p2.5", "p16", "p50", "p84", "p97.5")
+    rows = []
+    for name, e in params.items():
+        rows.append([f"<code>{esc(name)}</code>", esc(e.get("unit", ""))]
+                    + [("num", fmt_number(e.get(k))) for k in keys]
+                    + [("num", fmt_number(e.get("optimum"))), ("num", fmt_number(e.get("truth"))),
+                       ("num", fmt_number(e.get("tau"))), ("num", fmt_number(e.get("ess"))),
+                       "yes" if e.get("determined") else '<span class="warn">no</span>'])
+    out.append(_table(["parameter", "unit", "2.5 %", "16 %", "median", "84 %", "97.5 %", "optimum", "truth",
+                       "tau", "ESS", "determined"], rows))
+    acc = conv.get("acceptance_fraction") or {}
+    out.append(f'<p class="note">Convergence: {"converged" if conv.get("converged") else "NOT converged"} '
+               f'({esc(conv.get("stop_reason") or "")}); {esc(conv.get("rule", ""))}; steps {conv.get("steps")}, '
+               f'walkers {conv.get("walkers")}, burn-in {conv.get("burn_in")}, thin {conv.get("thin")}, '
+               f'mean acceptance {fmt_number(acc.get("mean"))}.</p>')
+    corr = posterior.get("correlation") or {}
+    names, matrix = corr.get("names") or [], corr.get("matrix") or []
+    if names and matrix:
+        out.append("<h3>Posterior correlations</h3>")
+        out.append(_table(["", *[f"<code>{esc(n)}</code>" for n in names]],
+                          [[f"<code>{esc(n)}</code>"] + [("num", fmt_number(v, 2)) for v in row]
+                           for n, row in zip(names, matrix, strict=False)]))
     return out
 
 

@@ -177,12 +177,15 @@ def _use_log_y(ax, values) -> None:
         ax.set_yscale("log")
 
 
-def plot_incidence_slices(predictions: dict, slices: dict | None, *, tolerance: float = PLANE_TOLERANCE_DEG):
+def plot_incidence_slices(predictions: dict, slices: dict | None, *, tolerance: float = PLANE_TOLERANCE_DEG,
+                          bands: dict | None = None):
     """Model curves in each exitant direction's incidence plane with measured points near it (log y).
 
     slices : table theta_o, phi_o, signed_theta_i (deg, + = mirror side), model_<c> (1/sr), or None.
     Measured points from ``predictions`` within ``tolerance`` deg of the plane are drawn as dots at their
     in-plane angle.  Dotted vertical lines: mirror (+theta_o) and retro-reflection (-theta_o) angles.
+    bands : posterior-predictive bands on the same rows as ``slices`` ({"p5": (M, C), "p95": (M, C)}, from
+    posterior.json), drawn as shaded 5-95 % ranges.
     """
     channels = channels_of(predictions)
     pred_groups = {(t, p): rows for t, p, rows in exitant_groups(predictions)}
@@ -202,6 +205,11 @@ def plot_incidence_slices(predictions: dict, slices: dict | None, *, tolerance: 
                 x, y = slices["signed_theta_i"][rows][order], slices[f"model_{c}"][rows][order]
                 ax.plot(x, y, "-", color=colour, lw=1.2, label=f"model {c}")
                 all_values.append(y)
+                if bands is not None:
+                    lo = np.asarray(bands["p5"], dtype=float)[rows, index][order]
+                    hi = np.asarray(bands["p95"], dtype=float)[rows, index][order]
+                    ax.fill_between(x, lo, hi, color=colour, alpha=0.25, lw=0,
+                                    label=f"posterior 5-95 % {c}")
             if (theta_o, phi_o) in pred_groups:
                 rows = pred_groups[(theta_o, phi_o)]
                 signed, distance = incidence_plane_coordinates(
@@ -381,4 +389,19 @@ def plot_error_comparison(rows: list[dict]):
     ax.grid(axis="y", alpha=0.3, lw=0.5)
     ax.legend(fontsize=8)
     ax.set_title("Relative error per fit (paper: Irawan & Marschner 2012, sec. 8)", fontsize=9)
+    return fig
+
+
+def plot_corner(samples: dict, truths: dict | None = None):
+    """Corner plot (corner.corner) of posterior samples: columns parameter -> (S,) in declared units; the
+    generating values of simulated data as truths when given; 16/50/84 % quantiles marked."""
+    import corner
+    from matplotlib.figure import Figure
+
+    names = list(samples)
+    data = np.column_stack([np.asarray(samples[n], dtype=float) for n in names])
+    fig = Figure(figsize=(1.9 * len(names) + 1, 1.9 * len(names) + 1))
+    t = [truths.get(n) for n in names] if truths and any(truths.get(n) is not None for n in names) else None
+    corner.corner(data, labels=names, truths=t, quantiles=[0.16, 0.5, 0.84], show_titles=True,
+                  title_fmt=".3g", fig=fig)
     return fig
