@@ -142,3 +142,52 @@ def test_python_api_lazy_exports_resolve():
         assert getattr(cl, name) is not None, name
     with pytest.raises(AttributeError):
         cl.no_such_thing  # noqa: B018
+
+
+def _posterior_project(tmp_path, steps, max_steps, cv=""):
+    config = _project(tmp_path, max_evals=150)
+    text = config.read_text().replace(
+        "  metric: relative", f"  metric: relative\n  posterior: {{walkers: 16, steps: {steps}, max_steps: {max_steps}}}"
+        + (f"\n  cv_folds: {cv}" if cv else ""))
+    config.write_text(text)
+    return config
+
+
+def test_fit_with_posterior_and_cross_validation(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    config = _posterior_project(tmp_path, 100, 200, cv=2)
+    assert main(["fit", str(config), "--quiet", "--report"]) == 0
+    fit_dir = tmp_path / "fits" / "polyester-lining"
+    fit = json.loads((fit_dir / "fit.json").read_text())
+    assert fit["cross_validation"]["k"] == 2 and fit["cross_validation"]["held_out"]["p50"] > 0
+    posterior = json.loads((fit_dir / "posterior.json").read_text())
+    assert set(posterior["parameters"]) >= set(fit["config"]["fit"]["free"])
+    assert (fit_dir / "posterior_samples.csv").is_file()
+    html = (tmp_path / "reports" / "polyester-lining" / "index.html").read_text()
+    assert "Posterior" in html and "cross-validation" in html
+    assert (tmp_path / "reports" / "polyester-lining" / "corner.png").is_file()
+    assert not list(tmp_path.glob("fits/.*checkpoint*"))  # the checkpoint is gone once the fit is saved
+
+
+def test_sigint_during_posterior_then_rerun_continues(tmp_path):
+    import os
+    import signal
+    import time
+
+    config = _posterior_project(tmp_path, 3000, 3000)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, "-m", "clothlab.cli", "fit", str(config), "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    checkpoint = tmp_path / "fits" / ".polyester-lining.posterior-checkpoint.npz"
+    deadline = time.time() + 240
+    while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    assert checkpoint.exists(), proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert not (tmp_path / "fits" / "polyester-lining").exists()  # nothing half-written
+    done = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    posterior = json.loads((tmp_path / "fits" / "polyester-lining" / "posterior.json").read_text())
+    assert posterior["convergence"]["resumed_from_step"] > 0

@@ -338,6 +338,9 @@ def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
     weave = result.problem.model.weave
     if cfg.model.kind == "irawan":
         weave = apply_parameters(weave, result.params)
-    return write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
+    out = write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
                                weave_text=format_wv(weave), extra=extra, force=force)
+    if result.posterior is not None:  # the fit directory now holds the result: the checkpoint has served
+        checkpoint_path(cfg, fits_dir).unlink(missing_ok=True)
+    return out
