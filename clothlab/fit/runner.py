@@ -54,6 +54,7 @@ class FitResult:
     wall_time: float
     warnings: list = field(default_factory=list)
     cross_validation: dict | None = None
+    evaluation_speed: dict | None = None
     posterior: object = None  # PosteriorResult (clothlab.fit.posterior) when sampled
 
     @property
@@ -102,6 +103,21 @@ def multistart_minimize(problem, x0, opt, progress=None):
     return replace(best, trace=trace, nevals=offset, wall_time=time_offset)
 
 
+def evaluation_speed(problem, params, repeats: int = 5) -> dict:
+    """Direction pairs per second of one full model evaluation (all components) on the measured directions,
+    best of ``repeats`` (memoised yarn integrals cleared, so this is the cost of a new parameter point)."""
+    best = float("inf")
+    for _ in range(repeats):
+        memo = getattr(problem.model, "_memo", None)
+        if memo is not None:
+            memo.clear()
+        t = time.perf_counter()
+        problem.design(params)
+        best = min(best, time.perf_counter() - t)
+    return {"pairs_per_second": problem.measurement.n / best, "seconds_per_evaluation": best,
+            "directions": problem.measurement.n}
+
+
 def checkpoint_path(config, fits_dir=None):
     """Where an interrupted posterior run keeps its chain: a hidden file next to fits/<name>/ (the fit
     directory itself is only written, atomically, when everything is done)."""
@@ -144,6 +160,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
             notes.append(f"coefficient {name} is 0 in every channel: that component is not seen in the data")
     result = FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
                        time.perf_counter() - started, notes)
+    result.evaluation_speed = evaluation_speed(problem, params)
     if config.fit.cv_folds >= 2:
         from clothlab.fit.crossval import cross_validate
 
@@ -239,6 +256,7 @@ def fit_summary(result: FitResult) -> dict:
                       "max_evals": cfg.fit.optimizer.max_evals, "status": getattr(opt, "message", "")},
         "warnings": list(result.warnings),
         "cross_validation": result.cross_validation,
+        "evaluation_speed": result.evaluation_speed,
         "posterior": None if result.posterior is None else {
             "file": "posterior.json", "not_determined": result.posterior.to_json()["not_determined"],
             "converged": bool(result.posterior.converged)},

@@ -160,6 +160,7 @@ def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
         "free": sum(1 for e in (fit.get("parameters") or {}).values() if e.get("free", True)),
         "evaluations": fit.get("evaluations"),
         "wall_time_s": fit.get("wall_time_s"),
+        "pairs_per_second": (fit.get("evaluation_speed") or {}).get("pairs_per_second"),
         "simulated": is_simulated((fit.get("measurement") or {}).get("provenance")),
         "paper": PAPER_RELATIVE_ERRORS.get(paper_key),
         "paper_fabric": paper_key,

@@ -315,7 +315,7 @@ def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "com
     paper = (median %, 80th %) or None.
     """
     header = ["fit", "fabric", "model", "quadrature", "median", "80th pct.", "95th pct.", "free params",
-              "evaluations", "wall time (s)", "paper median*", "paper 80th*"]
+              "evaluations", "fit time (s)", "model speed (pairs/s)", "paper median*", "paper 80th*"]
     table_rows = []
     for row in rows:
         name = esc(row["name"])
@@ -329,6 +329,7 @@ def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "com
             ("num", fmt_percent(row.get("p50"))), ("num", fmt_percent(row.get("p80"))),
             ("num", fmt_percent(row.get("p95"))), ("num", fmt_number(row.get("free"))),
             ("num", fmt_number(row.get("evaluations"))), ("num", fmt_number(row.get("wall_time_s"))),
+            ("num", "\u2014" if row.get("pairs_per_second") is None else f"{row['pairs_per_second']:,.0f}"),
             ("num", f"{paper[0]:g} %" if paper else "\u2014"), ("num", f"{paper[1]:g} %" if paper else "\u2014"),
         ])
     body = [f"<h1>clothlab comparison: {esc(title)}</h1>",
