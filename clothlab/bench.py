@@ -475,7 +475,75 @@ def print_fit_algorithms(result: dict) -> None:
         print(f"  plot: {result['figure']}")
 
 
-SECTIONS = ("cli", "speed", "accuracy", "fit", "tradeoff", "fit_algorithms")
+def models_section(quick: bool) -> list[dict]:
+    """IM (trapezoid 11, and support 8) against the Kang shader (tile average, 4 nodes per axis, and the
+    default adaptive node count): direction pairs per second on the 1,575 paper directions, same run; plus the
+    errors and fit times of the saved example fits fits/<fabric> and fits/<fabric>-kang when present."""
+    from clothlab.frames import spherical_to_vector
+    from clothlab.models.irawan.model import IrawanModel, Quadrature
+    from clothlab.models.kang.model import KangModel
+    from clothlab.presets import PRESET_NAMES, get_preset
+    from clothlab.simulate import paper_sampling
+
+    ti, pi_, to, po = paper_sampling()
+    wi, wo = spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
+    fits = Path(__file__).resolve().parents[1] / "fits"
+    rows = []
+    for name in PRESET_NAMES[:2] if quick else PRESET_NAMES:
+        weave = get_preset(name)
+        candidates = {"irawan trapezoid-11": IrawanModel(weave, Quadrature("trapezoid", 11)),
+                      "irawan support-8": IrawanModel(weave, Quadrature("support", 8)),
+                      "kang tile_nodes=4": KangModel(weave, tile_nodes=4),
+                      "kang adaptive nodes": KangModel(weave)}
+        for label, model in candidates.items():
+            p = model.default_parameters()
+
+            def evaluate(model=model, p=p):
+                memo = getattr(model, "_memo", None)
+                if memo is not None:
+                    memo.clear()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", GeometryWarning)
+                    model.components(wi, wo, p, normalised=False, warn=False)
+
+            evaluate()
+            seconds = _best_time(evaluate, 3 if quick else 7)
+            row = {"fabric": name, "model": label, "pairs_per_second": len(wi) / seconds, "seconds_1575": seconds}
+            fit_name = name if label.startswith("irawan trapezoid") else f"{name}-kang" if label == \
+                "kang tile_nodes=4" else None
+            if fit_name and (fits / fit_name / "fit.json").is_file():
+                fit = json.loads((fits / fit_name / "fit.json").read_text())
+                row.update({"fit": fit_name, "p50": fit["errors"]["overall"]["p50"],
+                            "p80": fit["errors"]["overall"]["p80"], "fit_wall_time_s": fit["wall_time_s"]})
+            rows.append(row)
+    return rows
+
+
+def print_models(rows) -> None:
+    print("\n== IM vs Kang: evaluation speed on 1,575 directions (same run) and the saved example fits ==")
+    print(f"  {'fabric':18s} {'model':22s} {'pairs/s':>12s} {'median':>8s} {'80th':>8s} {'fit (s)':>8s}")
+    for r in rows:
+        err = (f"{100 * r['p50']:7.2f}% {100 * r['p80']:7.2f}% {r['fit_wall_time_s']:8.1f}" if "p50" in r
+               else f"{'-':>8s} {'-':>8s} {'-':>8s}")
+        print(f"  {r['fabric']:18s} {r['model']:22s} {r['pairs_per_second']:12,.0f} {err}")
+
+
+def posterior_section(quick: bool) -> dict:
+    """A full six-parameter posterior to the tau criterion (polyester-lining, noisy), limit 10 minutes; the
+    quick run caps it at 1 minute (and will usually report 'not converged')."""
+    from clothlab.fit.posterior import posterior_benchmark
+
+    return posterior_benchmark("polyester-lining", max_minutes=1.0 if quick else 10.0, progress=False)
+
+
+def btf_section(quick: bool) -> dict:
+    """Load and tile-average a synthetic 256 x 256 BTF stack (6,561 images; 200 in the quick run)."""
+    from clothlab.btf.bench import btf_memory_benchmark
+
+    return btf_memory_benchmark(quick=quick, verbose=False)
+
+
+SECTIONS = ("cli", "speed", "accuracy", "fit", "tradeoff", "fit_algorithms", "models", "posterior", "btf")
 
 
 def run_benchmarks(*, quick: bool = False, json_path=None, figures_dir=None, sections=SECTIONS) -> int:
@@ -513,6 +581,18 @@ def run_benchmarks(*, quick: bool = False, json_path=None, figures_dir=None, sec
     if "fit_algorithms" in sections:
         figures["fit_algorithms"] = fit_algorithms_section(quick, figures_dir=figures_dir)
         print_fit_algorithms(figures["fit_algorithms"])
+    if "models" in sections:
+        figures["models"] = models_section(quick)
+        print_models(figures["models"])
+    if "posterior" in sections:
+        figures["posterior"] = p = posterior_section(quick)
+        print(f"\n== posterior ({p['fabric']}, {len(p['free'])} free, {p['walkers']} walkers) ==\n"
+              f"  {p['steps']} steps in {p['posterior_wall_time_s']:.0f} s; converged by the tau rule: "
+              f"{p['converged']} (within {p['limit_minutes']:g} min: {p['within_limit']}); "
+              f"max tau {max(p['tau'].values()):.0f}; not determined: {p['not_determined'] or 'none'}")
+    if "btf" in sections:
+        figures["btf"] = b = btf_section(quick)
+        print(f"\n== BTF stack: {b.get('n_images')} images of {b.get('size')} px ==\n  {b}")
     if json_path:
         from clothlab.atomic import atomic_write_text
 
