@@ -56,6 +56,7 @@ def fabric_yaml(name: str, variant: str) -> str:
         "fit:",
         "  free: [" + ", ".join(free) + "]",
         "  metric: relative",
+        "  cv_folds: 5",
         "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: 8, seed: 1}",
         "report: {percentiles: [50, 80, 95]}",
         "output: {fits: ../../fits, reports: ../../reports}",

@@ -22,6 +22,7 @@ def _project(tmp_path, max_evals=200):
     shutil.copy(EXAMPLE / "noisy.csv", tmp_path / "noisy.csv")
     text = (EXAMPLE / "fabric.yaml").read_text()
     text = text.replace("max_evals: 6000, starts: 8", f"max_evals: {max_evals}, starts: 1")
+    text = text.replace("  cv_folds: 5\n", "")
     text = text.replace("output: {fits: ../../fits, reports: ../../reports}", "output: {fits: fits, reports: reports}")
     (tmp_path / "fabric.yaml").write_text(text)
     return tmp_path / "fabric.yaml"
@@ -146,9 +147,9 @@ def test_python_api_lazy_exports_resolve():
 
 def _posterior_project(tmp_path, steps, max_steps, cv=""):
     config = _project(tmp_path, max_evals=150)
+    posterior = f"  posterior: {{walkers: 16, steps: {steps}, max_steps: {max_steps}}}"
     text = config.read_text().replace(
-        "  metric: relative", f"  metric: relative\n  posterior: {{walkers: 16, steps: {steps}, max_steps: {max_steps}}}"
-        + (f"\n  cv_folds: {cv}" if cv else ""))
+        "  metric: relative", f"  metric: relative\n{posterior}" + (f"\n  cv_folds: {cv}" if cv else ""))
     config.write_text(text)
     return config
 
