@@ -38,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--posterior", action="store_true",
                    help="also sample the posterior with emcee (fit.posterior settings, else the defaults); an "
                         "interrupted run continues from its checkpoint when the same command is run again")
+    p.add_argument("--no-posterior", action="store_true", help="skip the posterior even if fabric.yaml asks for it")
     p.add_argument("--cv", type=int, metavar="K", help="k-fold cross-validated error percentiles (K >= 2)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     _add_quadrature_overrides(p)
@@ -137,7 +138,9 @@ def cmd_fit(args) -> int:
                               seed=args.seed)
         if args.cv is not None:
             cfg = replace(cfg, fit=replace(cfg.fit, cv_folds=args.cv))
-        if args.posterior and cfg.fit.posterior is None:
+        if args.no_posterior:
+            cfg = replace(cfg, fit=replace(cfg.fit, posterior=None))
+        elif args.posterior and cfg.fit.posterior is None:
             walkers = max(32, 2 * len(cfg.fit.free) + 2)
             cfg = replace(cfg, fit=replace(cfg.fit, posterior=PosteriorConfig(walkers=walkers)))
         dest = (args.fits_dir or cfg.output.fits) / cfg.name

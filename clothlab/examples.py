@@ -58,10 +58,11 @@ def fabric_yaml(name: str, variant: str) -> str:
         "  metric: relative",
         "  cv_folds: 5",
         "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: 8, seed: 1}",
+        "  posterior: {walkers: 32, steps: 1000, max_steps: 12000}" if variant == "noisy" else "",
         "report: {percentiles: [50, 80, 95]}",
         "output: {fits: ../../fits, reports: ../../reports}",
     ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(line for line in lines if line) + "\n"
 
 
 KANG_FREE = ("warp.nx", "warp.ny", "weft.nx", "weft.ny", "yarn_curvature", "fibre_curvature")

@@ -22,7 +22,8 @@ def _project(tmp_path, max_evals=200):
     shutil.copy(EXAMPLE / "noisy.csv", tmp_path / "noisy.csv")
     text = (EXAMPLE / "fabric.yaml").read_text()
     text = text.replace("max_evals: 6000, starts: 8", f"max_evals: {max_evals}, starts: 1")
-    text = text.replace("  cv_folds: 5\n", "")
+    text = "\n".join(line for line in text.splitlines() if not line.startswith(("  cv_folds:", "  posterior:")))
+    assert "posterior" not in text and "cv_folds" not in text
     text = text.replace("output: {fits: ../../fits, reports: ../../reports}", "output: {fits: fits, reports: reports}")
     (tmp_path / "fabric.yaml").write_text(text)
     return tmp_path / "fabric.yaml"

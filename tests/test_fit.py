@@ -37,7 +37,7 @@ def _close(fabric, name, fitted, truth):
 
 def _config(fabric, variant="clean", **optimizer):
     cfg = load_config(MEASUREMENTS / fabric / ("fabric-clean.yaml" if variant == "clean" else "fabric.yaml"))
-    cfg = replace(cfg, fit=replace(cfg.fit, cv_folds=0))  # cross-validation is tested on its own
+    cfg = replace(cfg, fit=replace(cfg.fit, cv_folds=0, posterior=None))  # CV and posteriors are tested apart
     if optimizer:
         cfg = replace(cfg, fit=replace(cfg.fit, optimizer=replace(cfg.fit.optimizer, **optimizer)))
     return cfg
