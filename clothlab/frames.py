@@ -44,28 +44,29 @@ def vector_to_spherical(w, *, degrees: bool = True) -> tuple[np.ndarray, np.ndar
     return theta, phi
 
 
-def azimuth_to_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees: bool = True):
-    """Convert azimuths measured from ``zero`` ('weft'|'x'|'warp'|'y') in ``sense`` ('ccw'|'cw')."""
+def _convention(zero: str, sense: str, degrees: bool) -> tuple[float, float]:
+    """(full turn, offset of ``zero``) in degrees or radians; ValueError for an unknown convention."""
     if zero not in AZIMUTH_ZERO:
         raise ValueError(f"azimuth zero must be one of {sorted(AZIMUTH_ZERO)}, got {zero!r}")
     if sense not in AZIMUTH_SENSE:
         raise ValueError(f"azimuth sense must be one of {AZIMUTH_SENSE}, got {sense!r}")
+    if degrees:
+        return 360.0, AZIMUTH_ZERO[zero]
+    return 2.0 * np.pi, float(np.deg2rad(AZIMUTH_ZERO[zero]))
+
+
+def azimuth_to_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees: bool = True):
+    """Convert azimuths measured from ``zero`` ('weft'|'x'|'warp'|'y') in ``sense`` ('ccw'|'cw')."""
+    full, offset = _convention(zero, sense, degrees)
     phi = np.asarray(phi, dtype=np.float64)
-    full = 360.0 if degrees else 2.0 * np.pi
-    offset = AZIMUTH_ZERO[zero] if degrees else np.deg2rad(AZIMUTH_ZERO[zero])
     signed = phi if sense == "ccw" else -phi
     return np.mod(signed + offset, full)
 
 
 def azimuth_from_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees: bool = True):
     """Inverse of :func:`azimuth_to_clothlab`."""
-    if zero not in AZIMUTH_ZERO:
-        raise ValueError(f"azimuth zero must be one of {sorted(AZIMUTH_ZERO)}, got {zero!r}")
-    if sense not in AZIMUTH_SENSE:
-        raise ValueError(f"azimuth sense must be one of {AZIMUTH_SENSE}, got {sense!r}")
+    full, offset = _convention(zero, sense, degrees)
     phi = np.asarray(phi, dtype=np.float64)
-    full = 360.0 if degrees else 2.0 * np.pi
-    offset = AZIMUTH_ZERO[zero] if degrees else np.deg2rad(AZIMUTH_ZERO[zero])
     shifted = phi - offset
     return np.mod(shifted if sense == "ccw" else -shifted, full)
 

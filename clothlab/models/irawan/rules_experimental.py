@@ -94,65 +94,6 @@ def _staple_split(wi, wo, t, wt, psi, umax, kappa, w, l):
     return out
 
 
-@njit(cache=True)
-def _positive_arc(x, p):
-    """The interval of v in (-pi/2, pi/2) where x sin v + p cos v > 0, as (lo, hi) (empty if lo >= hi).
-
-    Dividing by cos v > 0: x tan v + p > 0, i.e. v > atan(-p / x) for x > 0, v < atan(-p / x) for x < 0."""
-    if x == 0.0:
-        return (-0.5 * math.pi, 0.5 * math.pi) if p > 0.0 else (0.0, 0.0)
-    v0 = math.atan(-p / x)
-    if x > 0.0:
-        return v0, 0.5 * math.pi
-    return -0.5 * math.pi, v0
-
-
-@njit(cache=True)
-def _filament_split(wi, wo, t, wt, umax, kappa, w, l, delta):
-    n_dir = wi.shape[0]
-    out = np.zeros(n_dir)
-    a = 0.5 * w
-    for n in range(n_dir):
-        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
-        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
-        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
-        length = math.sqrt(sx * sx + sy * sy + sz * sz)
-        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
-            continue
-        hy, hz = sy / length, sz / length
-        u = math.atan(hy / hz)
-        if abs(u) >= umax:
-            continue
-        fade = 1.0
-        if delta > 0.0:
-            x = min(max((abs(u) - (1.0 - delta) * umax) / (delta * umax), 0.0), 1.0)
-            fade = 1.0 - x * x * (3.0 - 2.0 * x)
-        rho_yz = math.sqrt(hy * hy + hz * hz)
-        if fade <= 0.0 or rho_yz <= 0.0:
-            continue
-        su, cu = math.sin(u), math.cos(u)
-        radius = spine_radius_scalar(u, umax, kappa, w, l)
-        pi_ = wiy * su + wiz * cu
-        po_ = woy * su + woz * cu
-        lo_i, hi_i = _positive_arc(wix, pi_)
-        lo_o, hi_o = _positive_arc(wox, po_)
-        lo, hi = max(lo_i, lo_o), min(hi_i, hi_o)
-        span = hi - lo
-        if span <= 0.0:
-            continue
-        acc = 0.0
-        for k in range(t.shape[0]):
-            v = lo + span * t[k]
-            sv, cv = math.sin(v), math.cos(v)
-            ci = wix * sv + pi_ * cv
-            cr = wox * sv + po_ * cv
-            if ci <= 0.0 or cr <= 0.0:
-                continue
-            acc += wt[k] * a * (radius + a * cv) * ci * cr / (ci + cr)
-        out[n] = span * acc * fade / (length * rho_yz)
-    return out
-
-
 def split_yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, n=4, psi_threshold=1e-3):
     """I(wi, wo) of eq. 10 with the ``split`` rule; (N, 3) yarn-frame directions, angles in radians."""
     wi = np.ascontiguousarray(wi, dtype=np.float64)
@@ -163,4 +104,8 @@ def split_yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, n=4, psi_t
         s = 0.5 * (1.0 - np.cos(np.pi * t))
         return _staple_split(wi, wo, s, wt * 0.5 * np.pi * np.sin(np.pi * t), float(psi), float(umax),
                              float(kappa), float(w), float(l))
-    return _filament_split(wi, wo, t, wt, float(umax), float(kappa), float(w), float(l), float(delta))
+    from clothlab.models.irawan.kernels import filament_quadrature
+
+    # the filament half of this rule became the `support` rule's filament path (kernels.filament_quadrature)
+    return filament_quadrature(wi, wo, t[None, :], wt[None, :], float(umax), float(kappa), float(w), float(l),
+                               float(delta), True)
