@@ -77,12 +77,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, help="also write the figures as JSON")
     p.add_argument("--figures", type=Path, help="directory for the benchmark plots (default reports/bench)")
     p.add_argument("--sections", help="comma-separated subset of sections to run")
+    p.add_argument("--report", type=Path, metavar="DIR", help="also write an HTML page of the figures into DIR")
 
     p = sub.add_parser("check", help="numerical stability study: extreme inputs, reciprocity, continuity, stiff fits")
     p.add_argument("--full", action="store_true", help=">= 10^6 configurations and the stiff-fit study (minutes)")
     p.add_argument("--json", type=Path, help="also write the findings as JSON")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--figures", type=Path, help="directory for plots")
+    p.add_argument("--report", type=Path, metavar="DIR", help="also write an HTML page of the findings into DIR")
     return parser
 
 
@@ -291,13 +293,34 @@ def cmd_bench(args) -> int:
         if unknown:
             raise ConfigError(f"unknown bench section(s) {', '.join(unknown)}; choose from {', '.join(SECTIONS)}",
                               field="--sections")
-    return run_benchmarks(quick=args.quick, json_path=args.json, figures_dir=args.figures, sections=sections)
+    json_path = args.json
+    if args.report and json_path is None:
+        json_path = args.report / "bench.json"
+    code = run_benchmarks(quick=args.quick, json_path=json_path, figures_dir=args.figures or args.report,
+                          sections=sections)
+    if args.report:
+        import json
+
+        from clothlab.report.studies import write_study_report
+
+        figures = sorted((args.figures or args.report).glob("*.png"))
+        page = write_study_report(json.loads(Path(json_path).read_text()), args.report,
+                                  title="clothlab bench: speed and accuracy", figures=figures)
+        print(f"report: {page}")
+    return code
 
 
 def cmd_check(args) -> int:
     from clothlab.check import run_check
 
-    run_check(full=args.full, json_path=args.json, seed=args.seed, figures_dir=args.figures)
+    result = run_check(full=args.full, json_path=args.json, seed=args.seed, figures_dir=args.figures or args.report)
+    if args.report:
+        from clothlab.report.studies import write_study_report
+
+        figures = sorted((args.figures or args.report).glob("*.png")) if (args.figures or args.report).is_dir() else []
+        page = write_study_report(result, args.report, title="clothlab check: numerical stability and stiff fits",
+                                  figures=figures)
+        print(f"report: {page}")
     return 0
 
 

@@ -193,3 +193,11 @@ def test_sigint_during_posterior_then_rerun_continues(tmp_path):
     assert done.returncode == 0, done.stderr
     posterior = json.loads((tmp_path / "fits" / "polyester-lining" / "posterior.json").read_text())
     assert posterior["convergence"]["resumed_from_step"] > 0
+
+
+def test_check_report_page(tmp_path):
+    assert main(["check", "--report", str(tmp_path / "check")]) == 0
+    page = (tmp_path / "check" / "index.html").read_text()
+    assert "non_finite" in page and "reciprocity" in page
+    result = json.loads((tmp_path / "check" / "result.json").read_text())
+    assert result["totals"]["non_finite"] == 0 and result["totals"]["negative"] == 0
