@@ -79,6 +79,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sections", help="comma-separated subset of sections to run")
     p.add_argument("--report", type=Path, metavar="DIR", help="also write an HTML page of the figures into DIR")
 
+    p = sub.add_parser("calibrate", help="colour correction from a photographed ColorChecker (colour-science)")
+    p.add_argument("chart", type=Path, help="CSV with R, G, B linear camera values per patch (24 rows)")
+    p.add_argument("--method", default="Cheung 2004", choices=("Cheung 2004", "Finlayson 2015", "Vandermonde"))
+    p.add_argument("--degree", type=int, help="root-polynomial / Vandermonde degree")
+    p.add_argument("--apply", type=Path, metavar="TABLE", help="correct this measurement table")
+    p.add_argument("-o", "--output", type=Path, help="corrected table (with --apply)")
+    p.add_argument("--report", type=Path, metavar="DIR", help="write a page with delta E 2000 before / after")
+    p.add_argument("--force", action="store_true")
+
     p = sub.add_parser("check", help="numerical stability study: extreme inputs, reciprocity, continuity, stiff fits")
     p.add_argument("--full", action="store_true", help=">= 10^6 configurations and the stiff-fit study (minutes)")
     p.add_argument("--json", type=Path, help="also write the findings as JSON")
@@ -324,8 +333,15 @@ def cmd_check(args) -> int:
     return 0
 
 
-COMMANDS = {"fit": cmd_fit, "report": cmd_report, "eval": cmd_eval, "simulate": cmd_simulate, "bench": cmd_bench,
-            "check": cmd_check}
+def cmd_calibrate(args) -> int:
+    from clothlab.calibrate import calibrate_command
+
+    return calibrate_command(args.chart, method=args.method, degree=args.degree, apply=args.apply,
+                             output=args.output, report=args.report, force=args.force)
+
+
+COMMANDS = {"calibrate": cmd_calibrate, "fit": cmd_fit, "report": cmd_report, "eval": cmd_eval,
+            "simulate": cmd_simulate, "bench": cmd_bench, "check": cmd_check}
 
 
 if __name__ == "__main__":

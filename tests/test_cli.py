@@ -201,3 +201,26 @@ def test_check_report_page(tmp_path):
     assert "non_finite" in page and "reciprocity" in page
     result = json.loads((tmp_path / "check" / "result.json").read_text())
     assert result["totals"]["non_finite"] == 0 and result["totals"]["negative"] == 0
+
+
+def test_calibrate_corrects_a_synthetic_camera(tmp_path, capsys):
+    import numpy as np
+
+    from clothlab.colour_calibration import chart_reference
+
+    reference = chart_reference()
+    camera = np.array([[0.8, 0.15, 0.05], [0.1, 0.85, 0.05], [0.05, 0.2, 0.75]])
+    measured = reference @ camera.T  # a camera mixing the channels; the correction must undo it
+    chart = tmp_path / "chart.csv"
+    chart.write_text("patch,R,G,B\n" + "".join(f"p{i},{r!r},{g!r},{b!r}\n" for i, (r, g, b) in enumerate(measured)))
+    out = tmp_path / "corrected.csv"
+    args = ["calibrate", str(chart), "--apply", str(EXAMPLE / "noisy.csv"), "-o", str(out),
+            "--report", str(tmp_path / "cal")]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert float(text.split("after mean ")[1].split()[0]) < 0.5
+    assert out.is_file() and (tmp_path / "cal" / "index.html").is_file()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("R,G,B\n0.1,0.2,oops\n")
+    assert main(["calibrate", str(bad)]) == 2
+    assert "bad.csv:2" in capsys.readouterr().err
