@@ -60,8 +60,9 @@ def calibrate_command(chart, *, method="Cheung 2004", degree=None, apply=None, o
                          path=chart)
     correction = fit_correction(measured, reference, method, degree=degree)
     s = correction.summary
-    print(f"{method}: delta E 2000 before mean {s['before']['mean']:.2f} (max {s['before']['max']:.2f}), "
-          f"after mean {s['after']['mean']:.2f} (max {s['after']['max']:.2f})")
+    before_s, after_s = s["delta_e_2000_before"], s["delta_e_2000_after"]
+    print(f"{method}: delta E 2000 before mean {before_s['mean']:.2f} (max {before_s['max']:.2f}), "
+          f"after mean {after_s['mean']:.2f} (max {after_s['max']:.2f})")
     if apply is not None:
         from clothlab.io.loader import load_measurement
         from clothlab.io.table import write_table
