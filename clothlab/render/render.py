@@ -1,0 +1,236 @@
+"""Render a cloth patch with the IM or Kang shaders; EXR + PNG output; LoD vs texture comparisons.
+
+Radiance per sample (no global illumination, no shadows but back-facing):
+
+    L = f_r(wi, wo) E cos(theta_i),   E = light intensity (directional) or I / d^2 (point, d in metres)
+
+with wi, wo in the fabric frame of the hit (z normal, y warp, x weft); samples with wi_z <= 0 or wo_z <= 0
+are black.  A pixel is the mean over its ``spp`` samples (the pixel centre for spp = 1, stratified jitter
+for square spp, seeded by scene.seed); background pixels are 0.  Everything is vectorised over samples.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import ConfigError, ResultExistsError
+from clothlab.render.camera import PinholeCamera
+from clothlab.render.geometry import make_surface
+from clothlab.render.scene import Scene
+from clothlab.render.shade import SHADERS, Counter, FabricModels, Samples, lod_weight, shade
+
+
+@dataclass
+class RenderResult:
+    """image (H, W, C) linear radiance; coverage (H, W) fraction of samples on the patch; timings (s);
+    stats: sample and model-evaluation counts, the fraction of covered pixels that ran the texture model
+    (``texture_pixel_fraction``), that used only the reflectance model, footprint range (tiles)."""
+
+    image: np.ndarray
+    coverage: np.ndarray
+    channels: tuple
+    shader: str
+    spp: int
+    timings: dict
+    stats: dict
+    exposure: float = 0.0
+    metadata: dict = field(default_factory=dict)
+
+
+def _check(shader, spp):
+    if shader not in SHADERS:
+        raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")
+    if isinstance(spp, bool) or not isinstance(spp, int | np.integer) or spp < 1:
+        raise ConfigError(f"spp must be an integer >= 1, got {spp!r}", field="spp")
+
+
+def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed: int | None = None,
+           fabric: FabricModels | None = None) -> RenderResult:
+    """Render ``scene`` with ``shader`` (one of SHADERS) at ``spp`` samples per pixel (default scene.spp).
+
+    ``fabric``: prebuilt models (:meth:`FabricModels.build`) to reuse between renders of one scene.
+    """
+    spp = scene.spp if spp is None else spp
+    _check(shader, spp)
+    start = time.perf_counter()
+    fabric = fabric or FabricModels.build(scene.fabric)
+    t_build = time.perf_counter()
+    camera = PinholeCamera(scene.camera)
+    surface = make_surface(scene.patch)
+    rng = np.random.default_rng(scene.seed if seed is None else seed)
+    px, py = camera.pixel_samples(spp, rng)
+    h, w = camera.height, camera.width
+    pixel = np.broadcast_to(np.arange(h * w).reshape(h, w, 1), px.shape).reshape(-1)
+    px, py = px.reshape(-1), py.reshape(-1)
+    directions = camera.directions(px, py)
+    hits = surface.intersect(camera.eye, directions)
+    idx = np.flatnonzero(hits.hit)
+    hits = type(hits)(**{k: getattr(hits, k)[idx] for k in hits.__dataclass_fields__})
+    footprint = hits.footprint(camera.eye, camera.directions(px[idx] + 1.0, py[idx]),
+                               camera.directions(px[idx], py[idx] + 1.0), surface.tile_mm)
+    to_light, irradiance = _light(scene.light, hits.position)
+    wi, wo = hits.to_fabric(to_light), hits.to_fabric(-directions[idx])
+    front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
+    samples = Samples(hits.u[front], hits.v[front], wi[front], wo[front], footprint[front], pixel[idx][front],
+                      hits.distance[front])
+    t_geometry = time.perf_counter()
+
+    counter = Counter()
+    f_r = shade(shader, fabric, samples, scene.lod, counter)
+    radiance = f_r * (irradiance[front] * wi[front, 2])[:, None]
+    t_shade = time.perf_counter()
+
+    channels = len(fabric.channels)
+    image = np.stack([np.bincount(samples.pixel, radiance[:, c], minlength=h * w) for c in range(channels)],
+                     axis=-1) / spp
+    coverage = np.bincount(pixel[idx], minlength=h * w) / spp
+    t_end = time.perf_counter()
+
+    timings = {"setup": t_build - start, "geometry": t_geometry - t_build, "shading": t_shade - t_geometry,
+               "accumulate": t_end - t_shade, "total": t_end - start}
+    timings.update({k: v for k, v in counter.items() if k.endswith("_seconds")})
+    stats = _stats(shader, scene, samples, counter, h * w, idx.size, pixel[idx])
+    return RenderResult(image=image.reshape(h, w, channels), coverage=coverage.reshape(h, w),
+                        channels=fabric.channels, shader=shader, spp=int(spp), timings=timings, stats=stats,
+                        exposure=scene.exposure,
+                        metadata={"scene": scene.source or "", "shader": shader, "spp": int(spp),
+                                  "lod_f0": scene.lod.f0, "lod_f1": scene.lod.f1,
+                                  "camera_distance_mm": scene.camera.distance})
+
+
+def _light(light, position):
+    """Unit directions towards the light (M, 3) and the irradiance at normal incidence (M,)."""
+    if light.type == "directional":
+        d = np.asarray(light.direction, dtype=np.float64)
+        return np.broadcast_to(d / np.linalg.norm(d), position.shape), np.full(len(position), light.intensity)
+    offset = np.asarray(light.position, dtype=np.float64) - position
+    dist = np.linalg.norm(offset, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return offset / dist[:, None], np.where(dist > 0.0, light.intensity / (1e-3 * dist) ** 2, 0.0)
+
+
+def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> dict:
+    shaded_pixels = np.unique(samples.pixel)
+    n = max(shaded_pixels.size, 1)
+    if shader == "im-lod":
+        b = lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1)
+        texture_pixels = np.unique(samples.pixel[b < 1.0]).size
+        reflectance_only = n - np.unique(samples.pixel[b < 1.0]).size if shaded_pixels.size else 0
+        blend_pixels = np.unique(samples.pixel[(b > 0.0) & (b < 1.0)]).size
+    else:
+        uses_texture = shader in ("im-texture", "kang-texture", "kang-lod")
+        texture_pixels = shaded_pixels.size if uses_texture else 0
+        reflectance_only = shaded_pixels.size - texture_pixels
+        blend_pixels = 0
+    finite = samples.footprint[np.isfinite(samples.footprint)]
+    stats = {
+        "pixels": int(pixels),
+        "covered_pixels": int(np.unique(hit_pixel).size),
+        "shaded_pixels": int(shaded_pixels.size),
+        "samples": int(hit_samples),
+        "shaded_samples": int(samples.u.size),
+        "texture_pixel_fraction": texture_pixels / n,
+        "blend_pixel_fraction": blend_pixels / n,
+        "reflectance_only_pixel_fraction": reflectance_only / n,
+        "footprint_min_tiles": float(finite.min()) if finite.size else float("nan"),
+        "footprint_median_tiles": float(np.median(finite)) if finite.size else float("nan"),
+        "footprint_max_tiles": float(finite.max()) if finite.size else float("nan"),
+    }
+    for name in ("texture", "reflectance", "kang"):
+        stats[f"{name}_evaluations"] = int(counter.get(f"{name}_points", 0))
+    return stats
+
+
+# ---------------------------------------------------------------------------------------------- output
+
+
+def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """8-bit sRGB codes (H, W, C) of linear ``image`` scaled by 2^exposure, clipped to [0, 1]."""
+    from clothlab.btf.images import linear_to_srgb
+
+    scaled = np.clip(np.asarray(image, dtype=np.float64) * 2.0 ** exposure, 0.0, 1.0)
+    return np.rint(linear_to_srgb(scaled) * 255.0).astype(np.uint8)
+
+
+def save_render(result: RenderResult, path_stem, *, exposure: float | None = None, force: bool = False,
+                pixel_type: str = "half") -> tuple[Path, Path]:
+    """Write ``<stem>.exr`` (linear, 'half' or 'float', with scene metadata) and ``<stem>.png`` (sRGB, 8 bit,
+    exposure in stops; default the scene's), each atomically (temporary file + rename).  Refuses to replace
+    an existing file unless ``force``.  Returns (exr path, png path)."""
+    import os
+    import tempfile
+
+    from clothlab.btf.images import write_image
+
+    if pixel_type not in ("half", "float"):
+        raise ConfigError(f"EXR pixel type must be 'half' or 'float', got {pixel_type!r}", field="pixel_type")
+    stem = Path(path_stem)
+    if stem.suffix.lower() in (".exr", ".png"):
+        stem = stem.with_suffix("")
+    exr, png = stem.parent / f"{stem.name}.exr", stem.parent / f"{stem.name}.png"
+    existing = [p for p in (exr, png) if p.exists()]
+    if existing and not force:
+        raise ResultExistsError(f"{', '.join(map(str, existing))} already exist(s); use --force (force=True) "
+                                "to replace", path=existing[0])
+    exr.parent.mkdir(parents=True, exist_ok=True)
+    exposure = result.exposure if exposure is None else exposure
+    names = result.channels if len(result.channels) == result.image.shape[-1] else None
+    attributes = {f"clothlab:{k}": v for k, v in result.metadata.items()}
+    jobs = ((exr, result.image, pixel_type, names),
+            (png, to_srgb8(result.image, exposure).astype(np.float32) / 255.0, "uint8", None))
+    for path, pixels, ptype, channel_names in jobs:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+        os.close(fd)
+        try:
+            write_image(tmp, pixels, pixel_type=ptype, channel_names=channel_names,
+                        attributes=attributes if path is exr else None)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    return exr, png
+
+
+# ---------------------------------------------------------------------------------------------- comparison
+
+
+def relative_error(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """sum |image - reference| / sum |reference| over the masked pixels and all channels (relative L1)."""
+    if mask is not None:
+        image, reference = image[mask], reference[mask]
+    denominator = np.abs(reference).sum()
+    return float(np.abs(image - reference).sum() / denominator) if denominator > 0 else float("nan")
+
+
+def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
+                reference_spp: int = 64, repeats: int = 1) -> list[dict]:
+    """Render ``scene`` with the camera moved to each distance (mm from its look-at point, same direction):
+    the supersampled texture model (``reference_spp`` stratified samples) as the antialiasing reference, and
+    each shader at ``spp``.  Per distance: time (best of ``repeats``, s), relative L1 error vs the reference
+    over fully covered pixels, texture-pixel fraction and footprint range of each shader."""
+    fabric = FabricModels.build(scene.fabric)
+    rows = []
+    for distance in distances:
+        s = replace(scene, camera=scene.camera.at_distance(distance))
+        reference = render(s, shader="im-texture", spp=reference_spp, fabric=fabric)
+        mask = reference.coverage >= 1.0
+        row = {"distance_mm": float(distance), "reference_seconds": reference.timings["total"],
+               "footprint_median_tiles": reference.stats["footprint_median_tiles"],
+               "footprint_max_tiles": reference.stats["footprint_max_tiles"], "pixels": int(mask.sum())}
+        for shader in shaders:
+            best = None
+            for _ in range(repeats):
+                result = render(s, shader=shader, spp=spp, fabric=fabric)
+                if best is None or result.timings["total"] < best.timings["total"]:
+                    best = result
+            row[shader] = {"seconds": best.timings["total"], "shading_seconds": best.timings["shading"],
+                           "relative_error": relative_error(best.image, reference.image, mask),
+                           "texture_pixel_fraction": best.stats["texture_pixel_fraction"],
+                           "texture_evaluations": best.stats["texture_evaluations"]}
+        rows.append(row)
+    return rows

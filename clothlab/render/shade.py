@@ -1,0 +1,242 @@
+"""The shading policy of :func:`clothlab.render.render`: which model runs at which sample.
+
+Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample):
+
+- ``im-texture``     the Irawan-Marschner texture model (sec. 7.2) at every sample.
+- ``im-reflectance`` the IM reflectance model (sec. 7.1), evaluated once per pixel (at its first surface
+                     sample; f_r is smooth in the directions across a pixel) and used for all its samples.
+- ``im-lod``         per sample, from the pixel footprint f (weave tiles, :mod:`.geometry`):
+                         texture model             where f <= f0   (the pixel resolves yarns),
+                         reflectance model         where f >= f1   (the pixel covers many tiles),
+                         (1 - b) texture + b refl  between, b = smoothstep(log(f / f0) / log(f1 / f0)),
+                     a C^1 blend in log footprint: continuous in the distance, with no jump at f0 or f1.
+                     This is the paper's "seamless switching" (sec. 3.2, 7): the tile average of the texture
+                     model equals the reflectance model, so the far limit of a supersampled texture and
+                     the reflectance model agree (tests/test_render.py).  Where b = 1 the texture model
+                     is never called (counted); the reflectance part is evaluated once per pixel.
+- ``kang-texture``   Kang's point shader with full yarn detail (footprint None, alpha = 0 of eq. 5).
+- ``kang-lod``       Kang's point shader with the pixel footprint: the eq. 5 mip blend, and Algorithm 1
+                     (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
+                     = camera distance / fabric.kang.view_distance_mm.
+
+Skipping (DESIGN.md principle 5): an IM component whose coefficient is zero in every channel, or whose yarn
+type covers no cell of the weave, is not computed (``need=``).
+
+Choice of f0 = 0.1 and f1 = 1 tile (scene.lod; the receding-plane study of render_benchmark): below about a
+tenth of a tile (a third to half a cell for the presets' 3..8-cell tiles) the pixel resolves the yarn
+segments and the texture model is what the supersampled reference shows; from about one tile on, the
+pixel's average over the highlights is within the reference's own sampling noise of the reflectance model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from clothlab.errors import ConfigError
+from clothlab.models.components import combine
+from clothlab.render.scene import Fabric, Lod
+from clothlab.weave import YARN_KINDS
+
+SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture")
+#: finite stand-in for an infinite footprint (grazing differentials) handed to the Kang shader
+MAX_FOOTPRINT = 1e6
+
+
+def lod_weight(footprint, f0: float, f1: float) -> np.ndarray:
+    """Reflectance weight b in [0, 1] of a footprint (tiles): 0 for f <= f0, 1 for f >= f1, smoothstep of
+    log(f / f0) / log(f1 / f0) between (continuous, with continuous slope, at both ends)."""
+    f = np.asarray(footprint, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        t = np.clip(np.log(np.maximum(f, 0.0) / f0) / np.log(f1 / f0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+@dataclass
+class Samples:
+    """Surface samples to shade: texture coordinates (tiles), fabric-frame directions (M, 3), pixel footprint
+    (tiles), pixel index, distance from the camera (mm)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    footprint: np.ndarray
+    pixel: np.ndarray
+    distance: np.ndarray
+
+    def take(self, index) -> Samples:
+        return Samples(*(getattr(self, k)[index] for k in ("u", "v", "wi", "wo", "footprint", "pixel", "distance")))
+
+
+@dataclass
+class FabricModels:
+    """The fabric of a scene as evaluable models: weave, IM reflectance and texture models with parameters and
+    coefficients (C,) per component name, channels; the Kang model is built on first use."""
+
+    spec: Fabric
+    weave: object
+    reflectance: object
+    texture: object
+    params: dict
+    coefficients: dict
+    channels: tuple
+    need: tuple
+    _kang: tuple | None = field(default=None, repr=False)
+
+    @classmethod
+    def build(cls, spec: Fabric) -> FabricModels:
+        from clothlab.models.irawan.model import COMPONENTS, IrawanModel
+        from clothlab.models.irawan.texture import IrawanTexture
+        from clothlab.presets import resolve_weave
+
+        if spec.fit is not None:
+            from clothlab.fit.store import load_fitted
+
+            model, params, coefficients, channels = load_fitted(spec.fit)
+            if not isinstance(model, IrawanModel):
+                raise ConfigError(f"the fit in {spec.fit} is of kind {model.kind!r}; fabric.fit needs an irawan "
+                                  "fit (a kang fit goes under fabric.kang.fit)", field="fabric.fit")
+            weave, quadrature = model.weave, model.quadrature
+        else:
+            weave = resolve_weave(spec.weave, spec.base_dir)
+            model, quadrature = IrawanModel(weave), None
+            params, coefficients, channels = spec.params, spec.coefficients, spec.channels
+        params = model.resolve(params)  # validates (ParameterError names the parameter)
+        coefficients = _broadcast(coefficients, len(channels), "fabric.coefficients")
+        need = tuple(name for name in COMPONENTS if _needed(name, coefficients, weave))
+        texture = IrawanTexture(weave, quadrature, seed=spec.seed)
+        return cls(spec, weave, model, texture, params, coefficients, tuple(channels), need)
+
+    def kang(self):
+        """(KangModel, params, coefficients) of the scene's Kang shader."""
+        if self._kang is None:
+            from clothlab.models.kang.model import KangModel
+
+            k = self.spec.kang
+            if k.fit is not None:
+                from clothlab.fit.store import load_fitted
+
+                model, params, coefficients, channels = load_fitted(k.fit)
+                if not isinstance(model, KangModel):
+                    raise ConfigError(f"the fit in {k.fit} is of kind {model.kind!r}, not kang",
+                                      field="fabric.kang.fit")
+                if tuple(channels) != self.channels:
+                    raise ConfigError(f"the Kang fit's channels {list(channels)} differ from the fabric's "
+                                      f"{list(self.channels)}", field="fabric.kang.fit")
+            else:
+                model, params = KangModel(self.weave), k.params
+                coefficients = k.coefficients or {
+                    "kd_warp": self.coefficients.get("kd", 0.0), "kd_weft": self.coefficients.get("kd", 0.0),
+                    "ks_warp": self.coefficients.get("ks_warp", 0.0), "ks_weft": self.coefficients.get("ks_weft", 0.0)}
+            params = model.resolve(params)
+            self._kang = (model, params, _broadcast(coefficients, len(self.channels), "fabric.kang.coefficients"))
+        return self._kang
+
+
+def _broadcast(coefficients: dict, n: int, where: str) -> dict:
+    out = {}
+    for name, coef in coefficients.items():
+        coef = np.atleast_1d(np.asarray(coef, dtype=np.float64))
+        if coef.shape not in ((1,), (n,)):
+            raise ConfigError(f"coefficient {name} has {coef.size} values for {n} channels", field=f"{where}.{name}")
+        out[name] = np.broadcast_to(coef, (n,)).copy()
+    return out
+
+
+def _needed(component: str, coefficients: dict, weave) -> bool:
+    """A component is computed only if its coefficient is non-zero somewhere and its yarn type is present."""
+    from clothlab.models.components import coefficient_name
+
+    coef = coefficients.get(coefficient_name(component), coefficients.get(component))
+    if coef is None or not np.any(coef != 0.0):
+        return False
+    kind = component.rsplit("_", 1)[-1]
+    return kind not in YARN_KINDS or weave.cell_share(kind) > 0.0
+
+
+# ---------------------------------------------------------------------------------------------- shaders
+
+
+class Counter(dict):
+    """Model evaluations per model (points passed in) and the time spent in each (seconds)."""
+
+    def run(self, name, n, fn, *args, **kwargs):
+        import time
+
+        start = time.perf_counter()
+        out = fn(*args, **kwargs)
+        self[f"{name}_points"] = self.get(f"{name}_points", 0) + int(n)
+        self[f"{name}_seconds"] = self.get(f"{name}_seconds", 0.0) + time.perf_counter() - start
+        return out
+
+
+def _zeros(fabric, m):
+    return np.zeros((m, len(fabric.channels)))
+
+
+def texture_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
+    """IM texture model f_r (M, C) at every sample."""
+    if not fabric.need or len(s.u) == 0:
+        return _zeros(fabric, len(s.u))
+    comps = counter.run("texture", len(s.u), fabric.texture.components, s.u, s.v, s.wi, s.wo, fabric.params,
+                        need=fabric.need, warn=False)
+    return combine(comps, fabric.coefficients)
+
+
+def reflectance_values(fabric: FabricModels, s: Samples, counter: Counter, *, per_pixel: bool = True) -> np.ndarray:
+    """IM reflectance model f_r (M, C); with ``per_pixel`` evaluated at the first sample of each pixel."""
+    if not fabric.need or len(s.u) == 0:
+        return _zeros(fabric, len(s.u))
+    if per_pixel:
+        _, first, back = np.unique(s.pixel, return_index=True, return_inverse=True)
+        wi, wo = s.wi[first], s.wo[first]
+    else:
+        back, wi, wo = slice(None), s.wi, s.wo
+    comps = counter.run("reflectance", len(wi), fabric.reflectance.components, wi, wo, fabric.params,
+                        need=fabric.need, warn=False)
+    return combine(comps, fabric.coefficients)[back]
+
+
+def im_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) -> np.ndarray:
+    """The IM level of detail (module docstring): texture, blend or reflectance by the pixel footprint."""
+    b = lod_weight(s.footprint, lod.f0, lod.f1)
+    out = _zeros(fabric, len(b))
+    near = np.flatnonzero(b < 1.0)
+    if near.size:
+        out[near] += (1.0 - b[near, None]) * texture_values(fabric, s.take(near), counter)
+    blend = np.flatnonzero((b > 0.0) & (b < 1.0))
+    if blend.size:
+        out[blend] += b[blend, None] * reflectance_values(fabric, s.take(blend), counter, per_pixel=False)
+    far = np.flatnonzero(b >= 1.0)
+    if far.size:
+        out[far] += reflectance_values(fabric, s.take(far), counter)
+    return out
+
+
+def kang_values(fabric: FabricModels, s: Samples, counter: Counter, *, lod: bool) -> np.ndarray:
+    """Kang's point shader f_r (M, C); ``lod``: with the pixel footprint (eq. 5, optionally Algorithm 1)."""
+    model, params, coefficients = fabric.kang()
+    if len(s.u) == 0:
+        return _zeros(fabric, 0)
+    footprint = np.minimum(s.footprint, MAX_FOOTPRINT) if lod else None
+    view = None
+    if lod and fabric.spec.kang.prefilter:
+        view = s.distance / fabric.spec.kang.view_distance_mm
+    comps = counter.run("kang", len(s.u), model.point_components, s.u, s.v, s.wi, s.wo, params,
+                        footprint=footprint, view_distance=view)
+    return combine(comps, coefficients)
+
+
+def shade(shader: str, fabric: FabricModels, samples: Samples, lod: Lod, counter: Counter) -> np.ndarray:
+    """f_r (M, C) of ``shader`` at the samples."""
+    if shader == "im-lod":
+        return im_lod_values(fabric, samples, counter, lod)
+    if shader == "im-texture":
+        return texture_values(fabric, samples, counter)
+    if shader == "im-reflectance":
+        return reflectance_values(fabric, samples, counter)
+    if shader in ("kang-lod", "kang-texture"):
+        return kang_values(fabric, samples, counter, lod=shader == "kang-lod")
+    raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")
