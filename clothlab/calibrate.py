@@ -4,7 +4,9 @@ The chart file is a CSV with columns R, G, B (linear camera values, one row per 
 standard order, 24 rows for the ColorChecker 24; an optional ``patch`` column is kept for the report).
 The correction (:mod:`clothlab.colour_calibration`, colour-science) maps camera RGB to linear sRGB (D65)
 of the chart's reference values; its delta E 2000 before / after is printed and, with ``report``, written
-as a page.  ``apply`` corrects a measurement table (values and sigma) and writes a new clothlab table.
+as a page.  ``apply`` corrects a measurement table (values and sigma) and writes a new clothlab table;
+values a correction maps below zero (colours outside the chart's gamut) are raised to 1e-6 of the channel
+maximum, counted and recorded in the table's provenance.
 """
 
 from __future__ import annotations
@@ -69,7 +71,18 @@ def calibrate_command(chart, *, method="Cheung 2004", degree=None, apply=None, o
 
         if output is None:
             raise InputError("--apply needs -o OUTPUT for the corrected table", field="--output")
-        print(write_table(correction.apply_measurement(load_measurement(apply)), output, overwrite=force))
+        import dataclasses
+
+        corrected = correction.apply_measurement(load_measurement(apply))
+        floor = 1e-6 * np.max(corrected.values, axis=0, keepdims=True)
+        low = corrected.values < floor
+        if low.any():  # out-of-gamut colours map below zero; a BRDF table holds no negative values
+            print(f"warning: {int(low.sum())} corrected values below {floor.min():.3g} (out of the chart's gamut) "
+                  "were raised to 1e-6 x the channel maximum; recorded in the table's provenance")
+            corrected = dataclasses.replace(
+                corrected, values=np.where(low, floor, corrected.values),
+                provenance={**corrected.provenance, "colour_correction_floored_values": int(low.sum())})
+        print(write_table(corrected, output, overwrite=force))
     if report is not None:
         from clothlab.report.studies import write_study_report
 
