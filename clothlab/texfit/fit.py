@@ -1,0 +1,408 @@
+"""Fit the texture parameters the BRDF cannot see to a BTF stack (issue 4 item 4; paper sec. 4.2, 7.2).
+
+Free (any subset of :data:`TEXTURE_FREE`): the tile offset (u0, v0) in tiles, a small rotation rho (deg),
+the segment length/width ratio scale s and hWidth (eq. 12), with the layout conventions of
+:mod:`clothlab.texfit.simulate_btf`.  The BRDF parameters come from a reflectance fit (or fabric.yaml) and
+are **held fixed**; ``refine`` names BRDF parameters (e.g. ``warp.umax``) that are refined as well, within
+their declared fit bounds.  At every objective evaluation the linear coefficients (kd, ks_warp, ks_weft) are
+solved by exact NNLS per channel (:func:`clothlab.fit.nnls.nnls_small`, DESIGN.md principle 3).
+
+Data: the **raw images**, not the unit-tile averages.  Reasons: (1) a rotated weave is smeared by averaging
+tiles along the image axes, so the rotation is only observable in the raw images; (2) the intensity noise
+(sec. 7.2.1) lives in the raw images only (tile averaging removes it), and its statistics are reported from
+the residuals; (3) the offset is kept exactly (the model is evaluated at the very pixel centres).  The model
+is noise-free in the objective (the noise realisation of real cloth is unknown; the noise has mean 1, so
+the least-squares fit is unbiased).  Objective: sum of squared pixel residuals / sum of squared pixel values.
+
+The image scale (tiles across the image) is read from the manifest of a clothlab-simulated stack, else
+estimated from the images (:meth:`BtfStack.estimate_period`), or given.
+
+Global stage: the offset objective is periodic and multimodal (every shift that lines the bands up with the
+wrong yarns is a local minimum), so the offset is first searched on a grid over one whole tile (step
+``grid_step`` cells, images subsampled by ``grid_stride`` px) with the other parameters at their starts;
+then nlopt's LN_SBPLX (robust on the piecewise-constant steps that band edges crossing pixel centres cause)
+polishes all free parameters from the best ``starts`` grid points, the offset boxed to +- one grid step.
+
+Noise statistics: the ratio (measured - kd/pi) / (model specular) over pixels whose model specular part is
+bright; its coefficient of variation is the fitted noise ``amplitude`` (1 for the paper's exponential noise,
+0 without noise).  The offset is identifiable only up to the weave's own translations
+(:func:`pattern_translations`); the result lists them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import GeometryWarning, InputError
+from clothlab.texfit.simulate_btf import (
+    TextureSource,
+    fabric_coordinates,
+    image_centre,
+    load_source,
+    rotate_z,
+    texture_params,
+)
+
+TEXTURE_FREE = ("offset", "rotation", "ratio", "hwidth")
+ROTATION_BOUNDS = (-5.0, 5.0)  # deg
+RATIO_BOUNDS = (0.8, 1.25)
+HWIDTH_BOUNDS = (0.05, 1.0)
+NOISE_PRESENT = 0.2  # amplitude (coefficient of variation) above which noise is reported present
+MAX_PIXEL_BYTES = 2**30
+
+
+def pattern_translations(weave, samples: int = 4, atol: float = 1e-3) -> np.ndarray:
+    """(K, 2) shifts (du, dv) in tiles, whole cells within one tile, that leave the noise-free texture
+    unchanged (same yarn kind and local (x, y) to ``atol`` cells at every point; the published segment
+    centres carry 4 digits, e.g. 0.0833); (0, 0) first."""
+    from clothlab.weave_lookup import locate_segments
+
+    w, h = weave.tile_width, weave.tile_height
+    grid = (np.arange(samples) + 0.5) / samples
+    u = ((np.arange(w)[:, None] + grid[None, :]).ravel() / w)[None, :]
+    v = ((np.arange(h)[:, None] + grid[None, :]).ravel() / h)[:, None]
+    u, v = np.broadcast_arrays(u, v)
+    kinds = np.array([s.kind == "weft" for s in weave.segments])
+    seg, x, y = locate_segments(weave, u, v)
+    shifts = []
+    for b in range(h):
+        for a in range(w):
+            seg2, x2, y2 = locate_segments(weave, u + a / w, v + b / h)
+            if (np.array_equal(kinds[seg], kinds[seg2]) and np.allclose(x, x2, atol=atol)
+                    and np.allclose(y, y2, atol=atol)):
+                shifts.append((a / w, b / h))
+    return np.asarray(shifts, dtype=np.float64)
+
+
+def offset_error_cells(found, truth, weave) -> float:
+    """Distance (cells) between two offsets modulo whole tiles and the weave's own translations."""
+    w, h = weave.tile_width, weave.tile_height
+    d = np.asarray(found, float)[None, :] - np.asarray(truth, float)[None, :] - pattern_translations(weave)
+    d -= np.round(d)
+    return float(np.min(np.hypot(d[:, 0] * w, d[:, 1] * h)))
+
+
+def _same_offset(a, b, shifts, tol: float = 1e-9) -> bool:
+    d = np.asarray(a, float)[None, :] - np.asarray(b, float)[None, :] - shifts
+    d -= np.round(d)
+    return bool(np.any(np.all(np.abs(d) < tol, axis=1)))
+
+
+@dataclass
+class TextureFit:
+    """Result of :func:`fit_texture`.  offset in tiles wrapped to [0, 1); rotation deg; ratio and hwidth
+    unitless; coefficients {name: (C,)}; errors: per-image relative-error percentiles (see :func:`image_errors`)."""
+
+    offset: tuple[float, float]
+    rotation: float
+    ratio: float
+    hwidth: float
+    refined: dict
+    coefficients: dict
+    channels: tuple
+    objective: float
+    noise: dict
+    errors: dict
+    translations: list
+    repeats: tuple[float, float]
+    angles: np.ndarray
+    files: list
+    free: tuple
+    nevals: int
+    seconds: float
+    grid: dict
+    message: str
+    source: str
+    truth: dict | None = None
+    measured_tiles: np.ndarray | None = field(default=None, repr=False)
+    model_tiles: np.ndarray | None = field(default=None, repr=False)
+
+    def to_dict(self) -> dict:
+        return {
+            "offset_tiles": list(self.offset), "rotation_deg": self.rotation, "ratio_scale": self.ratio,
+            "hwidth": self.hwidth, "refined": self.refined,
+            "coefficients": {k: dict(zip(self.channels, np.asarray(v).tolist(), strict=True))
+                             for k, v in self.coefficients.items()},
+            "channels": list(self.channels), "objective": self.objective, "noise": self.noise,
+            "equivalent_offset_shifts_tiles": self.translations, "tile_repeats": list(self.repeats),
+            "free": list(self.free), "evaluations": self.nevals, "wall_time_s": self.seconds,
+            "grid": self.grid, "optimizer": self.message, "source": self.source, "truth": self.truth,
+            "held_fixed": "BRDF parameters of the source (reflectance fit), except 'refined'",
+            "data": "raw images (pixel values), noise-free model at pixel centres",
+            "errors": self.errors,
+        }
+
+
+class _Problem:
+    """Raw stack pixels and the texture model, evaluated for a vector of free parameters."""
+
+    def __init__(self, stack, src: TextureSource, repeats, free, refine):
+        from clothlab.btf.write import texture_coordinates
+        from clothlab.models.irawan.texture import IrawanTexture
+
+        self.src, self.free, self.refine = src, tuple(free), tuple(refine)
+        self.texture = IrawanTexture(src.weave, src.quadrature)
+        self.repeats = repeats
+        size = (stack.width, stack.height)
+        need = len(stack) * stack.width * stack.height * stack.channels * 4
+        if need > MAX_PIXEL_BYTES:
+            raise InputError(f"the stack's raw pixels need {need / 2**20:.0f} MB; crop the stack", path=stack.source)
+        self.pixels = np.stack([stack.image(i) for i in range(len(stack))])  # (N, H, W, C) float32
+        self.a, self.b = texture_coordinates(size, repeats)  # image coordinates without offset
+        self.wi, self.wo = stack.wi, stack.wo
+        self.start = {"u0": 0.0, "v0": 0.0, "rotation": 0.0, "ratio": 1.0, "hwidth": float(src.params["hwidth"]),
+                      **{k: float(src.params[k]) for k in refine}}
+
+    def names(self) -> list[str]:
+        out = []
+        for name in self.free:
+            out += ["u0", "v0"] if name == "offset" else [name]
+        return out + list(self.refine)
+
+    def values(self, x) -> dict:
+        return {**self.start, **dict(zip(self.names(), np.asarray(x, float).tolist(), strict=True))}
+
+    def components(self, values: dict, stride: int = 1) -> np.ndarray:
+        """(N, P, 3) diffuse, specular_warp, specular_weft at the (subsampled) pixels."""
+        params = {**self.src.params, **{k: values[k] for k in self.refine}}
+        params = texture_params(params, ratio=values["ratio"], hwidth=values["hwidth"])
+        offset = (values["u0"], values["v0"])
+        u, v = self.a[::stride, ::stride] + offset[0], self.b[::stride, ::stride] + offset[1]
+        fu, fv = fabric_coordinates(u, v, values["rotation"], image_centre(offset, self.repeats), self.src.weave)
+        out = np.empty((len(self.wi), fu.size, 3))
+        wi, wo = rotate_z(self.wi, -values["rotation"]), rotate_z(self.wo, -values["rotation"])
+        for n in range(len(self.wi)):
+            comps = self.texture.components(fu, fv, wi[n], wo[n], params, noise=False, warn=False)
+            for k, name in enumerate(("diffuse", "specular_warp", "specular_weft")):
+                out[n, :, k] = comps[name].reshape(-1)
+        return out
+
+    def data(self, stride: int = 1) -> np.ndarray:
+        p = self.pixels[:, ::stride, ::stride]
+        return p.reshape(p.shape[0], -1, p.shape[-1]).astype(np.float64)
+
+    def solve(self, values: dict, stride: int = 1):
+        """(objective, coef (3, C), design (N, P, 3), data (N, P, C))."""
+        from clothlab.fit.nnls import nnls_small
+
+        design, y = self.components(values, stride), self.data(stride)
+        coef, residual = nnls_small(design.reshape(-1, 3), y.reshape(-1, y.shape[-1]))
+        return float(np.sum(residual**2) / np.sum(y**2)), coef, design, y
+
+
+def _scale_from(stack, tile_repeats, weave) -> tuple[float, float]:
+    """Tiles across (width, height): given, from a clothlab manifest, or from the images' period."""
+    if tile_repeats is not None:
+        r = np.atleast_1d(np.asarray(tile_repeats, float))
+        return (float(r[0]), float(r[-1]))
+    if stack.source is not None and stack.source.suffix.lower() in (".yaml", ".yml"):
+        import yaml
+
+        doc = yaml.safe_load(stack.source.read_text(encoding="utf-8")) or {}
+        repeats = (doc.get("simulated") or {}).get("tile_repeats")
+        if repeats:
+            return (float(repeats[0]), float(repeats[1]))
+    period = stack.estimate_period()
+    return (stack.width / period.px, stack.height / period.py)
+
+
+def _manifest_truth(stack) -> dict | None:
+    if stack.source is None or stack.source.suffix.lower() not in (".yaml", ".yml"):
+        return None
+    import yaml
+
+    doc = yaml.safe_load(stack.source.read_text(encoding="utf-8")) or {}
+    texture = (doc.get("provenance") or {}).get("texture")
+    if not texture:
+        return None
+    keys = ("offset", "rotation", "ratio", "hwidth", "noise", "seed", "fineness", "source")
+    return {k: texture.get(k) for k in keys}
+
+
+def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), tile_repeats=None, grid_step: float = 0.25,
+                grid_stride: int = 2, starts: int = 3, max_evals: int = 600, seed: int = 1) -> TextureFit:
+    """Fit the texture parameters to ``stack`` (a :class:`~clothlab.btf.BtfStack` or a path) with the BRDF of
+    ``source`` (fit directory, fabric.yaml or preset) held fixed; see the module docstring for the method."""
+    from clothlab.btf import BtfStack
+    from clothlab.fit.optimize import minimize
+    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+
+    start_time = time.perf_counter()
+    stack = stack if isinstance(stack, BtfStack) else BtfStack.open(stack)
+    src = source if isinstance(source, TextureSource) else load_source(source)
+    unknown = [f for f in free if f not in TEXTURE_FREE]
+    bad_refine = [r for r in refine if r not in IRAWAN_PARAMS.names() or r in ("hwidth",)]
+    if unknown or bad_refine:
+        raise InputError(f"free must be among {', '.join(TEXTURE_FREE)} and refine among the BRDF parameters; got "
+                         f"{unknown + bad_refine}", field="free")
+    weave = src.weave
+    repeats = _scale_from(stack, tile_repeats, weave)
+    problem = _Problem(stack, src, repeats, free, refine)
+    w, h = weave.tile_width, weave.tile_height
+    nevals = 0
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        # global stage: the offset on a grid over one tile
+        grid_u = np.arange(0.0, 1.0, grid_step / w)
+        grid_v = np.arange(0.0, 1.0, grid_step / h)
+        scores = []
+        offset_free = "offset" in free
+        shifts = pattern_translations(weave)
+        seen: list[tuple[float, float]] = []
+        for u0 in (grid_u if offset_free else [0.0]):
+            for v0 in (grid_v if offset_free else [0.0]):
+                if any(_same_offset((u0, v0), s, shifts) for s in seen):
+                    continue  # equivalent under the weave's own translations: same objective
+                seen.append((u0, v0))
+                value = problem.solve({**problem.start, "u0": u0, "v0": v0}, grid_stride)[0]
+                scores.append((value, u0, v0))
+                nevals += 1
+        scores.sort()
+        names = problem.names()
+        best = None
+        messages = []
+        for _value, u0, v0 in scores[: max(1, starts)]:
+            x0, lo, hi = [], [], []
+            for name in names:
+                if name == "u0":
+                    x0.append(u0), lo.append(u0 - grid_step / w), hi.append(u0 + grid_step / w)
+                elif name == "v0":
+                    x0.append(v0), lo.append(v0 - grid_step / h), hi.append(v0 + grid_step / h)
+                else:
+                    bounds = {"rotation": ROTATION_BOUNDS, "ratio": RATIO_BOUNDS, "hwidth": HWIDTH_BOUNDS}.get(name)
+                    if bounds is None:
+                        bounds = IRAWAN_PARAMS[name].bounds
+                    x0.append(float(np.clip(problem.start[name], *bounds))), lo.append(bounds[0]), hi.append(bounds[1])
+            base = {**problem.start, "u0": u0, "v0": v0}
+
+            def objective(x, base=base):
+                return problem.solve({**base, **dict(zip(names, x.tolist(), strict=True))})[0]
+
+            result = minimize(objective, x0, lo, hi, global_algorithm=None, local_algorithm="LN_SBPLX",
+                              max_evals=max(20, max_evals // max(1, starts)), seed=seed, xtol_rel=1e-5)
+            nevals += result.nevals
+            messages.append(result.message)
+            if best is None or result.fun < best[0]:
+                best = (result.fun, {**base, **dict(zip(names, result.x.tolist(), strict=True))})
+        values = best[1]
+        objective_value, coef, design, y = problem.solve(values)
+        noise = noise_statistics(design, y, coef)
+        model = np.einsum("npk,kc->npc", design, coef)
+
+    channels = tuple(src.channels) if src.channels and len(src.channels) == y.shape[-1] else tuple(
+        f"c{i}" for i in range(y.shape[-1]))
+    shape = problem.pixels.shape
+    errors, measured_tiles, model_tiles = image_errors(
+        problem.pixels, model.reshape(shape), repeats, channels, stack)
+    offset = (float(np.mod(values["u0"], 1.0)), float(np.mod(values["v0"], 1.0)))
+    return TextureFit(
+        offset=offset, rotation=float(values["rotation"]), ratio=float(values["ratio"]),
+        hwidth=float(values["hwidth"]), refined={k: float(values[k]) for k in refine},
+        coefficients={k: coef[i] for i, k in enumerate(("kd", "ks_warp", "ks_weft"))}, channels=channels,
+        objective=objective_value, noise=noise, errors=errors,
+        translations=pattern_translations(weave).tolist(), repeats=repeats, angles=stack.angles,
+        files=[str(e.path.name) for e in stack.entries], free=tuple(free), nevals=nevals,
+        seconds=time.perf_counter() - start_time,
+        grid={"step_cells": grid_step, "stride_px": grid_stride, "points": len(scores),
+              "best": [{"objective": s, "u0": a, "v0": b} for s, a, b in scores[: max(1, starts)]]},
+        message="; ".join(messages), source=src.origin, truth=_manifest_truth(stack),
+        measured_tiles=measured_tiles, model_tiles=model_tiles)
+
+
+def noise_statistics(design, data, coef, *, bright: float = 0.25) -> dict:
+    """Intensity-noise statistics from the residuals (sec. 7.2.1): r = (measured - kd diffuse) / specular model
+    over pixel-channels whose model specular part exceeds ``bright`` x its 99th percentile in that image."""
+    diffuse = design[..., :1] * coef[0][None, None, :]
+    specular = np.einsum("npk,kc->npc", design[..., 1:], coef[1:])
+    ratios = []
+    for n in range(specular.shape[0]):
+        s = specular[n]
+        top = np.percentile(s, 99)
+        if top <= 0:
+            continue
+        mask = s > bright * top
+        ratios.append((data[n] - diffuse[n])[mask] / s[mask])
+    if not ratios or sum(r.size for r in ratios) < 10:
+        return {"amplitude": float("nan"), "present": None, "n": 0,
+                "note": "too few bright specular pixels to measure the noise"}
+    r = np.concatenate(ratios)
+    amplitude = float(np.std(r) / np.mean(r)) if np.mean(r) > 0 else float("nan")
+    return {"amplitude": amplitude, "present": bool(amplitude > NOISE_PRESENT), "ratio_mean": float(np.mean(r)),
+            "ratio_p5": float(np.percentile(r, 5)), "ratio_p50": float(np.percentile(r, 50)),
+            "ratio_p95": float(np.percentile(r, 95)), "n": int(r.size),
+            "meaning": "coefficient of variation of measured/model specular intensity on bright specular "
+                       "pixels; ~1 for the paper's exponential noise, ~0 without noise"}
+
+
+def image_errors(measured, model, repeats, channels, stack=None, percentiles=(50, 80, 95)):
+    """Per-image relative-error percentiles: of the unit-tile averages (``tile``; the noise averaged out, the
+    figure a reader compares with the paper's Fig. 3/4 tiles) and of the raw pixel values (``pixel``).
+    Returns (errors dict, measured tiles, model tiles), tiles (N, ny, nx, C) averaged with the period
+    (W / repeats_u, H / repeats_v) px from the image's corner."""
+    from clothlab.btf.period import average_tiles
+    from clothlab.metrics import error_percentiles
+
+    n, height, width, c = measured.shape
+    period = (width / repeats[0], height / repeats[1])
+    tiles_measured, tiles_model, rows = [], [], []
+    for i in range(n):
+        tm = average_tiles(measured[i], period)
+        tf = average_tiles(model[i], period)
+        tiles_measured.append(tm)
+        tiles_model.append(tf)
+        row = {"index": i}
+        if stack is not None:
+            e = stack.entries[i]
+            row.update(file=e.path.name, theta_i=e.theta_i, phi_i=e.phi_i, theta_o=e.theta_o, phi_o=e.phi_o)
+        row["tile"] = error_percentiles(tm.reshape(-1, c), tf.reshape(-1, c), percentiles, channels)["overall"]
+        row["pixel"] = error_percentiles(measured[i].reshape(-1, c), model[i].reshape(-1, c), percentiles,
+                                         channels)["overall"]
+        rows.append(row)
+    tiles_measured, tiles_model = np.stack(tiles_measured), np.stack(tiles_model)
+    overall = {
+        "tile": error_percentiles(tiles_measured.reshape(-1, c), tiles_model.reshape(-1, c), percentiles,
+                                  channels)["overall"],
+        "pixel": error_percentiles(measured.reshape(-1, c), model.reshape(-1, c), percentiles, channels)["overall"],
+    }
+    errors = {"meaning": "relative error |model - measured| / measured (fractions) of unit-tile averages "
+                         "('tile') and of raw pixel values ('pixel'), per image",
+              "period_px": list(period), "overall": overall, "images": rows}
+    return errors, tiles_measured, tiles_model
+
+
+def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False) -> int:
+    """CLI body of ``clothlab fit-btf``: fit, write ``texfit.json``, ``errors.json`` and ``tiles.png`` into
+    ``out_dir`` atomically (ResultExistsError if it exists, unless ``force``); print a summary; 0 on success."""
+    import json
+
+    from clothlab.atomic import atomic_directory, atomic_write_bytes
+    from clothlab.errors import ResultExistsError
+    from clothlab.fit.store import _json_safe
+    from clothlab.texfit.plots import tile_comparison_figure
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and any(out_dir.iterdir()) and not force:
+        raise ResultExistsError(f"{out_dir} already exists; pass --force to replace it", path=out_dir)
+    result = fit_texture(stack_dir, fit_dir_or_yaml)
+    with atomic_directory(out_dir, force=out_dir.exists()) as tmp:
+        document = _json_safe(result.to_dict())
+        atomic_write_bytes(tmp / "texfit.json", (json.dumps(document, indent=2) + "\n").encode())
+        atomic_write_bytes(tmp / "errors.json", (json.dumps(document["errors"], indent=2) + "\n").encode())
+        figure = tile_comparison_figure(result)
+        figure.savefig(tmp / "tiles.png", dpi=110)
+    overall = result.errors["overall"]["tile"]
+    print(f"texture fit of {stack_dir} ({len(result.files)} images) with the BRDF of {result.source}: offset "
+          f"({result.offset[0]:.4f}, {result.offset[1]:.4f}) tiles, rotation {result.rotation:.3f} deg, "
+          f"ratio {result.ratio:.3f}, hWidth {result.hwidth:.3f}; noise amplitude {result.noise['amplitude']:.2f}; "
+          f"tile-average relative error p50 {overall['p50']:.3g}, p80 {overall['p80']:.3g}; "
+          f"{result.nevals} evaluations, {result.seconds:.1f} s -> {out_dir}")
+    if not math.isfinite(result.objective):
+        return 1
+    return 0

@@ -1,0 +1,231 @@
+"""Simulated BTF stacks of the Irawan-Marschner texture model (issue 4 item 3; paper sec. 4.2, Fig. 4, sec. 7.2).
+
+Directions (:func:`fig4_directions`): the light on four half circles of illumination *elevation* 30, 45, 60
+and 75 deg (the arrangement of the paper's Fig. 4), i.e. theta_i = 90 deg - elevation, at azimuths evenly
+spread over [0, 180] deg; the view near the normal (one or a few views).
+
+Texture layout (the parameters the BRDF cannot see, :class:`TextureLayout`):
+
+- ``offset`` (u0, v0) in weave tiles: the texture coordinate of the image's lower-left corner
+  (:mod:`clothlab.btf.write` pixel mapping);
+- ``rotation`` rho in degrees: the fabric is turned counter-clockwise by rho in the image (seen from above)
+  about the image centre.  A pixel at image texture coordinate p (tiles, as write.py, offset included) shows
+  the fabric point f = c + R(-rho) (p - c) (rotation in *cells*, which are square; c = image centre), and an
+  image-frame direction d is d_fab = R(-rho) d in the fabric frame;
+- ``ratio``: scale s of the segment length/width ratio: l' = l sqrt(s), w' = w / sqrt(s) for both yarn types
+  (segment area kept; s = 1 keeps the weave's w, l);
+- ``hwidth``: eq. 12 band width (None: the weave's / fit's value);
+- ``noise`` and ``seed``: the sec. 7.2.1 noise of :class:`IrawanTexture` and its realisation.
+
+Pixels are square: the image height covers ``tile_repeats * W_cells / H_cells * height / width`` tiles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import InputError
+
+ELEVATIONS = (30.0, 45.0, 60.0, 75.0)  # deg, paper Fig. 4
+
+
+@dataclass(frozen=True)
+class TextureLayout:
+    """How the weave lies in the images and the texture-only parameters (see the module docstring)."""
+
+    offset: tuple[float, float] = (0.0, 0.0)  # tiles
+    rotation: float = 0.0  # deg, counter-clockwise
+    ratio: float = 1.0  # scale of l / w
+    hwidth: float | None = None  # eq. 12; None = the source's
+    noise: bool = True
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["offset"] = [float(x) for x in self.offset]
+        return d
+
+
+@dataclass
+class TextureSource:
+    """A texture model's origin: weave, quadrature, parameters (declared units), coefficients {name: (C,)}
+    or None, channel names or None, and a description for provenance."""
+
+    weave: object
+    quadrature: object
+    params: dict
+    coefficients: dict | None
+    channels: tuple | None
+    origin: str
+
+
+def load_source(source) -> TextureSource:
+    """A fit directory (fit.json + weave.wv, Irawan model), a fabric.yaml, or ``preset:<name>`` / a preset name."""
+    from clothlab.models.irawan.model import IrawanModel, Quadrature
+    from clothlab.models.irawan.parameters import weave_parameters
+    from clothlab.presets import PRESET_NAMES, get_preset
+
+    text = str(source)
+    path = Path(text)
+    if path.is_dir():
+        from clothlab.fit.store import load_fitted
+
+        model, params, coefficients, channels = load_fitted(path)
+        if not isinstance(model, IrawanModel):
+            raise InputError(f"the fit uses model '{getattr(model, 'kind', type(model).__name__)}'; the texture "
+                             "model needs an Irawan-Marschner (kind: irawan) fit", path=path / "fit.json")
+        return TextureSource(model.weave, model.quadrature, params, coefficients, channels, f"fit:{path}")
+    if path.suffix.lower() in (".yaml", ".yml") and path.is_file():
+        from clothlab.config import load_config
+        from clothlab.presets import resolve_weave
+
+        config = load_config(path)
+        if config.model.kind != "irawan":
+            raise InputError(f"model.kind is '{config.model.kind}'; the texture model needs 'irawan'", path=path,
+                             field="model.kind")
+        weave = resolve_weave(config.model.weave, path.parent)
+        params = {**weave_parameters(weave), **{k: float(v) for k, v in config.model.params.items()}}
+        q = Quadrature(config.model.quadrature.rule, config.model.quadrature.nodes)
+        return TextureSource(weave, q, params, None, None, f"config:{path}")
+    name = text[len("preset:"):] if text.lower().startswith("preset:") else text
+    if name.strip().lower().replace("_", "-") not in PRESET_NAMES:
+        raise InputError(f"texture source '{text}' is neither a fit directory, a fabric.yaml nor a preset "
+                         f"({', '.join(PRESET_NAMES)})", field="source")
+    from clothlab.examples import YARN_COLOURS
+
+    weave = get_preset(name)
+    colours = YARN_COLOURS.get(weave.name)
+    coefficients = None if colours is None else {k: np.asarray(v, dtype=np.float64) for k, v in colours.items()}
+    return TextureSource(weave, Quadrature(), weave_parameters(weave), coefficients,
+                         ("R", "G", "B") if colours else None, f"preset:{weave.name}")
+
+
+def fig4_directions(n_directions: int = 16, *, elevations=ELEVATIONS, views=((0.0, 0.0),)) -> np.ndarray:
+    """(N, 4) theta_i, phi_i, theta_o, phi_o (deg): lights on half circles of the given elevations (Fig. 4),
+    ``n_directions`` in all, spread evenly over elevations and views; azimuths evenly over [0, 180] deg."""
+    elevations = [float(e) for e in elevations]
+    views = [tuple(float(a) for a in v) for v in views]
+    groups = len(elevations) * len(views)
+    if int(n_directions) < groups:
+        raise InputError(f"n_directions = {n_directions} is fewer than the {groups} (elevation, view) groups",
+                         field="n_directions")
+    if any(not 0.0 < e <= 90.0 for e in elevations):
+        raise InputError(f"elevations must lie in (0, 90] deg, got {elevations}", field="elevations")
+    per_group = np.full(groups, int(n_directions) // groups)
+    per_group[: int(n_directions) % groups] += 1
+    rows = []
+    for g, count in enumerate(per_group):
+        view = views[g // len(elevations)]
+        elevation = elevations[g % len(elevations)]
+        azimuths = [90.0] if count == 1 else np.linspace(0.0, 180.0, count)
+        rows += [(90.0 - elevation, float(phi), view[0], view[1]) for phi in azimuths]
+    return np.asarray(rows, dtype=np.float64)
+
+
+def square_pixel_repeats(weave, size, tile_repeats: float) -> tuple[float, float]:
+    """(repeats across the width, across the height) in tiles so that pixels are square in cells."""
+    width, height = size
+    cells_per_px = float(tile_repeats) * weave.tile_width / width
+    return float(tile_repeats), cells_per_px * height / weave.tile_height
+
+
+def rotate_z(vectors: np.ndarray, angle_deg: float) -> np.ndarray:
+    """Rotate (..., 3) vectors counter-clockwise about z by ``angle_deg``."""
+    c, s = np.cos(np.deg2rad(angle_deg)), np.sin(np.deg2rad(angle_deg))
+    x, y = vectors[..., 0], vectors[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y, vectors[..., 2]], axis=-1)
+
+
+def fabric_coordinates(u, v, rotation: float, centre, weave) -> tuple[np.ndarray, np.ndarray]:
+    """Fabric texture coordinates f = c + R(-rho)(p - c) of image texture coordinates p = (u, v) (tiles);
+    the rotation acts in cells (square), ``centre`` c in tiles."""
+    if rotation == 0.0:
+        return np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
+    w, h = weave.tile_width, weave.tile_height
+    du, dv = (np.asarray(u) - centre[0]) * w, (np.asarray(v) - centre[1]) * h
+    c, s = np.cos(np.deg2rad(rotation)), np.sin(np.deg2rad(rotation))
+    return centre[0] + (c * du + s * dv) / w, centre[1] + (-s * du + c * dv) / h
+
+
+def texture_params(params: dict, *, ratio: float = 1.0, hwidth: float | None = None) -> dict:
+    """``params`` with the segment ratio scale and hwidth of a :class:`TextureLayout` applied."""
+    out = dict(params)
+    root = float(np.sqrt(ratio))
+    for kind in ("warp", "weft"):
+        out[f"{kind}.l"] = params[f"{kind}.l"] * root
+        out[f"{kind}.w"] = params[f"{kind}.w"] / root
+    if hwidth is not None:
+        out["hwidth"] = float(hwidth)
+    return out
+
+
+def image_centre(offset, repeats) -> tuple[float, float]:
+    """Texture coordinate (tiles) of the image centre for a stack written with ``offset`` and ``repeats``."""
+    return offset[0] + 0.5 * repeats[0], offset[1] + 0.5 * repeats[1]
+
+
+def texture_evaluator(texture, params: dict, coefficients: dict, layout: TextureLayout, centre):
+    """``evaluate(u, v, wi, wo) -> (H, W, C)`` for :func:`clothlab.btf.write.write_btf_stack` (image-frame
+    directions and texture coordinates, mapped to the fabric by ``layout``)."""
+    p = texture_params(params, ratio=layout.ratio, hwidth=layout.hwidth)
+
+    def evaluate(u, v, wi, wo):
+        fu, fv = fabric_coordinates(u, v, layout.rotation, centre, texture.weave)
+        values = texture.evaluate(fu, fv, rotate_z(wi, -layout.rotation), rotate_z(wo, -layout.rotation),
+                                  coefficients, p, noise=layout.noise)
+        return values.reshape(*np.shape(u), -1)
+
+    return evaluate
+
+
+def simulate_btf(source, out_dir, *, directions=None, n_directions: int = 16, size=64, tile_repeats: float = 4.0,
+                 layout: TextureLayout | None = None, views=((0.0, 0.0),), naming: str = "utia",
+                 force: bool = False) -> Path:
+    """Write a simulated BTF stack (half-float EXR + manifest.yaml) of the texture model of ``source``
+    (:func:`load_source`) and return its directory.  The generating layout, parameters and coefficients
+    are recorded under ``provenance.texture`` in the manifest."""
+    import warnings
+
+    from clothlab.btf.write import write_btf_stack
+    from clothlab.errors import GeometryWarning
+    from clothlab.models.irawan.texture import IrawanTexture
+
+    layout = layout or TextureLayout()
+    src = source if isinstance(source, TextureSource) else load_source(source)
+    if src.coefficients is None:
+        raise InputError(f"{src.origin} carries no coefficients (kd, ks); simulate from a fit directory or a "
+                         "preset", field="source")
+    texture = IrawanTexture(src.weave, src.quadrature, seed=int(layout.seed))
+    size = (int(size), int(size)) if np.ndim(size) == 0 else tuple(int(s) for s in size)
+    repeats = square_pixel_repeats(src.weave, size, tile_repeats)
+    table = fig4_directions(n_directions, views=views) if directions is None else np.asarray(directions, float)
+    centre = image_centre(layout.offset, repeats)
+    p = texture_params(src.params, ratio=layout.ratio, hwidth=layout.hwidth)
+    provenance = {"texture": {
+        "source": src.origin, "weave": src.weave.name, **layout.to_dict(), "hwidth": p["hwidth"],
+        "rotation_centre_tiles": list(centre), "fineness": float(src.weave.fineness),
+        "quadrature": {"rule": src.quadrature.rule, "nodes": int(src.quadrature.nodes)},
+        "params": src.params, "coefficients": {k: np.asarray(v).tolist() for k, v in src.coefficients.items()},
+        "channels": list(src.channels or []),
+        "directions": "light on half circles of elevation 30/45/60/75 deg (theta_i = 90 - elevation), "
+                      "azimuth 0..180 deg; paper Fig. 4"}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)  # reported by the reflectance fit already
+        return write_btf_stack(out_dir, texture_evaluator(texture, src.params, src.coefficients, layout, centre),
+                               directions=table, size=size, tile_repeats=repeats, naming=naming, exr=True,
+                               manifest=True, overwrite=force, half=True, offset=layout.offset,
+                               channel_names=list(src.channels) if src.channels else None, provenance=provenance)
+
+
+def simulate_btf_command(source, out_dir, *, n_directions: int = 16, size: int = 64, tile_repeats: float = 4.0,
+                         offset=(0.25, 0.4), seed: int = 0, force: bool = False) -> int:
+    """CLI body of ``clothlab simulate --btf``: write the stack, print one line; 0 on success."""
+    offset = tuple(float(x) for x in (np.repeat(offset, 2) if np.ndim(offset) == 0 else offset))
+    path = simulate_btf(source, out_dir, n_directions=n_directions, size=size, tile_repeats=tile_repeats,
+                        layout=TextureLayout(offset=offset, seed=int(seed)), force=force)
+    print(f"wrote simulated BTF stack {path} ({n_directions} images, {size} px, {tile_repeats:g} tiles across, "
+          f"offset {offset[0]:g}, {offset[1]:g} tiles, noise seed {seed})")
+    return 0
