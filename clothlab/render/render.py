@@ -207,22 +207,32 @@ def relative_error(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | 
     return float(np.abs(image - reference).sum() / denominator) if denominator > 0 else float("nan")
 
 
+#: the antialiasing reference of each shader family: its own texture-level shader, supersampled
+REFERENCE_SHADER = {"im": "im-texture", "kang": "kang-texture"}
+
+
 def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
-                reference_spp: int = 64, repeats: int = 1) -> list[dict]:
+                reference_spp: int = 64, repeats: int = 1, fabric: FabricModels | None = None) -> list[dict]:
     """Render ``scene`` with the camera moved to each distance (mm from its look-at point, same direction):
-    the supersampled texture model (``reference_spp`` stratified samples) as the antialiasing reference, and
-    each shader at ``spp``.  Per distance: time (best of ``repeats``, s), relative L1 error vs the reference
-    over fully covered pixels, texture-pixel fraction and footprint range of each shader."""
-    fabric = FabricModels.build(scene.fabric)
+    per shader family the supersampled texture-level shader (im-texture or kang-texture at ``reference_spp``
+    stratified samples) as the antialiasing reference, and each shader at ``spp``.  Per distance and shader:
+    time (best of ``repeats``, s), relative L1 error vs its family's reference over fully covered pixels,
+    texture-pixel fraction, texture evaluations; and the footprint range of the view (tiles)."""
+    for shader in shaders:
+        _check(shader, spp)
+    fabric = fabric or FabricModels.build(scene.fabric)
     rows = []
     for distance in distances:
         s = replace(scene, camera=scene.camera.at_distance(distance))
-        reference = render(s, shader="im-texture", spp=reference_spp, fabric=fabric)
-        mask = reference.coverage >= 1.0
-        row = {"distance_mm": float(distance), "reference_seconds": reference.timings["total"],
-               "footprint_median_tiles": reference.stats["footprint_median_tiles"],
-               "footprint_max_tiles": reference.stats["footprint_max_tiles"], "pixels": int(mask.sum())}
+        references = {}
+        row = {"distance_mm": float(distance)}
         for shader in shaders:
+            family = shader.split("-")[0]
+            if family not in references:
+                references[family] = render(s, shader=REFERENCE_SHADER[family], spp=reference_spp, fabric=fabric)
+                row[f"{family}_reference_seconds"] = references[family].timings["total"]
+            reference = references[family]
+            mask = reference.coverage >= 1.0
             best = None
             for _ in range(repeats):
                 result = render(s, shader=shader, spp=spp, fabric=fabric)
@@ -231,6 +241,12 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
             row[shader] = {"seconds": best.timings["total"], "shading_seconds": best.timings["shading"],
                            "relative_error": relative_error(best.image, reference.image, mask),
                            "texture_pixel_fraction": best.stats["texture_pixel_fraction"],
-                           "texture_evaluations": best.stats["texture_evaluations"]}
+                           "texture_evaluations": best.stats["texture_evaluations"],
+                           "reflectance_evaluations": best.stats["reflectance_evaluations"],
+                           "kang_evaluations": best.stats["kang_evaluations"]}
+            row.setdefault("pixels", int(mask.sum()))
+            row.setdefault("footprint_min_tiles", best.stats["footprint_min_tiles"])
+            row.setdefault("footprint_median_tiles", best.stats["footprint_median_tiles"])
+            row.setdefault("footprint_max_tiles", best.stats["footprint_max_tiles"])
         rows.append(row)
     return rows

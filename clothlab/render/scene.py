@@ -38,7 +38,7 @@ fabric:
     view_distance_mm: 100     # Algorithm 1 tolerance 1 / (distance / view_distance_mm)
 lod:
   f0: 0.1                     # footprint (tiles) below which only the texture model runs
-  f1: 1.0                     # footprint (tiles) above which only the reflectance model runs
+  f1: 0.5                     # footprint (tiles) above which only the reflectance model runs
 render:
   spp: 1
   seed: 0
@@ -61,7 +61,7 @@ LIGHT_TYPES = ("directional", "point")
 #: LoD thresholds (pixel footprint in weave tiles), chosen from the receding-plane error measurements
 #: (render_benchmark; docstring of :mod:`clothlab.render.shade`).
 DEFAULT_F0 = 0.1
-DEFAULT_F1 = 1.0
+DEFAULT_F1 = 0.5
 DEFAULT_COEFFICIENTS = {"kd": (0.2, 0.26, 0.42), "ks_warp": (0.12, 0.12, 0.12), "ks_weft": (0.02, 0.03, 0.07)}
 DEFAULT_CHANNELS = ("R", "G", "B")
 

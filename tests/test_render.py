@@ -1,0 +1,271 @@
+"""Renderer: geometry vs hand-computed rays, LoD policy (texture near, reflectance far, continuous blend),
+supersampling convergence, scene-file errors, EXR/PNG output, the Kang wiring."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clothlab.errors import ConfigError, ResultExistsError
+from clothlab.models.components import combine
+from clothlab.models.irawan.texture import IrawanTexture
+from clothlab.render import compare_lod, load_scene, render, render_command, save_render, scene_from_dict
+from clothlab.render.bench import receding_plane_scene
+from clothlab.render.geometry import make_surface
+from clothlab.render.scene import Patch
+from clothlab.render.shade import FabricModels, lod_weight
+
+REPO = Path(__file__).resolve().parents[1]
+LIGHT = np.array([0.3, -0.2, 1.0])
+
+
+def head_on(height=3.0, resolution=(16, 12), fov=20.0, warp_angle=30.0, **fabric):
+    return scene_from_dict({
+        "patch": {"size_mm": [50, 50], "tile_mm": [1.0, 2.0], "warp_angle_deg": warp_angle},
+        "camera": {"position": [0, 0, height], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov_deg": fov,
+                   "resolution": list(resolution)},
+        "light": {"type": "directional", "direction": LIGHT.tolist(), "intensity": 2.0},
+        "fabric": {"weave": "preset:cotton-denim", **fabric},
+    })
+
+
+def oblique(distance, resolution=(12, 9), fov=30.0):
+    return scene_from_dict({
+        "patch": {"size_mm": [20000, 20000], "tile_mm": [1.0, 2.0]},
+        "camera": {"position": [0, -distance / np.sqrt(2), distance / np.sqrt(2)], "fov_deg": fov,
+                   "resolution": list(resolution)},
+        "light": {"type": "directional", "direction": LIGHT.tolist()},
+    })
+
+
+def test_head_on_close_view_is_the_texture_model_at_the_pixel_centres():
+    scene = head_on()
+    w, h = scene.camera.resolution
+    # pixel-centre rays by hand: camera looks down -z with up +y, so image right = +x and image down = -y
+    half = np.tan(np.deg2rad(10.0))
+    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    x_img, y_img = (cols - w / 2) * 2 * half / h, (rows - h / 2) * 2 * half / h
+    X, Y = 3.0 * x_img.ravel(), -3.0 * y_img.ravel()  # hits on z = 0
+    a = np.deg2rad(30.0)
+    weft, warp = np.array([np.cos(a), np.sin(a), 0.0]), np.array([-np.sin(a), np.cos(a), 0.0])
+    u, v = (X * np.cos(a) + Y * np.sin(a)) / 1.0, (-X * np.sin(a) + Y * np.cos(a)) / 2.0
+    wo = np.stack([-X, -Y, np.full_like(X, 3.0)], axis=1)
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    light = LIGHT / np.linalg.norm(LIGHT)
+    frame = np.stack([weft, warp, [0.0, 0.0, 1.0]])
+    wi_f, wo_f = np.broadcast_to(frame @ light, wo.shape), wo @ frame.T
+    fabric = FabricModels.build(scene.fabric)
+    texture = IrawanTexture(fabric.weave, seed=0)
+    expected = combine(texture.components(u, v, wi_f, wo_f, fabric.params), fabric.coefficients)
+    expected = (expected * 2.0 * wi_f[:, 2:3]).reshape(h, w, -1)
+    assert np.any(expected[..., 0] > 2 * expected[..., 0].min())  # the view shows highlight structure
+    for shader in ("im-texture", "im-lod"):
+        result = render(scene, shader=shader)
+        np.testing.assert_allclose(result.image, expected, rtol=1e-9, atol=1e-12)
+        assert result.stats["texture_pixel_fraction"] == 1.0
+    assert result.stats["footprint_max_tiles"] < scene.lod.f0
+    assert result.stats["reflectance_evaluations"] == 0
+
+
+def test_far_lod_is_the_reflectance_model_and_never_runs_the_texture_model(monkeypatch):
+    scene = oblique(3000.0)
+    reflectance = render(scene, shader="im-reflectance", spp=4)
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the texture model ran in a far view")
+
+    monkeypatch.setattr(IrawanTexture, "components", forbidden)
+    lod = render(scene, shader="im-lod", spp=4)
+    assert lod.stats["footprint_min_tiles"] > scene.lod.f1
+    assert lod.stats["texture_evaluations"] == 0 and lod.stats["texture_pixel_fraction"] == 0.0
+    assert lod.stats["reflectance_evaluations"] == lod.stats["shaded_pixels"]  # once per pixel
+    np.testing.assert_array_equal(lod.image, reflectance.image)
+    assert lod.image.min() > 0.0
+
+
+def test_a_zero_coefficient_or_missing_yarn_type_is_not_computed(monkeypatch):
+    seen = []
+    original = IrawanTexture.components
+
+    def spy(self, *args, need=None, **kwargs):
+        seen.append(tuple(need))
+        return original(self, *args, need=need, **kwargs)
+
+    monkeypatch.setattr(IrawanTexture, "components", spy)
+    scene = head_on(resolution=(4, 3), coefficients={"kd": [0.2, 0.2, 0.2], "ks_warp": [0.3, 0.2, 0.1],
+                                                     "ks_weft": [0, 0, 0]})
+    render(scene, shader="im-texture")
+    assert seen == [("diffuse", "specular_warp")]
+
+
+def test_blend_is_continuous_in_distance():
+    """A 1-pixel camera looking at one fixed surface point from a receding position: the pixel value
+    moves from the texture value to the reflectance value with no jump at f0 or f1."""
+    scene = oblique(1.0, resolution=(1, 1), fov=1.0)
+    fabric = FabricModels.build(scene.fabric)
+    values, footprints = [], []
+    for d in np.geomspace(1.0, 100.0, 300):
+        s = scene.__class__(**{**scene.__dict__, "camera": scene.camera.at_distance(d)})
+        result = render(s, shader="im-lod", fabric=fabric)
+        values.append(result.image[0, 0, 2])
+        footprints.append(result.stats["footprint_min_tiles"])
+    values, footprints = np.array(values), np.array(footprints)
+    assert footprints[0] < scene.lod.f0 / 2 and footprints[-1] > 2 * scene.lod.f1
+    texture = render(scene, shader="im-texture", fabric=fabric).image[0, 0, 2]
+    reflectance = render(scene, shader="im-reflectance", fabric=fabric).image[0, 0, 2]
+    gap = abs(texture - reflectance)
+    assert gap > 0.1 * reflectance  # the two models differ here, so a jump would show
+    assert values[0] == pytest.approx(texture, rel=1e-12) and values[-1] == pytest.approx(reflectance, rel=1e-12)
+    assert np.max(np.abs(np.diff(values))) < 0.03 * gap
+    # the weight itself: 0 / 1 at the thresholds, continuous across them
+    f0, f1 = scene.lod.f0, scene.lod.f1
+    eps = 1e-9
+    assert lod_weight(f0, f0, f1) == 0.0 and lod_weight(f1, f0, f1) == 1.0
+    assert lod_weight(f0 * (1 + eps), f0, f1) < 1e-12 and lod_weight(f1 * (1 - eps), f0, f1) > 1 - 1e-12
+
+
+def test_supersampled_texture_converges_to_the_reflectance_model_far_away():
+    scene = oblique(2000.0)
+    reflectance = render(scene, shader="im-reflectance").image
+    errors = {}
+    for spp in (4, 64):
+        texture = render(scene, shader="im-texture", spp=spp).image
+        errors[spp] = np.abs(texture - reflectance).sum() / reflectance.sum()
+        mean_error = abs(texture.mean() - reflectance.mean()) / reflectance.mean()
+    assert errors[64] < errors[4] and errors[64] < 0.08
+    assert mean_error < 0.01
+
+
+def test_compare_lod_reports_time_error_and_texture_use_by_distance():
+    scene = receding_plane_scene((16, 12))
+    rows = compare_lod(scene, [10.0, 1000.0], shaders=("im-lod", "im-texture"), spp=4, reference_spp=16)
+    near, far = rows
+    assert near["im-lod"]["texture_pixel_fraction"] > 0.5 and far["im-lod"]["texture_evaluations"] == 0
+    assert far["im-lod"]["relative_error"] < far["im-texture"]["relative_error"]
+    assert all(np.isfinite(r[s]["seconds"]) for r in rows for s in ("im-lod", "im-texture"))
+
+
+def test_kang_lod_equals_full_detail_below_one_fibre_ridge_and_differs_far():
+    near = head_on(height=0.25, resolution=(6, 4))
+    lod, full = render(near, shader="kang-lod"), render(near, shader="kang-texture")
+    # eq. 5: alpha = 0 while footprint * cells * N_xi <= 1 (6 cells, N_xi = 6 by default)
+    assert lod.stats["footprint_max_tiles"] * 6 * 6 <= 1.0
+    np.testing.assert_array_equal(lod.image, full.image)
+    assert lod.stats["kang_evaluations"] == lod.stats["shaded_samples"] > 0
+    far = oblique(3000.0, resolution=(4, 3))
+    assert not np.allclose(render(far, shader="kang-lod").image, render(far, shader="kang-texture").image)
+
+
+def test_cylinder_hits_normals_and_texture_coordinates():
+    patch = Patch(shape="cylinder", size_mm=(30.0, 10.0), center=(0.0, 0.0, 0.0), tile_mm=(2.0, 1.0),
+                  radius_mm=10.0)
+    surface = make_surface(patch)
+    theta = np.array([-0.5, 0.0, 0.8, 1.6])  # the last is outside the 30 mm arc (|r theta| > 15)
+    x = 10.0 * np.sin(theta)
+    origins_z = 50.0
+    hits = [surface.intersect(np.array([xi, 2.0, origins_z]), np.array([[0.0, 0.0, -1.0]])) for xi in x]
+    assert [bool(h.hit[0]) for h in hits] == [True, True, True, False]
+    for h, t in zip(hits[:3], theta[:3], strict=True):
+        np.testing.assert_allclose(h.normal[0], [np.sin(t), 0.0, np.cos(t)], atol=1e-12)
+        np.testing.assert_allclose(h.position[0], [10 * np.sin(t), 2.0, 10 * np.cos(t)], atol=1e-9)
+        assert h.u[0] == pytest.approx(10.0 * t / 2.0) and h.v[0] == pytest.approx(2.0)
+        np.testing.assert_allclose(np.cross(h.weft[0], h.warp[0]), h.normal[0], atol=1e-12)
+
+
+def test_cylinder_scene_lit_from_below_is_black():
+    """The patch spans |theta| <= 1.5 rad, so every normal has n_z > 0: light from straight below is
+    back-facing everywhere (black), light from above lights it."""
+    def scene(direction):
+        return scene_from_dict({
+            "patch": {"shape": "cylinder", "size_mm": [30, 20], "radius_mm": 10, "tile_mm": 1.0},
+            "camera": {"position": [0, -40, 40], "look_at": [0, 0, 10], "fov_deg": 20,
+                       "resolution": [16, 12]},
+            "light": {"type": "directional", "direction": direction},
+        })
+
+    above, below = render(scene([0, 0, 1]), shader="im-lod"), render(scene([0, 0, -1]), shader="im-lod")
+    assert above.stats["covered_pixels"] == below.stats["covered_pixels"] > 50
+    assert above.image.max() > 0.0 and below.image.max() == 0.0 and below.stats["shaded_samples"] == 0
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"camera": {"position": [0, 0, 10], "fov_deg": -5}}, "camera.fov_deg"),
+    ({"camera": {"position": [0, 0, 10], "resolution": [16]}}, "camera.resolution"),
+    ({"camera": {"position": [0, 0, 10], "up": [0, 0, 1]}}, "camera.up"),
+    ({"camera": {"look_at": [0, 0, 0]}}, "camera.position"),
+    ({"light": {"type": "spot"}}, "light.type"),
+    ({"light": {"type": "point"}}, "light.position"),
+    ({"patch": {"size_mm": [10, 10]}}, "patch.tile_mm"),
+    ({"patch": {"size_mm": [10, 10], "tile_mm": 1, "shape": "cylinder"}}, "patch.radius_mm"),
+    ({"patch": {"size_mm": [10, -1], "tile_mm": 1}}, "patch.size_mm"),
+    ({"patch": {"size_mm": [10, 10], "tile_mm": 1, "colour": "red"}}, "patch.colour"),
+    ({"lod": {"f0": 0.5, "f1": 0.2}}, "lod.f1"),
+    ({"render": {"spp": 0}}, "render.spp"),
+    ({"fabric": {"coefficients": {"kd": "blue"}}}, "fabric.coefficients.kd"),
+    ({"fabric": {"fit": "no/such/dir"}}, "fabric.fit"),
+])
+def test_scene_errors_name_the_field(tmp_path, change, field):
+    import yaml
+
+    data = {"patch": {"size_mm": [10, 10], "tile_mm": 1}, "camera": {"position": [0, -10, 10]},
+            "light": {"direction": [0, 0, 1]}}
+    data.update(change)
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError) as info:
+        load_scene(path)
+    assert info.value.field == field and str(path) in str(info.value)
+
+
+def test_unknown_preset_and_bad_yaml_are_clear(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text("patch: [unclosed\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_scene(path)
+    scene = scene_from_dict({"patch": {"size_mm": [10, 10], "tile_mm": 1}, "camera": {"position": [0, -5, 5]},
+                             "light": {"direction": [0, 0, 1]}, "fabric": {"weave": "preset:burlap"}})
+    with pytest.raises(ConfigError, match="unknown weave preset"):
+        render(scene)
+    with pytest.raises(ConfigError, match="unknown shader"):
+        render(scene, shader="phong")
+
+
+def test_example_scene_file_is_the_benchmark_scene():
+    example = load_scene(REPO / "measurements" / "scenes" / "receding_plane.yaml")
+    bench = receding_plane_scene()
+    assert (example.patch, example.camera, example.light, example.lod, example.spp) == (
+        bench.patch, bench.camera, bench.light, bench.lod, bench.spp)
+
+
+@pytest.mark.parametrize("pixel_type, rtol", [("float", 1e-6), ("half", 1e-3)])
+def test_saved_exr_round_trips_and_png_is_srgb(tmp_path, pixel_type, rtol):
+    from clothlab.btf.images import read_image
+
+    result = render(head_on(resolution=(8, 6)), shader="im-texture")
+    exr, png = save_render(result, tmp_path / "out" / "view", pixel_type=pixel_type, exposure=1.0)
+    back, info = read_image(exr)
+    assert info.channel_names == ("R", "G", "B") and back.shape == result.image.shape
+    np.testing.assert_allclose(back, result.image, rtol=rtol, atol=1e-7)
+    encoded, _ = read_image(png, encoding="linear")  # the stored codes / 255
+    linear = np.clip(result.image * 2.0, 0, 1)
+    srgb = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+    np.testing.assert_allclose(encoded, srgb, atol=0.51 / 255)
+    with pytest.raises(ResultExistsError):
+        save_render(result, tmp_path / "out" / "view")
+    save_render(result, tmp_path / "out" / "view", force=True)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["view.exr", "view.png"]  # no temp files
+
+
+def test_render_command_writes_and_refuses_to_overwrite(tmp_path, capsys):
+    import yaml
+
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(yaml.safe_dump({"patch": {"size_mm": [40, 40], "tile_mm": [1, 2]},
+                                     "camera": {"position": [0, -20, 20], "resolution": [8, 6]},
+                                     "light": {"direction": [0, 0, 1]}, "render": {"spp": 1}}))
+    assert render_command(scene, tmp_path / "r", "im-lod", 2, False) == 0
+    assert (tmp_path / "r.exr").is_file() and (tmp_path / "r.png").is_file()
+    assert "texture model in" in capsys.readouterr().out
+    with pytest.raises(ResultExistsError):
+        render_command(scene, tmp_path / "r", "im-lod", 2, False)
+    assert render_command(scene, tmp_path / "r", "kang-lod", 1, True) == 0
