@@ -62,6 +62,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, help="output table (clothlab CSV)")
     p.add_argument("--paper-examples", type=Path, metavar="DIR",
                    help="write the six simulated paper-fabric example sets into DIR")
+    p.add_argument("--btf", type=Path, metavar="DIR",
+                   help="write a simulated BTF stack (texture model, EXR + manifest) of the source into DIR "
+                        "(source: preset:<name>, a fabric.yaml or a fit directory)")
+    p.add_argument("--btf-directions", type=int, default=16, help="(light, view) pairs of the BTF stack")
+    p.add_argument("--btf-size", type=int, default=64, help="image size in pixels")
+    p.add_argument("--btf-tiles", type=float, default=4.0, help="weave tiles across an image")
+    p.add_argument("--btf-offset", default="0.25,0.4", help="tile offset u0,v0 in tiles")
     p.add_argument("--kd", help="diffuse albedo per channel, e.g. 0.2,0.1,0.1")
     p.add_argument("--ks-warp", help="warp specular albedo per channel")
     p.add_argument("--ks-weft", help="weft specular albedo per channel")
@@ -78,6 +85,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--figures", type=Path, help="directory for the benchmark plots (default reports/bench)")
     p.add_argument("--sections", help="comma-separated subset of sections to run")
     p.add_argument("--report", type=Path, metavar="DIR", help="also write an HTML page of the figures into DIR")
+
+    p = sub.add_parser("fit-btf", help="fit the texture parameters (tile offset, rotation, w/l ratio, hWidth, "
+                                       "noise) to a BTF stack, the BRDF parameters from a reflectance fit held")
+    p.add_argument("stack", type=Path, help="BTF stack directory (names with angles, or a manifest)")
+    p.add_argument("source", type=Path, help="the reflectance fit directory (fits/<name>) or a fabric.yaml")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output directory (texfit.json, tiles.png)")
+    p.add_argument("--force", action="store_true")
 
     p = sub.add_parser("calibrate", help="colour correction from a photographed ColorChecker (colour-science)")
     p.add_argument("chart", type=Path, help="CSV with R, G, B linear camera values per patch (24 rows)")
@@ -249,6 +263,17 @@ def _channel_values(text, field, n):
 
 
 def cmd_simulate(args) -> int:
+    if args.btf is not None:
+        from clothlab.texfit import simulate_btf_command
+
+        if not args.source:
+            raise ConfigError("--btf needs a source: preset:<name>, a fabric.yaml or a fit directory")
+        try:
+            offset = tuple(float(x) for x in args.btf_offset.split(","))
+        except ValueError:
+            raise ConfigError(f"expected u0,v0 numbers, got {args.btf_offset!r}", field="--btf-offset") from None
+        return simulate_btf_command(args.source, args.btf, n_directions=args.btf_directions, size=args.btf_size,
+                                    tile_repeats=args.btf_tiles, offset=offset, seed=args.seed, force=args.force)
     if args.paper_examples is not None:
         from clothlab.examples import write_paper_examples
 
@@ -333,6 +358,12 @@ def cmd_check(args) -> int:
     return 0
 
 
+def cmd_fit_btf(args) -> int:
+    from clothlab.texfit import fit_btf_command
+
+    return fit_btf_command(args.stack, args.source, args.output, force=args.force)
+
+
 def cmd_calibrate(args) -> int:
     from clothlab.calibrate import calibrate_command
 
@@ -340,7 +371,7 @@ def cmd_calibrate(args) -> int:
                              output=args.output, report=args.report, force=args.force)
 
 
-COMMANDS = {"calibrate": cmd_calibrate, "fit": cmd_fit, "report": cmd_report, "eval": cmd_eval,
+COMMANDS = {"calibrate": cmd_calibrate, "fit": cmd_fit, "fit-btf": cmd_fit_btf, "report": cmd_report, "eval": cmd_eval,
             "simulate": cmd_simulate, "bench": cmd_bench, "check": cmd_check}
 
 
