@@ -543,7 +543,15 @@ def btf_section(quick: bool) -> dict:
     return btf_memory_benchmark(quick=quick, verbose=False)
 
 
-SECTIONS = ("cli", "speed", "accuracy", "fit", "tradeoff", "fit_algorithms", "models", "posterior", "btf")
+def render_section(quick: bool) -> dict:
+    """Receding plane: LoD vs always-texture render time and error against a supersampled reference."""
+    from clothlab.render.bench import render_benchmark
+
+    return render_benchmark(quick=quick)
+
+
+SECTIONS = ("cli", "speed", "accuracy", "fit", "tradeoff", "fit_algorithms", "models", "posterior", "btf",
+            "render")
 
 
 def run_benchmarks(*, quick: bool = False, json_path=None, figures_dir=None, sections=SECTIONS) -> int:
@@ -593,6 +601,8 @@ def run_benchmarks(*, quick: bool = False, json_path=None, figures_dir=None, sec
     if "btf" in sections:
         figures["btf"] = b = btf_section(quick)
         print(f"\n== BTF stack: {b.get('n_images')} images of {b.get('size')} px ==\n  {b}")
+    if "render" in sections:
+        figures["render"] = render_section(quick)
     if json_path:
         from clothlab.atomic import atomic_write_text
 

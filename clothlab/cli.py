@@ -93,6 +93,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="output directory (texfit.json, tiles.png)")
     p.add_argument("--force", action="store_true")
 
+    p = sub.add_parser("render", help="render a scene (flat or cylindrical cloth patch) to EXR and PNG, with the "
+                                      "texture model only where the pixel footprint resolves yarns")
+    p.add_argument("scene", type=Path, help="scene YAML (see measurements/scenes/receding_plane.yaml)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output path stem (writes STEM.exr, STEM.png)")
+    p.add_argument("--shader", default="im-lod",
+                   choices=("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture"))
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
+    p.add_argument("--force", action="store_true")
+
     p = sub.add_parser("calibrate", help="colour correction from a photographed ColorChecker (colour-science)")
     p.add_argument("chart", type=Path, help="CSV with R, G, B linear camera values per patch (24 rows)")
     p.add_argument("--method", default="Cheung 2004", choices=("Cheung 2004", "Finlayson 2015", "Vandermonde"))
@@ -264,7 +273,7 @@ def _channel_values(text, field, n):
 
 def cmd_simulate(args) -> int:
     if args.btf is not None:
-        from clothlab.texfit import simulate_btf_command
+        from clothlab.texfit.simulate_btf import simulate_btf_command
 
         if not args.source:
             raise ConfigError("--btf needs a source: preset:<name>, a fabric.yaml or a fit directory")
@@ -359,9 +368,15 @@ def cmd_check(args) -> int:
 
 
 def cmd_fit_btf(args) -> int:
-    from clothlab.texfit import fit_btf_command
+    from clothlab.texfit.fit import fit_btf_command
 
     return fit_btf_command(args.stack, args.source, args.output, force=args.force)
+
+
+def cmd_render(args) -> int:
+    from clothlab.render import render_command
+
+    return render_command(args.scene, args.output, shader=args.shader, spp=args.spp, force=args.force)
 
 
 def cmd_calibrate(args) -> int:
@@ -371,8 +386,9 @@ def cmd_calibrate(args) -> int:
                              output=args.output, report=args.report, force=args.force)
 
 
-COMMANDS = {"calibrate": cmd_calibrate, "fit": cmd_fit, "fit-btf": cmd_fit_btf, "report": cmd_report, "eval": cmd_eval,
-            "simulate": cmd_simulate, "bench": cmd_bench, "check": cmd_check}
+COMMANDS = {"calibrate": cmd_calibrate, "fit": cmd_fit, "fit-btf": cmd_fit_btf, "render": cmd_render,
+            "report": cmd_report, "eval": cmd_eval, "simulate": cmd_simulate, "bench": cmd_bench,
+            "check": cmd_check}
 
 
 if __name__ == "__main__":

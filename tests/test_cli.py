@@ -224,3 +224,23 @@ def test_calibrate_corrects_a_synthetic_camera(tmp_path, capsys):
     bad.write_text("R,G,B\n0.1,0.2,oops\n")
     assert main(["calibrate", str(bad)]) == 2
     assert "bad.csv:2" in capsys.readouterr().err
+
+
+def test_simulate_btf_then_fit_btf_from_the_cli(tmp_path, capsys):
+    stack = tmp_path / "stack"
+    assert main(["simulate", "preset:polyester-lining", "--btf", str(stack), "--btf-directions", "6",
+                 "--btf-size", "32", "--btf-tiles", "3", "--btf-offset", "0.2,0.3"]) == 0
+    assert (stack / "manifest.yaml").is_file() and len(list(stack.rglob("*.exr"))) == 6
+    assert main(["simulate", "preset:polyester-lining", "--btf", str(stack)]) == 2  # exists, no --force
+    capsys.readouterr()
+    assert main(["fit-btf", str(stack), str(EXAMPLE / "fabric.yaml"), "-o", str(tmp_path / "texfit")]) == 0
+    result = json.loads((tmp_path / "texfit" / "texfit.json").read_text())
+    assert result
+
+
+def test_render_command_writes_exr_and_png(tmp_path, capsys):
+    scene = ROOT / "measurements" / "scenes" / "receding_plane.yaml"
+    stem = tmp_path / "plane"
+    assert main(["render", str(scene), "-o", str(stem), "--spp", "1"]) == 0
+    assert (tmp_path / "plane.exr").stat().st_size > 0 and (tmp_path / "plane.png").read_bytes()[:4] == b"\x89PNG"
+    assert main(["render", str(scene), "-o", str(stem)]) == 2  # no silent overwrite
