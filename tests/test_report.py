@@ -114,3 +114,204 @@ def write_synthetic_fit_dir(root, name="synthetic-denim", *, seed=0, n_theta=15,
     }
     (fit_dir / "fit.json").write_text(json.dumps(fit, indent=1), encoding="utf-8")
     return fit_dir
+
+
+# ---------------------------------------------------------------------------------------------- tests
+
+import pytest  # noqa: E402
+
+from clothlab.errors import InputError, ResultExistsError  # noqa: E402
+from clothlab.report import build, plots  # noqa: E402
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+SMALL = {"n_theta": 5, "n_phi": 8}  # 40 incident directions per exitant direction keeps the tests fast
+
+
+def _independent_percentiles(fit_dir: Path, channels=CHANNELS, qs=(50, 80, 95)):
+    """Percentiles of |model - measured| / measured read back with numpy's own CSV reader."""
+    table = np.genfromtxt(fit_dir / "predictions.csv", delimiter=",", names=True)
+    per = {c: np.abs(table[f"model_{c}"] - table[f"measured_{c}"]) / table[f"measured_{c}"] for c in channels}
+    pooled = np.concatenate(list(per.values()))
+    return ({q: np.percentile(pooled, q) for q in qs},
+            {c: {q: np.percentile(e, q) for q in qs} for c, e in per.items()})
+
+
+def _leftovers(reports_dir: Path):
+    """Hidden temporary entries (atomic-write leftovers) in a reports directory."""
+    return [p.name for p in reports_dir.iterdir() if p.name.startswith(".")] if reports_dir.exists() else []
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    root = tmp_path_factory.mktemp("report")
+    fit_dir = write_synthetic_fit_dir(root / "fits", **SMALL)
+    report = build.build_report(fit_dir, root / "reports")
+    return fit_dir, report
+
+
+def test_report_page_holds_parameters_and_independent_percentiles(built):
+    fit_dir, report = built
+    page = (report / "index.html").read_text(encoding="utf-8")
+    for name in ("warp.umax", "warp.kappa", "alpha", "kd", "ks_warp", "ks_weft"):
+        assert name in page
+    overall, per_channel = _independent_percentiles(fit_dir)
+    for q in (50, 80, 95):
+        assert f"{100 * overall[q]:.1f} %" in page
+        for c in CHANNELS:
+            assert f"{100 * per_channel[c][q]:.1f} %" in page
+    assert "SIMULATED data" in page
+    assert "at lower bound" in page  # warp.kappa sits at its lower bound
+    assert "18 %" in page and "34 %" in page  # the paper's cotton-denim figures are quoted
+    assert "records overall p50 = 0.1" in page  # fit.json's recorded errors disagree with predictions.csv
+
+
+def test_report_escapes_text_from_the_fit_file(built):
+    page = (built[1] / "index.html").read_text(encoding="utf-8")
+    assert "abc123&lt;&amp;&gt;" in page and "abc123<&>" not in page
+    assert "&lt;check&gt;" in page and "<check>" not in page
+
+
+def test_report_figures_are_valid_pngs_referenced_by_the_page(built):
+    report = built[1]
+    page = (report / "index.html").read_text(encoding="utf-8")
+    pngs = sorted(report.glob("*.png"))
+    assert {p.stem for p in pngs} == {"hemispheres", "slices", "error_histogram", "parameters", "trace"}
+    for png in pngs:
+        data = png.read_bytes()
+        assert data[:8] == PNG_SIGNATURE and len(data) > 1000
+        assert f'src="{png.name}"' in page
+
+
+def test_summary_json_parses_and_matches_independent_values(built):
+    fit_dir, report = built
+    summary = json.loads((report / "summary.json").read_text(encoding="utf-8"))
+    overall, per_channel = _independent_percentiles(fit_dir)
+    for q in (50, 80, 95):
+        assert summary["errors"]["overall"][f"p{q}"] == pytest.approx(overall[q], rel=1e-12)
+        assert summary["errors"]["per_channel"]["G"][f"p{q}"] == pytest.approx(per_channel["G"][q], rel=1e-12)
+    assert summary["errors"]["overall"]["n"] == 7 * 40 * 3
+    fit = json.loads((fit_dir / "fit.json").read_text(encoding="utf-8"))
+    assert summary["parameters"] == fit["parameters"]
+    assert summary["coefficients"] == fit["coefficients"]
+    assert summary["timing"]["evaluations"] == 300
+    assert summary["measurement"]["simulated"] is True
+
+
+def test_rerun_needs_force_and_force_replaces(tmp_path):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits", with_optional=False, **SMALL)
+    reports = tmp_path / "reports"
+    report = build.build_report(fit_dir, reports)
+    with pytest.raises(ResultExistsError):
+        build.build_report(fit_dir, reports)
+    fit = json.loads((fit_dir / "fit.json").read_text(encoding="utf-8"))
+    fit["warnings"] = ["a brand-new warning"]
+    (fit_dir / "fit.json").write_text(json.dumps(fit), encoding="utf-8")
+    assert "a brand-new warning" not in (report / "index.html").read_text(encoding="utf-8")
+    assert build.build_report(fit_dir, reports, force=True) == report
+    assert "a brand-new warning" in (report / "index.html").read_text(encoding="utf-8")
+    assert _leftovers(reports) == []
+
+
+def test_failure_midway_leaves_no_partial_report(tmp_path, monkeypatch):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits", **SMALL)
+    reports = tmp_path / "reports"
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("plot failed")
+
+    monkeypatch.setattr(plots, "plot_fit_trace", broken)  # the last figure: the others are already written
+    with pytest.raises(RuntimeError, match="plot failed"):
+        build.build_report(fit_dir, reports)
+    assert not (reports / "synthetic-denim").exists()
+    assert _leftovers(reports) == []
+
+
+def test_failed_forced_rebuild_keeps_the_old_report(tmp_path, monkeypatch):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits", with_optional=False, **SMALL)
+    reports = tmp_path / "reports"
+    report = build.build_report(fit_dir, reports)
+    before = (report / "index.html").read_bytes()
+    monkeypatch.setattr(plots, "plot_parameters", lambda fit: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        build.build_report(fit_dir, reports, force=True)
+    assert (report / "index.html").read_bytes() == before
+    assert _leftovers(reports) == []
+
+
+@pytest.mark.parametrize("broken_file, content, expect", [
+    ("fit.json", None, "fit.json: file not found"),
+    ("fit.json", '{"name": "x", "parameters": {', "fit.json:1: invalid JSON"),
+    ("fit.json", '{"name": "../escape"}', "field 'name'"),
+    ("predictions.csv", None, "predictions.csv: file not found"),
+    ("predictions.csv", "theta_i,phi_i,theta_o,phi_o,measured_R,model_R\n1,2,3,4,0.5,0.4\n1,2,3,x4,0.5,0.4\n",
+     "predictions.csv:3, field 'phi_o': value 'x4' is not a number"),
+    ("predictions.csv", "theta_i,phi_i,theta_o,measured_R,model_R\n1,2,3,0.5,0.4\n", "missing column(s) ['phi_o']"),
+    ("predictions.csv", "theta_i,phi_i,theta_o,phi_o,measured_R,model_R\n1,2,3,4,0.5,0.4\n",
+     "column(s) ['measured_G', 'model_G'"),
+])
+def test_bad_input_names_the_file(tmp_path, broken_file, content, expect):
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits", with_optional=False, **SMALL)
+    target = fit_dir / broken_file
+    if content is None:
+        target.unlink()
+    else:
+        target.write_text(content, encoding="utf-8")
+    with pytest.raises(InputError) as info:
+        build.build_report(fit_dir, tmp_path / "reports")
+    assert expect in str(info.value)
+    assert not (tmp_path / "reports").exists() or list((tmp_path / "reports").iterdir()) == []
+
+
+def test_comparison_lists_every_fit_with_the_papers_figures(tmp_path):
+    fits = [write_synthetic_fit_dir(tmp_path / "fits", name=n, fabric=f, seed=k, with_optional=False, **SMALL)
+            for k, (n, f) in enumerate([("denim-a", "cotton-denim"), ("lining-b", "Polyester_Lining"),
+                                        ("mystery-c", "burlap")])]
+    out = build.build_comparison(fits, tmp_path / "reports")
+    page = (out / "index.html").read_text(encoding="utf-8")
+    for name in ("denim-a", "lining-b", "mystery-c"):
+        assert name in page
+    for paper_value in ("18 %", "34 %", "19 %", "39 %"):
+        assert paper_value in page
+    assert "real measurements" in page
+    for fit_dir in fits:
+        overall, _ = _independent_percentiles(fit_dir)
+        assert f"{100 * overall[80]:.1f} %" in page
+    png = (out / "comparison.png").read_bytes()
+    assert png[:8] == PNG_SIGNATURE and len(png) > 1000
+    rows = json.loads((out / "summary.json").read_text(encoding="utf-8"))["rows"]
+    assert [r["paper"] for r in rows] == [[18.0, 34.0], [19.0, 39.0], None]
+    assert [r["free"] for r in rows] == [2, 2, 2]
+    with pytest.raises(ResultExistsError):
+        build.build_comparison(fits, tmp_path / "reports")
+
+
+def test_projection_puts_warp_up_and_plane_coordinates_are_signed_towards_the_mirror():
+    x, y = plots.tangent_plane_xy([30.0, 30.0], [90.0, 0.0])
+    assert np.allclose([x[0], y[0]], [0.0, 0.5]) and np.allclose([x[1], y[1]], [0.5, 0.0])
+    # exitant azimuth 90 (along the warp): the mirror side is azimuth 270
+    signed, distance = plots.incidence_plane_coordinates([40.0, 40.0, 40.0], [270.0, 90.0, 0.0], 30.0, 90.0)
+    assert np.allclose(signed[:2], [40.0, -40.0]) and np.allclose(distance[:2], 0.0, atol=1e-12)
+    assert distance[2] == pytest.approx(40.0)  # perpendicular to the plane: off by theta itself
+
+
+def test_hemisphere_discs_mark_the_exitant_direction_in_tangent_plane_coordinates(built):
+    from matplotlib.figure import Figure
+
+    from clothlab.report.data import load_fit_dir
+
+    record = load_fit_dir(built[0])
+    fig = plots.plot_hemisphere_comparison(record.predictions, channel="R")
+    assert isinstance(fig, Figure)
+    row = EXITANT.index((30.0, 90.0))
+    ax = fig.axes[3 * row]
+    assert "\u03c6o=90\u00b0" in ax.get_title()
+    markers = [line.get_xydata()[0] for line in ax.get_lines() if line.get_marker() == "x"]
+    assert markers and np.allclose(markers[0], [0.0, 0.5])
+
+
+def test_hemisphere_plot_survives_data_that_cannot_be_triangulated():
+    n = 6
+    table = {"theta_i": np.linspace(10, 60, n), "phi_i": np.zeros(n), "theta_o": np.zeros(n),
+             "phi_o": np.zeros(n), "measured_Y": np.linspace(0.1, 1.0, n), "model_Y": np.linspace(0.12, 0.9, n)}
+    fig = plots.plot_hemisphere_comparison(table)  # collinear incident directions: scatter fallback
+    assert len(fig.axes) >= 3
