@@ -315,3 +315,17 @@ def test_hemisphere_plot_survives_data_that_cannot_be_triangulated():
              "phi_o": np.zeros(n), "measured_Y": np.linspace(0.1, 1.0, n), "model_Y": np.linspace(0.12, 0.9, n)}
     fig = plots.plot_hemisphere_comparison(table)  # collinear incident directions: scatter fallback
     assert len(fig.axes) >= 3
+
+
+def test_comparison_columns_show_the_model_setting_and_the_optimisation_time_alone():
+    from clothlab.report.data import fabric_name, model_setting, optimisation_seconds
+
+    im = {"name": "x", "model": {"kind": "irawan", "weave": "preset:cotton-denim",
+                                 "quadrature": {"rule": "gauss", "nodes": 7}},
+          "wall_time_s": 500.0, "timings": {"optimisation_s": 12.5, "posterior_s": 480.0, "total_s": 500.0}}
+    kang = {"name": "cotton-denim-kang", "config": {"name": "cotton-denim-kang"},
+            "model": {"kind": "kang", "weave": "preset:cotton-denim", "options": {"tile_nodes": 4}},
+            "wall_time_s": 30.0}
+    assert model_setting(im) == "gauss 7" and model_setting(kang) == "tile_nodes=4"
+    assert optimisation_seconds(im) == 12.5 and optimisation_seconds(kang) == 30.0
+    assert fabric_name(im) == fabric_name(kang) == "cotton-denim"

@@ -29,6 +29,8 @@ from clothlab.report.data import (
     is_simulated,
     is_usable_dir_name,
     load_fit_dir,
+    model_setting,
+    optimisation_seconds,
     paper_fabric,
     percentile_key,
 )
@@ -130,7 +132,7 @@ def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percent
             "parameters": fit.get("parameters"),
             "coefficients": fit.get("coefficients"),
             "timing": {"evaluations": fit.get("evaluations"), "wall_time_s": fit.get("wall_time_s"),
-                       "objective": fit.get("objective"), "seed": fit.get("seed"),
+                       "stages_s": fit.get("timings"), "objective": fit.get("objective"), "seed": fit.get("seed"),
                        "optimizer": fit.get("optimizer")},
             "warnings": fit.get("warnings") or [],
             "notes": notes,
@@ -148,18 +150,17 @@ def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percent
 def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
     fit = record.fit
     overall = error_percentiles(record.predictions, record.channels, (50, 80, 95))["overall"]
-    quadrature = (fit.get("model") or {}).get("quadrature") or {}
     paper_key = paper_fabric(fit)
     report = reports_dir / record.name / "index.html"
     return {
         "name": record.name,
         "fabric": fabric_name(fit),
         "model": (fit.get("model") or {}).get("kind"),
-        "quadrature": " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or None,
+        "quadrature": model_setting(fit),
         "p50": overall["p50"], "p80": overall["p80"], "p95": overall["p95"], "n": overall["n"],
         "free": sum(1 for e in (fit.get("parameters") or {}).values() if e.get("free", True)),
         "evaluations": fit.get("evaluations"),
-        "wall_time_s": fit.get("wall_time_s"),
+        "wall_time_s": optimisation_seconds(fit),
         "pairs_per_second": (fit.get("evaluation_speed") or {}).get("pairs_per_second"),
         "simulated": is_simulated((fit.get("measurement") or {}).get("provenance")),
         "paper": PAPER_RELATIVE_ERRORS.get(paper_key),

@@ -259,14 +259,37 @@ PAPER_SOURCE = "Irawan & Marschner 2012, sec. 8 (their fits to real measurements
 
 
 def fabric_name(fit: dict) -> str:
-    """The fabric a fit is about: config 'name', else the weave preset, else the fit name."""
-    config_name = (fit.get("config") or {}).get("name")
-    if isinstance(config_name, str) and config_name:
-        return config_name
+    """The fabric a fit is about: the weave preset, else config 'name', else the fit name (so an IM and a
+    Kang fit of the same preset name the same fabric)."""
     weave = (fit.get("model") or {}).get("weave")
     if isinstance(weave, str) and weave.startswith("preset:"):
         return weave[len("preset:"):]
+    config_name = (fit.get("config") or {}).get("name")
+    if isinstance(config_name, str) and config_name:
+        return config_name
     return str(fit.get("name", ""))
+
+
+def optimisation_seconds(fit: dict) -> float | None:
+    """Wall time of the fit proper (global + local optimisation, all starts), without cross-validation and
+    posterior sampling, from fit.json 'timings'; 'wall_time_s' for a fit that ran neither."""
+    timings = fit.get("timings") or {}
+    if "optimisation_s" in timings:
+        return timings["optimisation_s"]
+    return fit.get("wall_time_s")
+
+
+def model_setting(fit: dict) -> str | None:
+    """The evaluation setting of a fit's model in a few words: the quadrature of an IM model, the options of
+    other kinds."""
+    model = fit.get("model") or {}
+    if model.get("kind", "irawan") == "irawan":
+        quadrature = model.get("quadrature") or {}
+        return " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or None
+    options = model.get("options")
+    if options is None:
+        options = ((fit.get("config") or {}).get("model") or {}).get("options") or {}
+    return ", ".join(f"{k}={v}" for k, v in options.items()) or "defaults"
 
 
 def paper_fabric(fit: dict) -> str | None:

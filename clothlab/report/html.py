@@ -271,6 +271,8 @@ def _facts_section(fit: dict) -> list[str]:
     rows = [
         ("evaluations", fmt_number(fit.get("evaluations"))),
         ("wall time", f"{fmt_number(wall)} s" if wall is not None else "\u2014"),
+        ("of which", _key_values({k: v for k, v in (fit.get("timings") or {}).items()
+                                  if k.endswith("_s") and k != "total_s"}) if fit.get("timings") else "\u2014"),
         ("objective start \u2192 final",
          f"{fmt_number(objective.get('start'))} \u2192 {fmt_number(objective.get('final'))}"),
         ("seed", fmt_number(fit.get("seed"))),
@@ -315,7 +317,7 @@ def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "com
     paper = (median %, 80th %) or None.
     """
     header = ["fit", "fabric", "model", "quadrature", "median", "80th pct.", "95th pct.", "free params",
-              "evaluations", "fit time (s)", "model speed (pairs/s)", "paper median*", "paper 80th*"]
+              "evaluations", "optimisation time (s)", "model speed (pairs/s)", "paper median*", "paper 80th*"]
     table_rows = []
     for row in rows:
         name = esc(row["name"])

@@ -114,6 +114,7 @@ def plot_hemisphere_comparison(predictions: dict, channel: str = "luminance"):
     """
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import LogNorm, Normalize
+    from matplotlib.ticker import NullFormatter
 
     channels = channels_of(predictions)
     measured = channel_values(predictions, "measured", channel, channels)
@@ -145,8 +146,10 @@ def plot_hemisphere_comparison(predictions: dict, channel: str = "luminance"):
             ax.set_title(f"{title}\n{_direction_label(theta_o, phi_o)}", fontsize=8.5)
         axes[row, 0].set_ylabel("y = warp \u2191", fontsize=8)
     axes[-1, 0].set_xlabel("x = weft \u2192", fontsize=8)
-    fig.colorbar(ScalarMappable(norm=brdf_norm, cmap=BRDF_CMAP), ax=axes[-1, :2], location="bottom",
-                 shrink=0.8, aspect=35, label=f"BRDF (1/sr), {channel}, log scale")
+    bar = fig.colorbar(ScalarMappable(norm=brdf_norm, cmap=BRDF_CMAP), ax=axes[-1, :2], location="bottom",
+                       shrink=0.8, aspect=35, label=f"BRDF (1/sr), {channel}, log scale")
+    # a short log range would label every minor tick and the labels overlap: label decades only
+    bar.ax.xaxis.set_minor_formatter(NullFormatter())
     fig.colorbar(ScalarMappable(norm=error_norm, cmap=ERROR_CMAP), ax=axes[-1, 2], location="bottom",
                  shrink=0.95, aspect=18, label="(model \u2212 measured) / measured")
     fig.suptitle("Incident hemispheres projected onto the tangent plane (warp vertical); "
