@@ -7,6 +7,7 @@ Heavy imports live inside the commands so that ``clothlab --help`` stays fast.  
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -127,13 +128,38 @@ def main(argv=None) -> int:
         parser.print_help()
         return 0
     try:
-        return COMMANDS[args.command](args)
+        with _geometry_warnings_to_stderr():
+            return COMMANDS[args.command](args)
     except ClothlabError as exc:
         print(f"clothlab: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("\nclothlab: interrupted", file=sys.stderr)
         return 130
+
+
+@contextlib.contextmanager
+def _geometry_warnings_to_stderr():
+    """A GeometryWarning (e.g. a segment violating w sin(umax) < l, sec. 5.3) reaches the user as one
+    'clothlab: warning: ...' line per distinct message, however often the model raises it."""
+    import warnings
+
+    from clothlab.errors import GeometryWarning
+
+    seen = set()
+    previous = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, GeometryWarning):
+            return previous(message, category, filename, lineno, file, line)
+        if str(message) not in seen:
+            seen.add(str(message))
+            print(f"clothlab: warning: {message}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", GeometryWarning)
+        warnings.showwarning = show
+        yield
 
 
 # ---------------------------------------------------------------------------------------------- fit
@@ -182,7 +208,7 @@ def cmd_fit(args) -> int:
             raise ResultExistsError(f"{dest} exists; pass --force to replace it", path=dest)
         configs.append(cfg)
     for cfg in configs:
-        progress = _Progress(cfg.name, cfg.fit.optimizer.max_evals, args.quiet)
+        progress = _Progress(cfg.name, cfg.fit.optimizer.max_evals + cfg.fit.optimizer.polish_evals, args.quiet)
         result = run_fit(cfg, progress=progress, fits_dir=args.fits_dir, posterior_progress=not args.quiet)
         progress.done()
         out = save_fit(result, force=args.force, fits_dir=args.fits_dir)
@@ -292,9 +318,6 @@ def cmd_simulate(args) -> int:
     if not args.source or args.output is None:
         raise ConfigError("give a source (preset:<name>, a .wv file or a fabric.yaml) and -o OUTPUT, "
                           "or --paper-examples DIR")
-    import warnings
-
-    from clothlab.errors import GeometryWarning
     from clothlab.io.table import write_table
     from clothlab.models.registry import build_model
     from clothlab.presets import resolve_weave
@@ -318,10 +341,8 @@ def cmd_simulate(args) -> int:
                     "ks_weft": _channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
     model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes))
     noise = NoiseModel(args.noise_mult, args.noise_add, args.seed)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", GeometryWarning)
-        m = simulate(model, params, coefficients, channels=channels, noise=noise,
-                     provenance={"sample_name": f"{weave.name} (SIMULATED)"})
+    m = simulate(model, params, coefficients, channels=channels, noise=noise,
+                 provenance={"sample_name": f"{weave.name} (SIMULATED)"})
     print(write_table(m, args.output, overwrite=args.force))
     return 0
 

@@ -105,6 +105,11 @@ class OptimizerConfig:
     seed: int = 1
     max_time: float | None = None
     starts: int = 1
+    polish: int | None = None  # evaluations of the final restarted polish; None = max_evals // 3, 0 = none
+
+    @property
+    def polish_evals(self) -> int:
+        return self.max_evals // 3 if self.polish is None else self.polish
 
 
 @dataclass(frozen=True)
@@ -199,6 +204,7 @@ class Config:
                     "seed": opt.seed,
                     "max_time": opt.max_time,
                     "starts": opt.starts,
+                    "polish": opt.polish_evals,
                 },
                 "posterior": None if post is None else {
                     "walkers": post.walkers, "steps": post.steps, "max_steps": post.max_steps,
@@ -558,6 +564,13 @@ class _Validator:
         table = _param_table(model.kind)
         free = self.free(f.get("free", list(DEFAULT_FREE[model.kind])), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
+        for name in free:  # explicit bounds were checked against the start above; the declared ones here
+            if table is not None and name not in bounds and name in model.params:
+                lo, hi = table[name].bounds
+                if not lo <= model.params[name] <= hi:
+                    raise self.r.at(("model", "params", name)).error(
+                        f"start value {model.params[name]:g} of free parameter {name} lies outside its default fit "
+                        f"bounds [{lo:g}, {hi:g}]; move it inside or set fit.bounds.{name}")
         metric = _as_choice(f.get("metric", "relative"), self.r.at(p + ("metric",)), METRICS)
         optimizer = self.optimizer(f.get("optimizer", {}))
         posterior = self.posterior(f.get("posterior"), free)
@@ -613,7 +626,7 @@ class _Validator:
 
     def optimizer(self, value: Any) -> OptimizerConfig:
         p = ("fit", "optimizer")
-        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time", "starts"))
+        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time", "starts", "polish"))
         d = OptimizerConfig()
         g = _as_choice(o.get("global", d.global_algorithm), self.r.at(p + ("global",)), GLOBAL_ALGORITHMS,
                        allow_null=True)
@@ -636,7 +649,10 @@ class _Validator:
         if starts > max_evals:
             raise self.r.at(p + ("starts",)).error(f"{starts} starts need at least as many evaluations; max_evals is "
                                                    f"{max_evals}")
-        return OptimizerConfig(g, loc, max_evals, seed, max_time, starts)
+        polish = o.get("polish")
+        if polish is not None:
+            polish = _as_int(polish, self.r.at(p + ("polish",)), 0)
+        return OptimizerConfig(g, loc, max_evals, seed, max_time, starts, polish)
 
     def posterior(self, value: Any, free: tuple) -> PosteriorConfig | None:
         p = ("fit", "posterior")

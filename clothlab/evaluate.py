@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import csv
 import io
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from clothlab.errors import GeometryWarning, InputError
+from clothlab.errors import InputError
 from clothlab.frames import spherical_to_vector
 
 ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
@@ -92,18 +91,17 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
     model, params, coefficients, channels = _model_source(source, rule, nodes)
     wi = spherical_to_vector(angles["theta_i"], angles["phi_i"])
     wo = spherical_to_vector(angles["theta_o"], angles["phi_o"])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", GeometryWarning)
-        if "u" in angles:
-            if getattr(model, "kind", "") != "irawan":
-                raise InputError(f"u, v columns need the irawan texture model; this model is {model.kind!r}",
-                                 path=directions, field="u")
-            from clothlab.models.irawan.texture import IrawanTexture
+    # a segment violating sec. 5.3 raises a GeometryWarning naming it (the CLI prints it once)
+    if "u" in angles:
+        if getattr(model, "kind", "") != "irawan":
+            raise InputError(f"u, v columns need the irawan texture model; this model is {model.kind!r}",
+                             path=directions, field="u")
+        from clothlab.models.irawan.texture import IrawanTexture
 
-            texture = IrawanTexture(model.weave, model.quadrature)
-            comps = texture.components(angles["u"], angles["v"], wi, wo, params)
-        else:
-            comps = model.components(wi, wo, params)
+        texture = IrawanTexture(model.weave, model.quadrature)
+        comps = texture.components(angles["u"], angles["v"], wi, wo, params)
+    else:
+        comps = model.components(wi, wo, params)
     columns = dict(angles)
     if coefficients is not None:
         total = 0.0

@@ -28,8 +28,8 @@ SEEDS = {name: 1000 + i for i, name in enumerate(YARN_COLOURS)}
 
 STAPLE_FREE = ("warp.psi", "weft.psi", "warp.umax", "weft.umax", "alpha", "beta")
 FILAMENT_FREE = ("warp.umax", "weft.umax", "warp.kappa", "weft.kappa", "alpha", "beta")
-START = {"warp.umax": 30.0, "weft.umax": 30.0, "warp.psi": 0.0, "weft.psi": 0.0, "warp.kappa": 0.0,
-         "weft.kappa": 0.0, "alpha": 0.05, "beta": 4.0}
+START = {"warp.umax": 20.0, "weft.umax": 20.0, "warp.psi": 0.0, "weft.psi": 0.0, "warp.kappa": 0.0,
+         "weft.kappa": 0.0, "alpha": 0.05, "beta": 2.0}
 
 
 def free_parameters(name: str) -> tuple[str, ...]:
@@ -139,4 +139,14 @@ the paper's sampling (225 incident x 7 exitant directions, sec. 4.1) and these y
   seed {SEEDS[name]} (per-value sigma columns included).
 - The generating parameters are recorded in each table's header (`provenance.parameters`).
 - `fabric.yaml` fits the noisy set, `fabric-clean.yaml` the clean one.
-"""
+{_geometry_note(name)}"""
+
+
+def _geometry_note(name: str) -> str:
+    """A README line for each yarn of the preset that violates the segment constraint of sec. 5.3."""
+    from clothlab.models.irawan.model import geometry_warnings
+    from clothlab.models.irawan.parameters import weave_parameters
+    from clothlab.presets import get_preset
+
+    return "".join(f"- Note: {message}; the model says so with a warning whenever it is evaluated.\n"
+                   for message in geometry_warnings(weave_parameters(get_preset(name)), name))

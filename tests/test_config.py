@@ -95,6 +95,9 @@ def test_full_config_values_and_resolved_paths(tmp_path):
         "G_MLSL_LDS", "LN_SBPLX", 1234, 7, 30.0)
     assert (fit.posterior.walkers, fit.posterior.steps, fit.posterior.max_steps) == (40, 500, 9000)
     assert fit.cv_folds == 4
+    assert opt.polish is None and opt.polish_evals == 1234 // 3  # the default final polish
+    assert load_config(project(tmp_path, edit(FULL, "max_time: 30}", "max_time: 30, polish: 0}"))
+                       ).fit.optimizer.polish_evals == 0
     assert config.report.percentiles == (50.0, 80.0, 95.0)
     assert config.output.fits == tmp_path / "out/fits"
     assert config.output.reports == tmp_path / "out/reports"
@@ -464,3 +467,21 @@ def test_reference_lists_every_key_choice_and_parameter():
         words += [f"`{c}`" for c in group]
     missing = [w for w in words if w not in doc]
     assert not missing
+
+
+def test_start_outside_the_declared_fit_bounds_is_refused_not_clipped(tmp_path):
+    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+
+    lo, hi = IRAWAN_PARAMS["beta"].bounds
+    start = hi * 1.5  # inside beta's physical range, outside the declared fit bounds
+    assert IRAWAN_PARAMS["beta"].check(start) == start
+    text = edit(FULL, "beta: 4.0}", f"beta: {start:g}}}")
+    err = fails(tmp_path, text)
+    assert err.field == "model.params.beta" and err.line == line_of(text, "params: {")
+    assert f"[{lo:g}, {hi:g}]" in str(err) and "fit.bounds.beta" in str(err)
+
+
+def test_polish_must_be_a_non_negative_count(tmp_path):
+    text = edit(FULL, "max_time: 30}", "max_time: 30, polish: -3}")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.optimizer.polish" and "-3" in str(err)

@@ -134,3 +134,25 @@ def test_saved_fit_directory(tmp_path):
         save_fit(result)
     assert (out / "fit.json").read_bytes() == before
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_polish_restarts_a_stopped_local_search_and_never_ends_worse():
+    from clothlab.fit.optimize import minimize
+    from clothlab.fit.runner import polish
+
+    cfg = _config("cotton-denim", variant="noisy", polish=800)
+    problem = build_problem(cfg)
+    k = len(problem.free)
+    stopped = minimize(problem, problem.to_unit(problem.start), np.zeros(k), np.ones(k), global_algorithm=None,
+                       local_algorithm="LN_BOBYQA", max_evals=60, seed=1)
+    polished = polish(problem, stopped, cfg.fit.optimizer)
+    assert polished.fun < stopped.fun * 0.9  # a 60-evaluation BOBYQA run is far from the optimum
+    assert polished.fun == pytest.approx(problem(polished.x), rel=1e-12)  # the point reported is the one scored
+    assert stopped.nevals < polished.nevals <= stopped.nevals + 800
+    stages = [row.stage for row in polished.trace]
+    assert stages[:stopped.nevals] == ["local"] * stopped.nevals and set(stages[stopped.nevals:]) == {"polish"}
+    assert [row.index for row in polished.trace] == list(range(1, polished.nevals + 1))
+    # from an optimum the polish ends at once and keeps it
+    again = polish(problem, polished, replace(cfg.fit.optimizer, polish=300))
+    assert again.fun <= polished.fun
+    assert polish(problem, stopped, replace(cfg.fit.optimizer, polish=0)) is stopped

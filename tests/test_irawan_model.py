@@ -197,3 +197,17 @@ def test_out_of_range_parameters_are_named():
         model.components(*random_pairs(3), {"warp.radius": 1.0})
     with pytest.raises(ParameterError, match="quadrature"):
         Quadrature("simpson", 11)
+
+
+def test_zero_albedo_yarn_warns_instead_of_a_silent_zero():
+    """A filament with umax -> 0 reflects along a line only: its albedo is 0 and its normalised specular
+    cannot be formed; the model returns 0 for it and says so, naming the yarn."""
+    model = IrawanModel(get_preset("polyester-lining"))
+    wi = spherical_to_vector(np.array([30.0]), np.array([0.0]))
+    wo = spherical_to_vector(np.array([30.0]), np.array([180.0]))
+    with pytest.warns(GeometryWarning, match="polyester-lining warp: the specular albedo is 0"):
+        comps = model.components(wi, wo, {"warp.umax": 1e-9})
+    assert np.all(comps["specular_warp"] == 0.0) and np.all(comps["specular_weft"] > 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.components(wi, wo, {"warp.umax": 1e-9}, warn=False)

@@ -329,3 +329,14 @@ def test_comparison_columns_show_the_model_setting_and_the_optimisation_time_alo
     assert model_setting(im) == "gauss 7" and model_setting(kang) == "tile_nodes=4"
     assert optimisation_seconds(im) == 12.5 and optimisation_seconds(kang) == 30.0
     assert fabric_name(im) == fabric_name(kang) == "cotton-denim"
+
+
+def test_posterior_table_shows_every_interval_column_of_a_saved_posterior():
+    from clothlab.report import html
+
+    posterior = json.loads((Path(__file__).resolve().parents[1] / "fits" / "cotton-denim" / "posterior.json")
+                           .read_text())
+    page = "".join(html._posterior_section(posterior))
+    for entry in posterior["parameters"].values():
+        for key in ("p2.5", "p16", "median", "p84", "p97.5"):
+            assert f">{html.fmt_number(entry[key])}<" in page, key

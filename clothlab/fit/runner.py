@@ -101,7 +101,54 @@ def multistart_minimize(problem, x0, opt, progress=None):
         time_offset += result.wall_time
         if best is None or result.fun < best.fun:
             best = result
-    return replace(best, trace=trace, nevals=offset, wall_time=time_offset)
+    best = replace(best, trace=trace, nevals=offset, wall_time=time_offset)
+    return polish(problem, best, opt, progress)
+
+
+#: A polish round that improves the objective by less than this (relative) ends the polish.
+POLISH_RTOL = 1e-6
+#: Evaluations of one local search inside the polish.
+POLISH_ROUND_EVALS = 600
+
+
+def polish(problem, best, opt, progress=None):
+    """Restart local searches from ``best`` (an OptimizeResult) until a round of [opt's local algorithm,
+    LN_SBPLX] improves the objective by less than :data:`POLISH_RTOL` relative or ``opt.polish_evals`` is
+    spent.  A restart gets a fresh trust region / simplex: on this objective (piecewise smooth under a
+    fixed-node rule) BOBYQA often reports convergence early, and SBPLX copes with the roughness.  The
+    result is never worse than ``best``; its trace continues best's, stage 'polish'."""
+    from dataclasses import replace
+
+    from clothlab.fit.optimize import minimize
+
+    budget = opt.polish_evals
+    if budget <= 0:
+        return best
+    k = len(problem.free)
+    algorithms = tuple(dict.fromkeys(a for a in (opt.local_algorithm, "LN_SBPLX") if a))
+    x, fun, trace, offset, time_offset = best.x, best.fun, list(best.trace), best.nevals, best.wall_time
+    used, improved = 0, True
+    while improved and used < budget:
+        round_start = fun
+        for algorithm in algorithms:
+            evals = min(POLISH_ROUND_EVALS, budget - used)
+            if evals <= 0:
+                break
+            result = minimize(problem, x, np.zeros(k), np.ones(k), global_algorithm=None,
+                              local_algorithm=algorithm, max_evals=evals, seed=opt.seed, callback=progress)
+            for row in result.trace:
+                trace.append(row._replace(index=row.index + offset, time=row.time + time_offset, stage="polish",
+                                          best=min(row.best, fun)))
+            offset += result.nevals
+            time_offset += result.wall_time
+            used += result.nevals
+            if result.fun < fun:
+                x, fun = result.x, result.fun
+                best = replace(best, x=x, fun=fun, at_lower=result.at_lower, at_upper=result.at_upper)
+        improved = fun < round_start * (1.0 - POLISH_RTOL)
+    status = dict(best.status, polish=f"{used} evaluations, objective {best.fun:.6g}")
+    message = f"{best.message}; polish: {used} evaluations"
+    return replace(best, trace=trace, nevals=offset, wall_time=time_offset, status=status, message=message)
 
 
 def evaluation_speed(problem, params, repeats: int = 5) -> dict:
@@ -250,7 +297,7 @@ def fit_summary(result: FitResult) -> dict:
         "parameters": _parameter_entries(result),
         "coefficients": {name: dict(zip(channels, map(float, coef), strict=True))
                          for name, coef in result.coefficients.items()},
-        "coefficient_meaning": "kd: diffuse albedo; ks_<kind>: mean specular albedo of that segment type",
+        "coefficient_meaning": problem.model.coefficient_meaning,
         "metric": problem.metric,
         "errors": result.errors,
         "objective": {"start": result.start_objective, "final": float(opt.fun),

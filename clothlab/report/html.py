@@ -240,7 +240,7 @@ def _posterior_section(posterior) -> list[str]:
         out.append('<p class="warn"><b>Not determined by these data:</b> '
                    + ", ".join(f"<code>{esc(n)}</code>" for n in undetermined)
                    + f' ({esc(posterior.get("identifiability_rule", ""))}).</p>')
-    keys = ("p2.5", "p16", "p50", "p84", "p97.5")
+    keys = ("p2.5", "p16", "median", "p84", "p97.5")  # posterior.json names (clothlab.fit.posterior)
     rows = []
     for name, e in params.items():
         rows.append([f"<code>{esc(name)}</code>", esc(e.get("unit", ""))]

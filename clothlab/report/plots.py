@@ -24,7 +24,7 @@ from clothlab.report.data import (
 
 #: Colours of named channels in line plots; other channel names take the default cycle.
 CHANNEL_COLOURS = {"R": "tab:red", "G": "tab:green", "B": "tab:blue", "Y": "0.2", "luminance": "0.2"}
-STAGE_COLOURS = {"global": "tab:orange", "local": "tab:blue"}
+STAGE_COLOURS = {"global": "tab:orange", "local": "tab:blue", "polish": "tab:green"}
 BRDF_CMAP = "inferno"
 ERROR_CMAP = "RdBu_r"
 #: Measured points within this angle (deg) of an exitant direction's incidence plane are shown in slices.

@@ -145,6 +145,7 @@ class IrawanModel:
     kind = "irawan"
     params = IRAWAN_PARAMS
     component_names = COMPONENTS
+    coefficient_meaning = "kd: diffuse albedo; ks_<kind>: mean specular albedo of that segment type"
 
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
@@ -205,7 +206,14 @@ class IrawanModel:
             value = phase * self._integral(wi, wo, p, kind)
             if normalised:
                 albedo = specular_albedo(p, kind, self.quadrature)
-                value = value / albedo if albedo > 0.0 else np.zeros_like(value)
+                if albedo > 0.0:
+                    value = value / albedo
+                else:  # e.g. a filament with umax -> 0: the highlight has no extent; say so, never a silent 0
+                    value = np.zeros_like(value)
+                    if warn:
+                        warnings.warn(f"{self.weave.name} {kind}: the specular albedo is 0 (umax = "
+                                      f"{p[f'{kind}.umax']:g} deg, psi = {p[f'{kind}.psi']:g} deg), so the "
+                                      f"normalised specular_{kind} is 0 everywhere", GeometryWarning, stacklevel=2)
             out[name] = value
         return out
 
