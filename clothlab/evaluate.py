@@ -73,7 +73,8 @@ def _model_source(source, rule, nodes):
 
         cfg = load_config(source)
         q = cfg.model.quadrature
-        model = build_model(cfg.model.kind, resolve_weave(cfg.model.weave, cfg.base_dir), (q.rule, q.nodes))
+        model = build_model(cfg.model.kind, resolve_weave(cfg.model.weave, cfg.base_dir), (q.rule, q.nodes),
+                            **cfg.model.options)
         params, coefficients, channels = dict(cfg.model.params), None, ()
     if rule is not None or nodes is not None:
         from clothlab.models.irawan.model import Quadrature

@@ -102,7 +102,9 @@ def load_fitted(fit_dir):
         params = {k: float(v["value"]) for k, v in fit["parameters"].items()}
         channels = tuple(fit["measurement"]["channels"])
         coefficients = {k: np.array([float(v[c]) for c in channels]) for k, v in fit["coefficients"].items()}
-    except (KeyError, TypeError, ValueError) as exc:
+        # the model's constructor options as fitted (e.g. kang: alternating, tile_nodes)
+        options = dict(fit["model"].get("options") or (fit.get("config") or {}).get("model", {}).get("options") or {})
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise InputError(f"fit.json lacks or mangles a required entry ({exc})", path=fit_dir / "fit.json") from None
-    model = build_model(kind, parse_wv(weave_path), (q.get("rule", "trapezoid"), int(q.get("nodes", 11))))
+    model = build_model(kind, parse_wv(weave_path), (q.get("rule", "trapezoid"), int(q.get("nodes", 11))), **options)
     return model, params, coefficients, channels

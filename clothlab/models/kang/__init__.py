@@ -5,6 +5,6 @@ ambient occlusion, per-yarn noise), lod (eq. 5, Algorithm 1), model (:class:`Kan
 """
 
 from clothlab.models.kang.model import KangModel
-from clothlab.models.kang.parameters import KANG_PARAMS, default_parameters
+from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters
 
-__all__ = ["KANG_PARAMS", "KangModel", "default_parameters"]
+__all__ = ["KANG_ALTERNATING_PARAMS", "KANG_PARAMS", "KangModel", "default_parameters"]

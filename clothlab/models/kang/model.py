@@ -2,19 +2,24 @@
 extending Kang 2010): Ashikhmin-Shirley BRDF per yarn type with alternating anisotropy, yarn normal
 perturbation with ambient occlusion, per-yarn noise, the eq. 5 LoD blend and Algorithm 1.
 
-Components (1/sr), per yarn type k in (warp, weft): ``diffuse_k`` = Lambert 1/pi times the ambient
-occlusion, ``specular_k`` = eq. 1 with the eq. 2 distribution about the perturbed normal, times the
-ambient occlusion.  The per-yarn diffuse and specular colours (sec. 4.2.1; denim: blue weft, white warp)
-are the linear coefficients of the components, solved outside the model.
+Point components (1/sr, :meth:`KangModel.point_components`, for textures and renders), per yarn type k in
+(warp, weft): ``diffuse_k`` = Lambert 1/pi on the points of type k, ``specular_k`` = eq. 1 with the eq. 2
+distribution about the perturbed normal, times the ambient occlusion (sec. 4.2.2 applies the AO to the
+anisotropic reflection only), both times the per-yarn noise; plus ``diffuse`` = diffuse_warp + diffuse_weft
+(so a fit's single kd renders).  The per-yarn diffuse and specular colours (sec. 4.2.1; denim: blue weft,
+white warp) are the linear coefficients (kd_warp, kd_weft, ks_warp, ks_weft; or kd, ks_warp, ks_weft).
 
-Tile average (:meth:`KangModel.components`).  Within yarn type k the point BRDF depends on the position
-only through the perturbation (delta_across, delta_along) of eqs. 3-4; over a yarn, sigma is uniform in
-[-1, 1] and the sawtooth phase uniform in [0, 1), so delta_across is uniform in [-c_y, c_y] and
+Tile average (:meth:`KangModel.components`, for BRDF tables): ``diffuse`` (1/pi) and ``specular_k``.  The
+per-yarn diffuse terms average to share_k / pi, constants proportional over all directions, so a table
+cannot separate kd_warp from kd_weft and only one diffuse component is offered; its coefficient kd is the
+cell-share-weighted mean of the per-yarn diffuse colours.  Within yarn type k the point BRDF depends on the
+position only through the perturbation (delta_across, delta_along) of eqs. 3-4; over a yarn, sigma is
+uniform in [-1, 1] and the sawtooth phase uniform in [0, 1), so delta_across is uniform in [-c_y, c_y] and
 delta_along uniform in [-c_f, c_f] (exact when a yarn's visible part spans its width and a whole number of
-fibre ridges).  The average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the pattern's cell
-share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle (``tile_nodes`` per axis).
-The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is measured in tests/test_kang.py
-against a fine grid over the tile (see docs/kang.md).
+fibre ridges).  The specular average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the
+pattern's cell share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle
+(``tile_nodes`` per axis).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
+measured in tests/test_kang.py against a fine grid over the tile (see docs/kang.md).
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ import numpy as np
 from clothlab.errors import ConfigError
 from clothlab.frames import to_yarn_frame
 from clothlab.models.kang import lod, microfacet, yarn
-from clothlab.models.kang.parameters import KANG_PARAMS, resolve_parameters
+from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters, resolve_parameters
 from clothlab.weave import YARN_KINDS, Weave
 from clothlab.weave_lookup import locate_segments
 
@@ -36,20 +41,32 @@ WEAVE_LEVELS = ("prefiltered", "flat")
 class KangModel:
     """Kang's procedural fabric shader behind the clothlab model interface.
 
-    Options: ``tile_nodes`` (Gauss-Legendre nodes per perturbation axis of the tile average and the
-    prefiltered weave level; None (default) chooses per axis from the lobe width, see
-    :func:`nodes_for_axis`); ``weave_level``: the far (alpha = 1) level of eq. 5,
+    Options: ``alternating`` (default True, the paper's model): the weft lobe is the warp lobe rotated by
+    90 deg (sec. 3.3), so only ``warp.nx`` / ``warp.ny`` are parameters; False declares independent
+    ``weft.nx`` / ``weft.ny`` (a generalisation of Kang); ``tile_nodes`` (Gauss-Legendre nodes per
+    perturbation axis of the tile average and the prefiltered weave level; None (default) chooses per axis
+    from the lobe width, see :func:`nodes_for_axis`); ``weave_level``: the far (alpha = 1) level of eq. 5,
     ``'prefiltered'`` (default: the yarn level averaged over the yarn, so the far view equals the tile
     average) or ``'flat'`` (the paper's literal choice: the unperturbed normal, no ambient occlusion);
     ``prefilter_min_samples`` / ``prefilter_max_samples`` / ``seed`` for Algorithm 1.
     """
 
     kind = "kang"
-    params = KANG_PARAMS
-    component_names = ("diffuse_warp", "diffuse_weft", "specular_warp", "specular_weft")
+    #: tile-averaged components (components(), what a fit solves coefficients for)
+    component_names = ("diffuse", "specular_warp", "specular_weft")
+    #: point components (point_components(), for textures and renders)
+    point_component_names = ("diffuse", "diffuse_warp", "diffuse_weft", "specular_warp", "specular_weft")
+    coefficient_meaning = (
+        "kd: diffuse albedo (Lambert), the cell-share-weighted mean of the per-yarn diffuse colours, which a "
+        "BRDF table cannot separate; ks_<kind>: specular colour of that yarn type, multiplying its ambient-"
+        "occluded eq. 1 lobe (Ashikhmin-Shirley, Schlick F with fresnel_f0) at its points - not an albedo: "
+        "the yarn's specular albedo is ks_<kind> times the lobe's white-furnace albedo (<= 1)")
 
-    def __init__(self, weave: Weave, *, tile_nodes: int | None = None, weave_level: str = "prefiltered",
-                 prefilter_min_samples: int = 5, prefilter_max_samples: int = 64, seed: int = 0):
+    def __init__(self, weave: Weave, *, alternating: bool = True, tile_nodes: int | None = None,
+                 weave_level: str = "prefiltered", prefilter_min_samples: int = 5,
+                 prefilter_max_samples: int = 64, seed: int = 0):
+        if not isinstance(alternating, bool | np.bool_):
+            raise ConfigError(f"alternating must be true or false, got {alternating!r}", field="alternating")
         if tile_nodes is not None and (not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1):
             raise ConfigError(f"tile_nodes must be a positive integer, got {tile_nodes!r}", field="tile_nodes")
         if weave_level not in WEAVE_LEVELS:
@@ -59,6 +76,8 @@ class KangModel:
             raise ConfigError(f"need 1 <= prefilter_min_samples < prefilter_max_samples, got "
                               f"{prefilter_min_samples!r}, {prefilter_max_samples!r}", field="prefilter_max_samples")
         self.weave = weave
+        self.alternating = bool(alternating)
+        self.params = KANG_ALTERNATING_PARAMS if self.alternating else KANG_PARAMS
         self.tile_nodes = None if tile_nodes is None else int(tile_nodes)
         self.weave_level = weave_level
         self.prefilter_min_samples = int(prefilter_min_samples)
@@ -69,6 +88,11 @@ class KangModel:
 
     # --- one yarn type, yarn frame -------------------------------------------------------------------
 
+    def _exponents(self, kind, p):
+        """(nx, ny) of yarn type ``kind`` in its yarn frame; the warp's for both types when alternating."""
+        source = "warp" if self.alternating else kind
+        return p[f"{source}.nx"], p[f"{source}.ny"]
+
     @staticmethod
     def _specular_about(wi_l, wo_l, normal, nx, ny, f0):
         """Eq. 1 with the eq. 2 lobe about ``normal`` (yarn frame; nx across, ny along the yarn)."""
@@ -77,69 +101,74 @@ class KangModel:
         return microfacet.ashikhmin_shirley(wi_l, wo_l, pdf, f0)
 
     def _yarn_average(self, kind, wi_l, wo_l, p):
-        """(E[ao rho], E[ao]) over the perturbation rectangle of eqs. 3-4 (Gauss-Legendre), (N,), scalar."""
+        """E[ao rho] (N,) over the perturbation rectangle of eqs. 3-4 (Gauss-Legendre)."""
+        nx, ny = self._exponents(kind, p)
         if self.tile_nodes is not None:
             q_across = q_along = self.tile_nodes
         else:
-            q_across = nodes_for_axis(p["yarn_curvature"], p[f"{kind}.nx"])
-            q_along = nodes_for_axis(p["fibre_curvature"], p[f"{kind}.ny"])
+            q_across = nodes_for_axis(p["yarn_curvature"], nx)
+            q_along = nodes_for_axis(p["fibre_curvature"], ny)
         x_across, w_across = _gauss_legendre(q_across)
         x_along, w_along = _gauss_legendre(q_along)
         d_across, d_along = np.meshgrid(p["yarn_curvature"] * x_across, p["fibre_curvature"] * x_along,
                                         indexing="ij")
         normal = yarn.perturbed_normal(d_across.ravel(), d_along.ravel())  # (Q, 3)
         ao = yarn.ambient_occlusion(normal)
-        rho = self._specular_about(wi_l[:, None, :], wo_l[:, None, :], normal[None], p[f"{kind}.nx"],
-                                   p[f"{kind}.ny"], p["fresnel_f0"])
-        weights = np.outer(w_across, w_along).ravel() * ao
-        return rho @ weights, float(np.sum(weights))
+        rho = self._specular_about(wi_l[:, None, :], wo_l[:, None, :], normal[None], nx, ny, p["fresnel_f0"])
+        return rho @ (np.outer(w_across, w_along).ravel() * ao)
 
     def _weave_level(self, kind, wi_l, wo_l, p):
-        """The alpha = 1 level of eq. 5: (specular, ao) of yarn type ``kind``."""
+        """The alpha = 1 level of eq. 5: the specular of yarn type ``kind``."""
         if self.weave_level == "prefiltered":
             return self._yarn_average(kind, wi_l, wo_l, p)
         flat = np.broadcast_to(np.array([0.0, 0.0, 1.0]), wi_l.shape)
-        return self._specular_about(wi_l, wo_l, flat, p[f"{kind}.nx"], p[f"{kind}.ny"], p["fresnel_f0"]), 1.0
+        return self._specular_about(wi_l, wo_l, flat, *self._exponents(kind, p), p["fresnel_f0"])
 
     # --- the interface ---------------------------------------------------------------------------------
 
     def default_parameters(self) -> dict[str, float]:
-        return resolve_parameters({})
+        return default_parameters(self.params)
 
     def resolve(self, params: dict | None) -> dict[str, float]:
-        """Defaults overridden by ``params``, validated against KANG_PARAMS (the fit-facing interface)."""
-        return resolve_parameters(params)
+        """Defaults overridden by ``params``, validated against ``self.params`` (the fit-facing interface;
+        when alternating, ``weft.nx`` / ``weft.ny`` raise a ParameterError saying they are tied)."""
+        return resolve_parameters(params, self.params)
 
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
                    warn: bool = True) -> dict[str, np.ndarray]:
         """Tile-averaged components (1/sr) at (N, 3) fabric-frame directions; zero below the horizon.
 
-        ``need`` limits the components computed; ``normalised`` and ``warn`` exist for interface parity with
-        the IM model (Kang's components are already in albedo units and raise no geometry warnings)."""
-        p = resolve_parameters(params)
+        ``diffuse`` (Lambert 1/pi) and ``specular_warp`` / ``specular_weft`` (module docstring).  ``need``
+        limits the components computed; ``normalised`` and ``warn`` exist for interface parity with the IM
+        model (Kang's components are already in albedo units and raise no geometry warnings)."""
+        p = self.resolve(params)
         wi, wo = _directions(wi, wo)
         visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         out = {name: np.zeros(len(wi)) for name in self.component_names}
         need = self.component_names if need is None else tuple(need)
+        if "diffuse" in need:
+            out["diffuse"] = np.where(visible, 1.0 / np.pi, 0.0)
         for kind in YARN_KINDS:
             share = self.shares[kind]
-            if share == 0.0 or not ({f"specular_{kind}", f"diffuse_{kind}"} & set(need)):
+            if share == 0.0 or f"specular_{kind}" not in need:
                 continue  # a yarn type with no visible area is skipped (DESIGN principle 5)
-            specular, ao = self._yarn_average(kind, to_yarn_frame(wi, kind), to_yarn_frame(wo, kind), p)
-            out[f"specular_{kind}"] = share * specular
-            out[f"diffuse_{kind}"] = np.where(visible, share * ao / np.pi, 0.0)
+            out[f"specular_{kind}"] = share * self._yarn_average(kind, to_yarn_frame(wi, kind),
+                                                                 to_yarn_frame(wo, kind), p)
         return out
 
     def point_components(self, u, v, wi, wo, params: dict, footprint=None, *,
                          view_distance=None) -> dict[str, np.ndarray]:
         """Components (1/sr) at texture points (u, v) (tile units) for (N, 3) direction pairs.
 
+        Keys :attr:`point_component_names`: per-yarn ``diffuse_warp`` / ``diffuse_weft`` (for per-yarn
+        colours kd_warp, kd_weft) and their sum ``diffuse`` (for a fit's single kd): give coefficients for
+        one or the other, not both (a renderer combining all keys would count the diffuse twice).
         ``footprint`` (scalar or (N,), tile units): the pixel's texture-space extent, giving the eq. 5
         blend (None: full yarn detail, alpha = 0).  ``view_distance`` (scalar or (N,)): when given
         (with a footprint), Algorithm 1 averages jittered evaluations over the footprint, stopping when
         the running mean changes by less than 1 / view_distance.
         """
-        p = resolve_parameters(params)
+        p = self.resolve(params)
         wi, wo = _directions(wi, wo)
         u, v = (np.broadcast_to(np.asarray(c, dtype=np.float64), (len(wi),)).copy() for c in (u, v))
         if footprint is not None:
@@ -154,15 +183,18 @@ class KangModel:
         if not np.all(np.isfinite(view_distance) & (view_distance > 0.0)):
             raise ConfigError("view_distance must be finite and > 0", field="view_distance")
 
+        names = self.point_component_names[1:]  # the four independent ones (diffuse is their sum)
+
         def evaluate(index, uu, vv):
             comps = self._point(uu, vv, wi[index], wo[index], p, footprint[index])
-            return np.stack([comps[name] for name in self.component_names], axis=-1)
+            return np.stack([comps[name] for name in names], axis=-1)
 
         mean, _ = lod.adaptive_prefilter(evaluate, u, v, footprint, view_distance,
                                          rng=np.random.default_rng(self.seed),
                                          min_samples=self.prefilter_min_samples,
                                          max_samples=self.prefilter_max_samples)
-        return {name: mean[:, k] for k, name in enumerate(self.component_names)}
+        out = {name: mean[:, k] for k, name in enumerate(names)}
+        return {"diffuse": out["diffuse_warp"] + out["diffuse_weft"], **out}
 
     def _point(self, u, v, wi, wo, p, footprint):
         """Point evaluation with the eq. 5 blend (no prefilter)."""
@@ -174,7 +206,7 @@ class KangModel:
             cells = footprint * max(self.weave.tile_width, self.weave.tile_height)
             alpha = lod.lod_alpha(cells, p["n_strands"])
         noise = yarn.yarn_noise(np.floor(u), np.floor(v), segment, p["noise"])
-        out = {name: np.zeros(len(wi)) for name in self.component_names}
+        out = {name: np.zeros(len(wi)) for name in self.point_component_names}
         for kind in YARN_KINDS:
             m = self._segment_is_weft[segment] == (kind == "weft")
             if not np.any(m):
@@ -184,18 +216,15 @@ class KangModel:
                                              p["n_strands"], p["fibre_slope"])
             normal = yarn.perturbed_normal(*yarn.perturbation(sigma, phase, p["fibre_curvature"],
                                                               p["yarn_curvature"]))
-            ao = yarn.ambient_occlusion(normal)
-            specular = ao * self._specular_about(wi_l, wo_l, normal, p[f"{kind}.nx"], p[f"{kind}.ny"],
-                                                 p["fresnel_f0"])
-            diffuse = ao.copy()
+            ao = yarn.ambient_occlusion(normal)  # scales the anisotropic reflection only (sec. 4.2.2)
+            specular = ao * self._specular_about(wi_l, wo_l, normal, *self._exponents(kind, p), p["fresnel_f0"])
             far = alpha[m] > 0.0
             if np.any(far):
-                far_specular, far_ao = self._weave_level(kind, wi_l[far], wo_l[far], p)
-                a = alpha[m][far]
-                specular[far] = lod.blend(specular[far], far_specular, a)  # eq. 5
-                diffuse[far] = lod.blend(diffuse[far], far_ao, a)
+                specular[far] = lod.blend(specular[far], self._weave_level(kind, wi_l[far], wo_l[far], p),
+                                          alpha[m][far])  # eq. 5
             out[f"specular_{kind}"][m] = noise[m] * specular
-            out[f"diffuse_{kind}"][m] = np.where(visible[m], noise[m] * diffuse / np.pi, 0.0)
+            out[f"diffuse_{kind}"][m] = np.where(visible[m], noise[m] / np.pi, 0.0)  # no AO (sec. 4.2.2)
+        out["diffuse"] = out["diffuse_warp"] + out["diffuse_weft"]
         return out
 
 
