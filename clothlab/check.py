@@ -17,6 +17,11 @@ Three parts, printed as a summary and returned as a dict (``run_check``):
 3. stiff fits (``full`` only) - :func:`clothlab.stiff.run_stiff`.
 
 The full run evaluates more than 10^6 (parameter, direction) configurations per rule.
+
+Verdict (``result["verdict"]``, :func:`verdict`; ``clothlab check`` exits with :func:`exit_code`): the sweep
+fails when it finds any non-finite or negative value, any reciprocity violation above RECIPROCITY_RTOL relative,
+or any evaluation that raised (its value is unknown); exit code 1 then, 0 otherwise.  Continuity jumps, the
+psi-threshold switch and the stiff fits are findings to read, not failures.
 """
 
 from __future__ import annotations
@@ -33,6 +38,22 @@ from clothlab.errors import GeometryWarning
 RECIPROCITY_RTOL = 1e-9
 JUMP_TOLERANCE = 1e-4
 RULES_CHECKED = (("trapezoid", 11), ("support", 8))
+FAILING_COUNTS = ("non_finite", "negative", "reciprocity", "exceptions")
+"""Sweep counts that make ``clothlab check`` fail (exit code 1) when non-zero."""
+
+
+def verdict(totals: dict) -> dict:
+    """{"passed": bool, "failures": {count: n} for the non-zero FAILING_COUNTS of the sweep ``totals``}."""
+    failures = {key: int(totals.get(key, 0)) for key in FAILING_COUNTS if totals.get(key, 0)}
+    return {"passed": not failures, "failures": failures,
+            "rule": (f"fails on any non-finite or negative value, any reciprocity violation above "
+                     f"{RECIPROCITY_RTOL:g} relative or any evaluation that raised")}
+
+
+def exit_code(result: dict) -> int:
+    """Exit status of ``clothlab check`` for a :func:`run_check` result: 0 when the sweep passed, else 1."""
+    v = result.get("verdict") or verdict(result["totals"])
+    return 0 if v["passed"] else 1
 
 
 def check_directions(n_random: int, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -274,6 +295,7 @@ def run_check(full: bool = False, json_path=None, seed: int = 0, figures_dir=Non
             for key in totals:
                 totals[key] += part.get(key, 0)
     result["totals"] = totals
+    result["verdict"] = verdict(totals)
     if full:
         from clothlab.stiff import run_stiff
 
@@ -324,4 +346,9 @@ def print_check(result: dict) -> None:
         from clothlab.stiff import print_stiff
 
         print_stiff(result["stiff"])
-    print(f"\n(check took {result['wall_time_s']:.1f} s)")
+    v = result.get("verdict") or verdict(result["totals"])
+    print(f"\nverdict: {'PASS' if v['passed'] else 'FAIL'} ("
+          + (", ".join(f"{k.replace('_', '-')} {n}" for k, n in v["failures"].items()) if v["failures"] else
+             "no non-finite or negative value, no reciprocity violation above "
+             f"{RECIPROCITY_RTOL:g} relative, no exception") + ")")
+    print(f"(check took {result['wall_time_s']:.1f} s)")

@@ -10,7 +10,10 @@ starts with the local polish alone (LN_BOBYQA).  At the best optimum: the Jacobi
 (coefficients re-solved by NNLS at every point, as in the objective) by central finite differences in the unit
 box, its condition number (ratio of extreme singular values), and the nearly dependent parameter groups
 (pairs whose Jacobian columns have |cosine| > COLLINEAR_COSINE, and the parameters carrying the smallest
-singular vector).
+singular vector).  Posterior correlations: a short emcee run (:func:`clothlab.fit.posterior.run_posterior`,
+Gaussian likelihood with the simulated sigma, walkers started at the best optimum, a fixed step budget, checkpoint
+in a temporary directory) gives the correlation matrix of the free parameters (in the sampled unit-box
+coordinates) and the most strongly correlated pairs; ``fast`` settings (:data:`FAST_POSTERIOR`) for tests.
 """
 
 from __future__ import annotations
@@ -25,6 +28,11 @@ from clothlab.errors import GeometryWarning
 COLLINEAR_COSINE = 0.99
 FD_STEP = 1e-4  # unit-box step of the finite differences
 NOISE = {"multiplicative": 0.05, "additive": 2e-4}
+POSTERIOR = {"walkers": 32, "steps": 1000, "max_steps": 1000, "check_every": 100}
+"""The stiff cases' posterior: 32 walkers, 1,000 steps (a fixed budget, ~40 s a case; not run to the tau rule)."""
+FAST_POSTERIOR = {"walkers": 12, "steps": 60, "max_steps": 60, "check_every": 20}
+STRONG_CORRELATION = 0.7
+"""Pairs with |posterior correlation| above this are listed as strongly correlated (the 3 strongest always)."""
 
 
 def stiff_cases() -> list[dict]:
@@ -90,8 +98,9 @@ def _fit(problem, x0, global_algorithm, max_evals, seed):
                     local_algorithm="LN_BOBYQA", max_evals=max_evals, seed=seed)
 
 
-def run_case(case: dict, *, seed: int = 0, perturbed: int = 3, max_evals: int = 3000) -> dict:
-    """Simulate, fit from the default and ``perturbed`` starts, and condition the best optimum."""
+def run_case(case: dict, *, seed: int = 0, perturbed: int = 3, max_evals: int = 3000, posterior=None) -> dict:
+    """Simulate, fit from the default and ``perturbed`` starts, condition the best optimum and sample a short
+    posterior there (``posterior``: run_posterior settings, default :data:`POSTERIOR`)."""
     from clothlab.examples import START, free_parameters
     from clothlab.fit.problem import FitProblem
     from clothlab.models.irawan.model import IrawanModel
@@ -127,19 +136,61 @@ def run_case(case: dict, *, seed: int = 0, perturbed: int = 3, max_evals: int = 
     best = min(fits, key=lambda f: f["objective"])
     jac = jacobian(problem, np.asarray(best["x"]))
     at_truth = conditioning(jacobian(problem, x_truth), list(free))
+    posterior = posterior_correlations(problem, problem.from_unit(np.asarray(best["x"])), seed=seed,
+                                       **(posterior or POSTERIOR))
     return {"name": case["name"], "preset": case["preset"], "changes": case["changes"], "free": list(free),
             "truth": {n: truth[n] for n in free}, "truth_objective": float(truth_objective), "fits": fits,
             "best_start": best["start"], **conditioning(jac, list(free)),
             "at_truth": {k: at_truth[k] for k in ("condition", "collinear_pairs", "weakest_parameters")},
+            "recovered_default": fits[0]["recovered"],
+            "recovered_perturbed": [f["recovered"] for f in fits[1:]],
+            "posterior": posterior, "strongest_correlations": posterior["strongest_text"],
             "wall_time_s": time.perf_counter() - started}
 
 
-def run_stiff(seed: int = 0, *, perturbed: int = 3, max_evals: int = 3000, cases=None, figures_dir=None) -> dict:
-    """Run every stiff case; returns {"cases": [...]} (``figures_dir`` is accepted for symmetry, unused)."""
+def posterior_correlations(problem, optimum: dict, *, seed: int, walkers: int, steps: int, max_steps: int,
+                           check_every: int) -> dict:
+    """A short emcee posterior at ``optimum`` (checkpoint in a temporary directory, removed afterwards): the
+    correlation matrix of the sampled coordinates, the strongly correlated pairs (|r| > STRONG_CORRELATION, at
+    least the 3 strongest) and the run's summary (steps, walkers, tau, acceptance, convergence)."""
+    import tempfile
+    from pathlib import Path
+
+    from clothlab.fit.posterior import run_posterior
+
+    with tempfile.TemporaryDirectory(prefix="clothlab-stiff-") as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        post = run_posterior(problem, optimum, walkers=walkers, steps=steps, max_steps=max_steps, seed=seed + 3,
+                             check_every=check_every, checkpoint_path=Path(tmp) / "checkpoint.npz", progress=False)
+    names = list(post.names)
+    corr = post.correlation()
+    corr = 0.5 * (corr + corr.T)  # exactly symmetric
+    np.fill_diagonal(corr, 1.0)
+    corr = np.clip(corr, -1.0, 1.0)
+    pairs = sorted(((names[i], names[j], float(corr[i, j])) for i in range(len(names))
+                    for j in range(i + 1, len(names))), key=lambda p: -abs(p[2]))
+    strong = [p for k, p in enumerate(pairs) if abs(p[2]) > STRONG_CORRELATION or k < 3]
+    pct = post.percentiles()
+    return {"names": names, "correlation": corr.tolist(),
+            "strongest_pairs": [{"a": a, "b": b, "r": r} for a, b, r in strong],
+            "strongest_text": "; ".join(f"{a}/{b} {r:+.2f}" for a, b, r in strong),
+            "intervals_95": {n: [pct[n]["p2.5"], pct[n]["p97.5"]] for n in names},
+            "not_determined": post.not_determined(), "steps": post.steps, "walkers": post.walkers,
+            "converged": bool(post.converged), "max_tau": float(np.max(post.tau)),
+            "acceptance_mean": float(np.mean(post.acceptance)), "wall_time_s": post.wall_time,
+            "coordinates": "sampled (unit-box) coordinates: log for log-scaled parameters"}
+
+
+def run_stiff(seed: int = 0, *, perturbed: int = 3, max_evals: int = 3000, cases=None, figures_dir=None,
+              fast: bool = False) -> dict:
+    """Run every stiff case; returns {"cases": [...]} (``figures_dir`` is accepted for symmetry, unused).
+    ``fast``: the short posterior of :data:`FAST_POSTERIOR` (tests)."""
     del figures_dir
     cases = cases or stiff_cases()
-    return {"seed": seed, "max_evals": max_evals,
-            "cases": [run_case(c, seed=seed, perturbed=perturbed, max_evals=max_evals) for c in cases]}
+    posterior = FAST_POSTERIOR if fast else POSTERIOR
+    return {"seed": seed, "max_evals": max_evals, "posterior_settings": dict(posterior),
+            "cases": [run_case(c, seed=seed, perturbed=perturbed, max_evals=max_evals, posterior=posterior)
+                      for c in cases]}
 
 
 def print_stiff(result: dict) -> None:
@@ -154,6 +205,10 @@ def print_stiff(result: dict) -> None:
                                                    or "none"))
         if case["zero_columns"]:
             print(f"    parameters with no effect at the optimum: {', '.join(case['zero_columns'])}")
+        post = case["posterior"]
+        print(f"    posterior ({post['walkers']} walkers x {post['steps']} steps, max tau {post['max_tau']:.0f}, "
+              f"{'converged' if post['converged'] else 'not converged by the tau rule'}): strongest correlations "
+              f"{post['strongest_text'] or '-'}; not determined: {', '.join(post['not_determined']) or 'none'}")
         header = "    " + f"{'start':26s} {'objective':>11s} {'ok':>3s} " + " ".join(f"{n:>11s}" for n in case["free"])
         print(header)
         print("    " + f"{'truth':26s} {'':11s} {'':3s} " + " ".join(f"{case['truth'][n]:11.4g}" for n in case["free"]))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from clothlab import check
-from clothlab.stiff import conditioning
+from clothlab.stiff import FAST_POSTERIOR, conditioning, run_case, stiff_cases
 
 
 def test_fast_check_finds_no_non_finite_negative_or_non_reciprocal_value(tmp_path):
@@ -17,6 +17,7 @@ def test_fast_check_finds_no_non_finite_negative_or_non_reciprocal_value(tmp_pat
     assert t["configurations"] > 50_000
     assert t["non_finite"] == t["negative"] == t["reciprocity"] == t["exceptions"] == 0
     assert t["back_facing_nonzero"] == 0
+    assert result["verdict"]["passed"] and check.exit_code(result) == 0
     assert (tmp_path / "check.json").is_file()
     rows = {(r["sweep"], r["rule"]): r for r in result["continuity"]}
     # the unsmoothed filament cutoff |u| = umax is a true discontinuity (numerics.md): it must be found
@@ -41,6 +42,56 @@ def test_sweep_counts_injected_problems(monkeypatch):
     assert counts["non_finite"] == 1 and counts["negative"] == 1
     assert counts["reciprocity"] == 2  # the 1e-6 change and the NaN
     assert counts["examples"]
+
+
+@pytest.mark.parametrize("key", ["non_finite", "negative", "reciprocity", "exceptions"])
+def test_verdict_fails_on_any_finding(key):
+    clean = {"configurations": 10, "non_finite": 0, "negative": 0, "back_facing_nonzero": 0, "reciprocity": 0,
+             "exceptions": 0}
+    assert check.verdict(clean) == {**check.verdict(clean), "passed": True, "failures": {}}
+    assert check.exit_code({"totals": clean}) == 0
+    v = check.verdict({**clean, key: 3})
+    assert not v["passed"] and v["failures"] == {key: 3}
+    assert check.exit_code({"totals": {**clean, key: 3}}) == 1
+
+
+def test_run_check_exit_code_is_1_when_the_sweep_finds_a_problem(monkeypatch, capsys):
+    """run_check records the verdict of its sweep; one non-finite value makes ``clothlab check`` exit 1."""
+    real = check.sweep_extremes
+
+    def one_nan(parameter_sets, wi, wo, rule, max_examples=5):
+        counts = real(parameter_sets[:2], wi, wo, rule, max_examples)
+        return {**counts, "non_finite": counts["non_finite"] + (rule == check.RULES_CHECKED[0])}
+
+    monkeypatch.setattr(check, "sweep_extremes", one_nan)
+    monkeypatch.setattr(check, "continuity_study", lambda *a, **k: [])
+    monkeypatch.setattr(check, "psi_threshold_jump", lambda *a, **k: [])
+    result = check.run_check(full=False, seed=1)
+    assert result["totals"]["non_finite"] == 2  # grid and random part of the first rule
+    assert result["verdict"] == {**result["verdict"], "passed": False, "failures": {"non_finite": 2}}
+    assert check.exit_code(result) == 1
+    assert "verdict: FAIL (non-finite 2)" in capsys.readouterr().out
+
+
+def test_one_stiff_case_quickly():
+    """A stiff case end to end with small budgets: the outcome fields the report shows are all there and sane."""
+    case = run_case(stiff_cases()[1], perturbed=1, max_evals=300, posterior=FAST_POSTERIOR)
+    free = case["free"]
+    assert len(free) == 6
+    assert math.isfinite(case["condition"]) and case["condition"] >= 1.0
+    assert math.isfinite(case["at_truth"]["condition"])
+    assert isinstance(case["recovered_default"], bool) and case["recovered_default"] == case["fits"][0]["recovered"]
+    assert len(case["recovered_perturbed"]) == 1 and all(isinstance(r, bool) for r in case["recovered_perturbed"])
+    post = case["posterior"]
+    assert post["names"] == free  # Gaussian likelihood (simulated sigma): no noise coordinate
+    corr = np.array(post["correlation"])
+    assert corr.shape == (6, 6) and np.isfinite(corr).all()
+    np.testing.assert_array_equal(corr, corr.T)
+    assert np.all(np.abs(corr) <= 1.0) and np.all(np.diag(corr) == 1.0)
+    strengths = [abs(p["r"]) for p in post["strongest_pairs"]]
+    assert len(strengths) >= 3 and strengths == sorted(strengths, reverse=True)
+    assert post["steps"] == FAST_POSTERIOR["steps"] and post["walkers"] == FAST_POSTERIOR["walkers"]
+    assert case["strongest_correlations"] == post["strongest_text"]
 
 
 def test_kappa_parabola_makes_r_hat_zero():
@@ -70,5 +121,9 @@ def test_full_check_and_stiff_fits():
     t = result["totals"]
     assert t["configurations"] >= 2_000_000  # >= 10^6 per rule, two rules
     assert t["non_finite"] == t["negative"] == t["reciprocity"] == t["exceptions"] == 0
+    assert check.exit_code(result) == 0
     polyester = next(c for c in result["stiff"]["cases"] if c["preset"] == "polyester-lining")
     assert polyester["fits"][0]["recovered"]
+    for case in result["stiff"]["cases"]:
+        corr = np.array(case["posterior"]["correlation"])
+        np.testing.assert_array_equal(corr, corr.T)

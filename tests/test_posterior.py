@@ -166,6 +166,40 @@ def test_checkpoint_from_other_settings_is_refused(tmp_path):
         run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
 
 
+def test_checkpoint_of_another_quadrature_rule_starts_afresh(tmp_path, capsys):
+    """The fingerprint covers the model's quadrature: a rerun with another rule (another likelihood) must not
+    continue the old chain; it starts a new one, says so, and that new chain is resumable in turn."""
+    from clothlab.models.irawan.model import IrawanModel, Quadrature
+
+    problem, truth = _problem()
+    checkpoint = tmp_path / "posterior.npz"
+    run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    other = FitProblem(IrawanModel(problem.model.weave, Quadrature("support", 8)), problem.measurement,
+                       problem.free, problem.start, dict(zip(problem.free, zip(problem.lower, problem.upper,
+                                                                                strict=True), strict=True)),
+                       problem.metric)
+    capsys.readouterr()
+    fresh = run_posterior(other, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    assert fresh.resumed_from == 0
+    message = capsys.readouterr().err
+    assert "belongs to another fit" in message and "model" in message
+    assert any("belongs to another fit" in w and "model" in w for w in fresh.warnings)
+    np.testing.assert_array_equal(fresh.chain, run_posterior(other, truth, seed=7, **FAST).chain)
+    assert run_posterior(other, truth, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 60
+
+
+def test_checkpoint_from_another_optimum_starts_afresh(tmp_path, capsys):
+    problem, truth = _problem()
+    checkpoint = tmp_path / "posterior.npz"
+    run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    moved = {**truth, "beta": truth["beta"] * 1.01}
+    post = run_posterior(problem, moved, seed=7, checkpoint_path=checkpoint, **FAST)
+    assert post.resumed_from == 0
+    assert "optimum" in capsys.readouterr().err
+    # the same optimum again: resumed (the rounding of the recorded optimum does not break an exact rerun)
+    assert run_posterior(problem, moved, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 60
+
+
 def test_coverage_short():
     """95 % intervals contain the generating value for >= 90 % of the free parameters (six noisy sets, two
     free parameters each, a third of the directions, short chains started at a local optimum)."""
