@@ -828,11 +828,12 @@ def btf_section(quick: bool) -> dict:
     return btf_memory_benchmark(quick=quick, verbose=False)
 
 
-def render_section(quick: bool) -> dict:
-    """Receding plane: LoD vs always-texture render time and error against a supersampled reference."""
+def render_section(quick: bool, figures_dir=None) -> dict:
+    """Receding plane: LoD vs always-texture render cost and error against a supersampled reference (and the
+    plot render_lod.png into ``figures_dir``)."""
     from clothlab.render.bench import render_benchmark
 
-    return render_benchmark(quick=quick)
+    return render_benchmark(quick=quick, figures_dir=figures_dir)
 
 
 SECTIONS = ("cli", "speed", "accuracy", "fit", "tradeoff", "fit_algorithms", "models", "posterior", "coverage",
@@ -892,7 +893,7 @@ def run_benchmarks(*, quick: bool = False, json_path=None, figures_dir=None, sec
         figures["btf"] = b = btf_section(quick)
         print(f"\n== BTF stack: {b.get('n_images')} images of {b.get('size')} px ==\n  {b}")
     if "render" in sections:
-        figures["render"] = render_section(quick)
+        figures["render"] = render_section(quick, figures_dir=figures_dir)
     if json_path:
         from clothlab.atomic import atomic_write_text
 

@@ -73,7 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kd", help="diffuse albedo per channel, e.g. 0.2,0.1,0.1")
     p.add_argument("--ks-warp", help="warp specular albedo per channel")
     p.add_argument("--ks-weft", help="weft specular albedo per channel")
-    p.add_argument("--channels", default="R,G,B")
+    p.add_argument("--channels", default="R,G,B",
+                   help="channel names (default R,G,B; with --btf the source's own when it has coefficients)")
     p.add_argument("--noise-mult", type=float, default=0.0, help="multiplicative log-normal sigma (0.05 = 5 %%)")
     p.add_argument("--noise-add", type=float, default=0.0, help="additive Gaussian sigma in 1/sr")
     p.add_argument("--seed", type=int, default=0)
@@ -92,6 +93,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("stack", type=Path, help="BTF stack directory (names with angles, or a manifest)")
     p.add_argument("source", type=Path, help="the reflectance fit directory (fits/<name>) or a fabric.yaml")
     p.add_argument("-o", "--output", type=Path, required=True, help="output directory (texfit.json, tiles.png)")
+    p.add_argument("--free", default="offset,rotation,ratio,hwidth",
+                   help="texture parameters to fit, comma-separated from offset, rotation, ratio, hwidth "
+                        "(default: all); the others stay at offset 0, rotation 0, ratio 1, the source's hWidth")
+    p.add_argument("--refine", default="",
+                   help="BRDF parameters to refine too, comma-separated (e.g. warp.umax,weft.umax; from alpha, "
+                        "beta, delta, warp./weft. psi, umax, kappa); starts from the held optimum and keeps the "
+                        "better (default: none, all held)")
+    p.add_argument("--crop", metavar="X0,Y0,W,H",
+                   help="fit a crop of every image: x0,y0,width,height in pixels (x = column, y = row from the top)")
     p.add_argument("--force", action="store_true")
 
     p = sub.add_parser("render", help="render a scene (flat or cylindrical cloth patch) to EXR and PNG, with the "
@@ -303,12 +313,25 @@ def cmd_simulate(args) -> int:
 
         if not args.source:
             raise ConfigError("--btf needs a source: preset:<name>, a fabric.yaml or a fit directory")
+        not_applicable = [flag for flag, value in (("-o/--output", args.output), ("--paper-examples",
+                          args.paper_examples), ("--noise-mult", args.noise_mult or None),
+                          ("--noise-add", args.noise_add or None)) if value is not None]
+        if not_applicable:
+            raise ConfigError(f"{' and '.join(not_applicable)} {'does' if len(not_applicable) == 1 else 'do'} not "
+                              "apply to --btf: the stack is written into the --btf directory, and its noise is the "
+                              "texture model's intensity noise (paper sec. 7.2.1, seeded by --seed), not the table "
+                              "simulation's measurement noise", field=not_applicable[0].split("/")[-1])
         try:
             offset = tuple(float(x) for x in args.btf_offset.split(","))
         except ValueError:
-            raise ConfigError(f"expected u0,v0 numbers, got {args.btf_offset!r}", field="--btf-offset") from None
+            offset = ()
+        if len(offset) != 2:
+            raise ConfigError(f"expected u0,v0 numbers, got {args.btf_offset!r}", field="--btf-offset")
         return simulate_btf_command(args.source, args.btf, n_directions=args.btf_directions, size=args.btf_size,
-                                    tile_repeats=args.btf_tiles, offset=offset, seed=args.seed, force=args.force)
+                                    tile_repeats=args.btf_tiles, offset=offset, seed=args.seed, kd=args.kd,
+                                    ks_warp=args.ks_warp, ks_weft=args.ks_weft,
+                                    channels=None if args.channels == "R,G,B" else args.channels,
+                                    rule=args.rule, nodes=args.nodes, force=args.force)
     if args.paper_examples is not None:
         from clothlab.examples import write_paper_examples
 
@@ -375,7 +398,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from clothlab.check import run_check
+    from clothlab.check import exit_code, run_check
 
     result = run_check(full=args.full, json_path=args.json, seed=args.seed, figures_dir=args.figures or args.report)
     if args.report:
@@ -385,13 +408,14 @@ def cmd_check(args) -> int:
         page = write_study_report(result, args.report, title="clothlab check: numerical stability and stiff fits",
                                   figures=figures)
         print(f"report: {page}")
-    return 0
+    return exit_code(result)  # 1 when the sweep found a non-finite / negative value or a reciprocity violation
 
 
 def cmd_fit_btf(args) -> int:
     from clothlab.texfit.fit import fit_btf_command
 
-    return fit_btf_command(args.stack, args.source, args.output, force=args.force)
+    return fit_btf_command(args.stack, args.source, args.output, force=args.force, free=args.free,
+                           refine=args.refine, crop=args.crop)
 
 
 def cmd_render(args) -> int:

@@ -88,6 +88,61 @@ def test_missing_image_in_manifest_names_the_file(tmp_path):
         BtfStack.open(tmp_path)
 
 
+def _grid(root, views, lights, naming="utia"):
+    grey = np.full((4, 4, 3), 90, np.uint8)
+    paths = []
+    for k, (tv, pv) in enumerate(views):
+        for j, (tl, pl) in enumerate(lights):
+            if naming == "utia":
+                name = f"tv{tv:03d}_pv{pv:03d}/tl{tl:03d}_pl{pl:03d}_tv{tv:03d}_pv{pv:03d}.png"
+            else:
+                index = k * len(lights) + j
+                name = f"tv{tv:03d}_pv{pv:03d}/{index:05d} tl{tl:03d} pl{pl:03d} tv{tv:03d} pv{pv:03d}.png"
+            paths.append(_write(root / name, grey))
+    return paths
+
+
+LIGHTS3 = [(0, 0), (30, 60), (60, 120)]
+VIEWS2 = [(0, 0), (30, 90)]
+
+
+def test_missing_image_in_a_name_based_grid_names_the_expected_file(tmp_path):
+    paths = _grid(tmp_path / "utia", VIEWS2, LIGHTS3)
+    assert len(BtfStack.open(tmp_path / "utia")) == 6  # complete: opens
+    paths[4].unlink()  # view (30, 90), light (30, 60)
+    with pytest.raises(InputError) as info:
+        BtfStack.open(tmp_path / "utia")
+    expected = tmp_path / "utia" / "tv030_pv090" / "tl030_pl060_tv030_pv090.png"
+    assert info.value.path == str(expected) and "missing image" in str(info.value)
+    assert "tv030_pv090/tl030_pl060_tv030_pv090.png" in str(info.value) and "2-view x 3-light" in str(info.value)
+    # a scattered sampling is allowed where asked for (or with a manifest)
+    assert len(BtfStack.open(tmp_path / "utia", grid=False)) == 5
+
+
+def test_missing_bonn_image_and_missing_view_directory(tmp_path):
+    paths = _grid(tmp_path / "bonn", VIEWS2, LIGHTS3, naming="bonn")
+    paths[2].unlink()  # view (0, 0), light (60, 120): the Bonn index is not known, shown as #####
+    with pytest.raises(InputError, match=r"tv000_pv000/##### tl060 pl120 tv000 pv000\.png"):
+        BtfStack.open(tmp_path / "bonn")
+    # and a view with no image at all, in a stack that claims the full 81 x 81 sampling (> half of it)
+    from clothlab.btf.names import check_grid, utia_directions
+
+    grid = utia_directions()
+    assert len(grid) == 81 and len(set(grid)) == 81
+    root = tmp_path / "full"
+    raw = [(root / f"tv{tv:03.0f}_pv{pv:03.0f}" / f"tl{tl:03.0f}_pl{pl:03.0f}_tv{tv:03.0f}_pv{pv:03.0f}.png",
+            (tl, pl, tv, pv)) for tv, pv in grid for tl, pl in grid]
+    check_grid(root, raw)  # complete
+    gone = (75.0, 165.0)
+    partial = [r for r in raw if r[1][2:] != gone]
+    with pytest.raises(InputError, match="81 x 81") as info:
+        check_grid(root, partial)
+    assert info.value.path == str(root / "tv075_pv165" / "tl000_pl000_tv075_pv165.png")
+    assert "80 more image(s) missing" in str(info.value)
+    # a few complete views of the database are a grid of their own
+    check_grid(root, [r for r in raw if r[1][2:] in grid[:3]])
+
+
 def test_inconsistent_sizes_and_channels(tmp_path):
     _write(tmp_path / "s" / "tl000_pl000_tv000_pv000.png", np.zeros((8, 8, 3), np.uint8))
     _write(tmp_path / "s" / "tl030_pl000_tv000_pv000.png", np.zeros((8, 9, 3), np.uint8))

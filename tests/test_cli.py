@@ -80,7 +80,7 @@ def test_fit_report_eval_end_to_end(tmp_path, capsys, monkeypatch):
 
 @pytest.mark.parametrize("edit, words", [
     (lambda t: t.replace("metric: relative", "metric: relative\n  colour: red"), ["colour"]),
-    (lambda t: t.replace("weft.umax: 30", "weft.umax: 120"), ["weft.umax", "120"]),
+    (lambda t: t.replace("weft.umax: 20", "weft.umax: 120"), ["weft.umax", "120"]),
     (lambda t: t.replace("preset:polyester-lining", "preset:velvet"), ["velvet"]),
     (lambda t: t.replace("path: noisy.csv", "path: missing.csv"), ["missing.csv"]),
 ])
@@ -235,7 +235,13 @@ def test_simulate_btf_then_fit_btf_from_the_cli(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit-btf", str(stack), str(EXAMPLE / "fabric.yaml"), "-o", str(tmp_path / "texfit")]) == 0
     result = json.loads((tmp_path / "texfit" / "texfit.json").read_text())
-    assert result
+    from clothlab.presets import get_preset
+    from clothlab.texfit.fit import offset_error_cells
+
+    truth = result["truth"]  # the simulator's manifest, read back by fit-btf
+    assert truth["offset"] == [0.2, 0.3]
+    assert offset_error_cells(result["offset_tiles"], truth["offset"], get_preset("polyester-lining")) < 0.1
+    assert abs(result["hwidth"] - truth["hwidth"]) < 0.03 and abs(result["ratio_scale"] - 1) < 0.05
 
 
 def test_render_command_writes_exr_and_png(tmp_path, capsys):

@@ -269,3 +269,77 @@ def test_render_command_writes_and_refuses_to_overwrite(tmp_path, capsys):
     with pytest.raises(ResultExistsError):
         render_command(scene, tmp_path / "r", "im-lod", 2, False)
     assert render_command(scene, tmp_path / "r", "kang-lod", 1, True) == 0
+
+
+def test_blend_pixels_evaluate_reflectance_once_and_texture_at_a_share_of_their_samples():
+    """In the blend range a pixel evaluates the reflectance model once (not at every sample) and the texture
+    model at ceil(sum (1 - b)) of its samples, weighted so that its total texture weight is the full
+    blend's; pixels wholly in the texture range keep every sample at weight 1."""
+    from clothlab.render.shade import blend_texture_samples
+
+    rng = np.random.default_rng(3)
+    for spp in (1, 4, 9):
+        pixel = np.repeat(np.arange(200), spp)
+        b = np.clip(rng.uniform(-0.3, 1.3, pixel.size), 0.0, 1.0)
+        b[pixel < 20] = 0.0  # texture-range pixels
+        perm = rng.permutation(pixel.size)  # the order of the samples does not matter
+        index, weight = blend_texture_samples(pixel[perm], b[perm])
+        p, bb = pixel[perm], b[perm]
+        texture_range = bb < 1.0
+        full = np.bincount(p[texture_range], 1.0 - bb[texture_range], minlength=200)
+        np.testing.assert_allclose(np.bincount(p[index], weight, minlength=200), full, atol=1e-12)
+        counts = np.bincount(p[index], minlength=200)
+        m = np.bincount(p[texture_range], minlength=200)
+        np.testing.assert_array_equal(counts, np.where(m > 0, np.clip(np.ceil(full - 1e-9), 1, m), 0))
+        assert np.all(bb[index] < 1.0)
+        assert np.all(weight[p[index] < 20] == 1.0) and np.all(counts[:20] == spp)
+
+    scene = oblique(6.0, resolution=(16, 12))  # footprints inside (f0, f1): every pixel blends
+    lod = render(scene, shader="im-lod", spp=4)
+    s = lod.stats
+    assert scene.lod.f0 < s["footprint_min_tiles"] and s["footprint_max_tiles"] < scene.lod.f1
+    assert s["blend_pixel_fraction"] == 1.0
+    assert s["reflectance_evaluations"] == s["shaded_pixels"]
+    assert s["texture_evaluations"] < s["shaded_samples"]
+    reference = render(scene, shader="im-texture", spp=64).image
+    texture = render(scene, shader="im-texture", spp=4).image
+    assert np.abs(lod.image - reference).sum() / reference.sum() < 0.15
+    assert abs(lod.image.mean() - texture.mean()) / texture.mean() < 0.05
+
+
+def test_receding_plane_error_bound_and_monotone_cost_at_a_tiny_resolution(tmp_path):
+    """The benchmark's statements on a 16 x 12 image: the LoD error within ERROR_BOUND at every distance;
+    from the first distance with no pixel in the texture range on, the model evaluations per image never
+    increase; beyond f1 one reflectance evaluation per pixel; flat rows of scalars; the plot is written."""
+    from clothlab.render.bench import ERROR_BOUND, render_benchmark
+
+    distances = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 16.0, 64.0, 256.0)
+    result = render_benchmark(resolution=(16, 12), distances=distances, reference_spp=16, repeats=1,
+                              shaders=("im-lod", "im-texture", "kang-lod", "kang-texture"),
+                              figures_dir=tmp_path, verbose=False)
+    rows, f0, f1 = result["rows"], result["settings"]["lod_f0_tiles"], result["settings"]["lod_f1_tiles"]
+    assert [r["distance_mm"] for r in rows] == list(distances)
+    assert all(not isinstance(v, dict | list) for r in rows for v in r.values())  # shown on the HTML page
+    errors = [r["im_lod_relative_error"] for r in rows]
+    assert max(errors) <= ERROR_BOUND and result["within_bound"] is True
+    cost = [r["im_lod_model_evaluations"] for r in rows]
+    assert rows[0]["footprint_max_tiles"] < f0 and rows[0]["im_lod_reflectance_evaluations"] == 0  # texture only
+    start = next(i for i, r in enumerate(rows) if r["footprint_min_tiles"] > f0)
+    assert 0 < start < len(rows) - 3 and result["trend"]["trend_from_mm"] == distances[start]
+    assert all(cost[i + 1] <= cost[i] for i in range(start, len(rows) - 1))
+    assert cost[-1] < cost[start] and cost[-1] * 4 == rows[-1]["im_texture_model_evaluations"]
+    # blend pixels are cheap: the cost falls across the blend range itself, below always-texture's by 6 mm
+    # (footprints 0.21..0.37 tile), not only where the reflectance model takes over
+    mid = distances.index(6.0)
+    assert rows[mid]["footprint_max_tiles"] < f1 and cost[mid] < cost[start]
+    assert all(cost[i] < rows[i]["im_texture_model_evaluations"] for i in range(mid, len(rows)))
+    for r in rows:
+        assert r["im_texture_model_evaluations"] == r["im_texture_texture_evaluations"] == 4 * 16 * 12
+        if r["footprint_min_tiles"] >= f1:
+            assert r["im_lod_texture_evaluations"] == 0 and r["im_lod_reflectance_evaluations"] == 16 * 12
+    assert result["lod_cost_falls"] is True
+    # the counts are deterministic: a second run gives the same
+    again = render_benchmark(resolution=(16, 12), distances=distances[:4], reference_spp=4, repeats=1,
+                             shaders=("im-lod", "im-texture"), verbose=False)
+    assert [r["im_lod_model_evaluations"] for r in again["rows"]] == cost[:4]
+    assert (tmp_path / "render_lod.png").read_bytes()[:4] == b"\x89PNG" and result["figure"].endswith("render_lod.png")

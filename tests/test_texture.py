@@ -452,3 +452,92 @@ def test_direction_shapes_broadcast_or_raise():
         assert np.array_equal(a[key], b[key])
     with pytest.raises(ParameterError, match=r"wi \(3, 3\)"):
         texture.components(u, v, np.zeros((3, 3)), wo)
+
+
+# ------------------------------------------------------------------------------ clothlab eval with u, v
+
+
+def _eval_csv(path, rows, header="theta_i,phi_i,theta_o,phi_o,u,v"):
+    path.write_text(header + "\n" + "".join(",".join(repr(float(x)) for x in row) + "\n" for row in rows))
+    return path
+
+
+def _read_csv(path):
+    import csv
+
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+def test_eval_with_u_v_is_the_texture_model_at_those_points(tmp_path, capsys):
+    """``clothlab eval`` with u, v columns against IrawanTexture.evaluate / .components called directly
+    (fit directory: f_r per channel; fabric.yaml: the components), at points across tile edges and at
+    negative coordinates; and the same directions without u, v give the reflectance model instead."""
+    from pathlib import Path
+
+    from clothlab.cli import main
+    from clothlab.config import load_config
+    from clothlab.fit.store import load_fitted
+    from clothlab.presets import resolve_weave
+
+    root = Path(__file__).resolve().parents[1]
+    rng = np.random.default_rng(11)
+    n = 40
+    rows = np.column_stack([rng.uniform(0, 80, n), rng.uniform(0, 360, n), rng.uniform(0, 80, n),
+                            rng.uniform(0, 360, n), rng.uniform(-2.5, 3.5, n), rng.uniform(-1.5, 2.5, n)])
+    csv_path = _eval_csv(tmp_path / "points.csv", rows)
+    wi, wo = spherical_to_vector(rows[:, 0], rows[:, 1]), spherical_to_vector(rows[:, 2], rows[:, 3])
+
+    fit_dir = root / "fits" / "polyester-lining"
+    assert main(["eval", str(fit_dir), str(csv_path), "-o", str(tmp_path / "fit.csv")]) == 0
+    out = _read_csv(tmp_path / "fit.csv")
+    np.testing.assert_array_equal(out["u"], rows[:, 4])
+    np.testing.assert_array_equal(out["v"], rows[:, 5])
+    model, params, coefficients, channels = load_fitted(fit_dir)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        expected = IrawanTexture(model.weave, model.quadrature).evaluate(rows[:, 4], rows[:, 5], wi, wo,
+                                                                        coefficients, params)
+        reflectance = model.evaluate(wi, wo, coefficients, params)
+    got = np.column_stack([out[c] for c in channels])
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
+
+    # without u, v: the reflectance model, which differs from the texture at single points
+    _eval_csv(tmp_path / "angles.csv", rows[:, :4], header="theta_i,phi_i,theta_o,phi_o")
+    assert main(["eval", str(fit_dir), str(tmp_path / "angles.csv"), "-o", str(tmp_path / "refl.csv")]) == 0
+    refl = np.column_stack([_read_csv(tmp_path / "refl.csv")[c] for c in channels])
+    assert "u" not in _read_csv(tmp_path / "refl.csv")
+    np.testing.assert_allclose(refl, reflectance, rtol=1e-9, atol=1e-15)
+    assert np.max(np.abs(refl - got) / np.maximum(refl, 1e-12)) > 0.1
+
+    # a fabric.yaml: the texture components (unit coefficients) with the configured parameters
+    config_path = root / "measurements" / "polyester-lining" / "fabric.yaml"
+    assert main(["eval", str(config_path), str(csv_path), "-o", str(tmp_path / "cfg.csv")]) == 0
+    out = _read_csv(tmp_path / "cfg.csv")
+    cfg = load_config(config_path)
+    texture = IrawanTexture(resolve_weave(cfg.model.weave, cfg.base_dir),
+                            Quadrature(cfg.model.quadrature.rule, cfg.model.quadrature.nodes))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        comps = texture.components(rows[:, 4], rows[:, 5], wi, wo, dict(cfg.model.params))
+    for name in ("diffuse", "specular_warp", "specular_weft"):
+        np.testing.assert_allclose(out[name], comps[name], rtol=1e-12, atol=1e-15)
+    capsys.readouterr()
+
+
+def test_eval_with_u_v_and_a_kang_source_is_a_clear_error(tmp_path, capsys):
+    from pathlib import Path
+
+    from clothlab.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    csv_path = _eval_csv(tmp_path / "points.csv", [[30, 0, 30, 180, 0.25, 0.5]])
+    assert main(["eval", str(root / "fits" / "polyester-lining-kang"), str(csv_path)]) == 2
+    err = capsys.readouterr().err
+    assert "field 'u'" in err and "irawan" in err and "kang" in err and str(csv_path) in err
+    assert err.count("\n") == 1  # one line, no traceback
+    # u without v is named too
+    half = _eval_csv(tmp_path / "half.csv", [[30, 0, 30, 180, 0.25]], header="theta_i,phi_i,theta_o,phi_o,u")
+    assert main(["eval", str(root / "fits" / "polyester-lining"), str(half)]) == 2
+    assert "both columns u and v" in capsys.readouterr().err

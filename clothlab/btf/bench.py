@@ -51,12 +51,24 @@ def png_bytes(pixels: np.ndarray, level: int = 1) -> bytes:
 
 
 def write_synthetic_stack(directory, n_images: int, size: int, *, seed: int = 0) -> list[Path]:
-    """Write ``n_images`` 8-bit PNGs (UTIA names) of :func:`synthetic_weave` into ``directory``."""
+    """Write ``n_images`` 8-bit PNGs (UTIA names) of :func:`synthetic_weave` into ``directory``: a complete
+    light x view grid (the loader rejects an incomplete one), all 81 x 81 for 6,561 images, else the first V
+    views x the first L lights of the sampling with V L = ``n_images`` and L the largest divisor <= 40 (a
+    sub-grid that does not claim the full sampling; 200 = 5 x 40)."""
     directory = Path(directory)
     directions = utia_directions()
-    pairs = [(li, vi) for vi in range(len(directions)) for li in range(len(directions))][:n_images]
-    if len(pairs) < n_images:
-        raise ValueError(f"at most {len(directions) ** 2} images on the UTIA sampling, asked {n_images}")
+    total = len(directions)
+    if not 1 <= n_images <= total**2:
+        raise ValueError(f"at most {total ** 2} images on the UTIA sampling, asked {n_images}")
+    if n_images == total**2:
+        n_views, n_lights = total, total
+    else:
+        n_lights = next((d for d in range(min(40, n_images), 0, -1) if n_images % d == 0 and n_images // d <= 40),
+                        None)
+        if n_lights is None:
+            raise ValueError(f"{n_images} images do not make a sub-grid of at most 40 x 40 directions")
+        n_views = n_images // n_lights
+    pairs = [(li, vi) for vi in range(n_views) for li in range(n_lights)]
     base = synthetic_weave(size)
     tint = np.array([1.0, 0.8, 0.6])
     rng = np.random.default_rng(seed)

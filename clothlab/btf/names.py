@@ -112,13 +112,19 @@ def find_manifest(directory: Path) -> Path | None:
     return None
 
 
-def entries_from_names(directory, *, warp_axis: str = "vertical") -> list[BtfEntry]:
-    """Entries of every image below ``directory`` whose names carry the angles (sorted by path)."""
+def entries_from_names(directory, *, warp_axis: str = "vertical", grid: bool | None = None) -> list[BtfEntry]:
+    """Entries of every image below ``directory`` whose names carry the angles (sorted by path).
+
+    Completeness (:func:`check_grid`): Bonn / UTIA stacks are light x view grids, so a missing image is an
+    error naming the file expected.  ``grid`` None checks when the names look like a grid (a light direction
+    shared by two views); True always; False never (a scattered sampling, e.g. clothlab's writer without a
+    manifest, has every view with its own lights).
+    """
     directory = Path(directory)
     if not directory.is_dir():
         raise InputError("BTF stack directory not found", path=directory)
     convention = name_convention(warp_axis)
-    entries = []
+    entries, raw = [], []
     for path in sorted(p for p in directory.rglob("*") if p.is_file() and is_image(p)):
         rel = path.relative_to(directory)
         if any(part.startswith(".") for part in rel.parts):
@@ -137,11 +143,82 @@ def entries_from_names(directory, *, warp_axis: str = "vertical") -> list[BtfEnt
                     f"view angles in the file name (tv {angles[2]:g}, pv {angles[3]:g}) disagree with its "
                     f"directory '{path.parent.name}' (tv {tv:g}, pv {pv:g})", path=path)
         entries.append(_entry(path, angles, convention, path))
+        raw.append((path, angles))
     if not entries:
         raise InputError(
             f"no images ({', '.join(IMAGE_SUFFIXES)}) found in the BTF stack directory", path=directory)
     check_duplicates(entries)
+    if grid is not False:
+        check_grid(directory, raw, required=bool(grid))
     return entries
+
+
+#: The 81 directions of the Bonn UBO2003 / UTIA sampling: polar angle -> azimuth step (deg); 1 + 6 + 12 +
+#: 18 + 20 + 24 = 81 directions, each stack 81 x 81 = 6,561 images.
+UTIA_RINGS = {0.0: 360.0, 15.0: 60.0, 30.0: 30.0, 45.0: 20.0, 60.0: 18.0, 75.0: 15.0}
+
+
+def utia_directions() -> list[tuple[float, float]]:
+    """The 81 (theta, phi) directions (deg) of the Bonn / UTIA sampling, as written in the file names."""
+    return [(theta, float(phi)) for theta, step in UTIA_RINGS.items() for phi in np.arange(0.0, 360.0, step)]
+
+
+def _key(theta, phi) -> tuple[float, float]:
+    return (round(float(theta), 4), round(float(phi) % 360.0, 4))
+
+
+def check_grid(directory, raw, *, required: bool = False) -> None:
+    """InputError naming the first missing file when a name-based stack is not a complete light x view grid.
+
+    ``raw``: (path, (tl, pl, tv, pv) as written in the name).  Every view must carry the same lights (the
+    union over views) - checked when ``required`` or when some light is shared by two views; and a stack
+    whose directions all lie on the 81-direction Bonn / UTIA sampling and which holds more than half of its
+    6,561 images claims that sampling, so all 81 x 81 must be there (this finds a whole missing view
+    directory too).  A subset of a few views, e.g. one view of a database, is checked as its own grid.
+    """
+    views: dict[tuple, dict[tuple, Path]] = {}
+    for path, (tl, pl, tv, pv) in raw:
+        views.setdefault(_key(tv, pv), {})[_key(tl, pl)] = path
+    lights = {light for per_view in views.values() for light in per_view}
+    shared = len(raw) > len(lights)
+    full = {_key(t, p) for t, p in utia_directions()}
+    claims_full = lights <= full and set(views) <= full and len(raw) > len(full) ** 2 // 2
+    if claims_full:
+        expected_views, expected_lights = sorted(full), sorted(full)
+    elif required or shared:
+        expected_views, expected_lights = sorted(views), sorted(lights)
+    else:
+        return
+    missing = [(view, light) for view in expected_views for light in expected_lights
+               if light not in views.get(view, {})]
+    if not missing:
+        return
+    view, light = missing[0]
+    expected = _expected_path(Path(directory), views.get(view), raw[0][0], light, view)
+    what = ("the 81 x 81 Bonn UBO2003 / UTIA sampling (its directions all lie on that grid)" if claims_full else
+            f"a {len(expected_views)}-view x {len(expected_lights)}-light grid (the lights of every view)")
+    more = f"; {len(missing) - 1} more image(s) missing" if len(missing) > 1 else ""
+    shown = expected.relative_to(directory) if expected.is_relative_to(directory) else expected
+    raise InputError(
+        f"missing image: expected '{shown}'"
+        f" (light tl {light[0]:g} pl {light[1]:g}, view tv {view[0]:g} pv {view[1]:g}) to complete {what}{more}; "
+        "a stack that is not a light x view grid needs a manifest", path=expected)
+
+
+def _expected_path(directory: Path, same_view: dict | None, template: Path, light, view) -> Path:
+    """The file name a missing (light, view) image would have, in the style of a file of the same view (or,
+    for a view with no image at all, of ``template`` in a sibling ``tvNNN_pvNNN`` directory)."""
+    sibling = next(iter(same_view.values())) if same_view else template
+    name = sibling.name
+    match = _ANGLES.search(name)
+    numbers = iter((light[0], light[1], view[0], view[1]))
+    angles = re.sub(_NUMBER, lambda _m: format_angle(next(numbers)), match.group(0))
+    prefix = re.sub(r"\d", "#", name[: match.start()])  # an image index (Bonn) is unknown
+    parent = sibling.parent
+    if not same_view and parent != directory and _VIEW_DIR.match(parent.name):
+        sep = re.search(r"[ _]+", parent.name).group(0)
+        parent = parent.parent / f"tv{format_angle(view[0])}{sep}pv{format_angle(view[1])}"
+    return parent / (prefix + angles + name[match.end():])
 
 
 def read_manifest(path) -> tuple[list[BtfEntry], str]:

@@ -110,9 +110,11 @@ class BtfStack:
 
     @classmethod
     def open(cls, path, *, manifest=None, crop=None, warp_axis: str | None = None, encoding: str = "auto",
-             check: bool = True) -> BtfStack:
+             check: bool = True, grid: bool | None = None) -> BtfStack:
         """Open a stack directory (manifest.yaml / manifest.csv inside, else angles from the file names)
-        or a manifest file.  ``warp_axis`` defaults to the manifest's, else 'vertical'."""
+        or a manifest file.  ``warp_axis`` defaults to the manifest's, else 'vertical'.  ``grid``: the
+        completeness check of a name-based stack (:func:`clothlab.btf.names.entries_from_names`: None =
+        when the names look like a light x view grid, True = always, False = never)."""
         path = Path(path)
         if manifest is None:
             if path.is_file():
@@ -128,7 +130,7 @@ class BtfStack:
                                  path=manifest, field="warp_axis")
             return cls(entries, crop=crop, warp_axis=declared, encoding=encoding, source=manifest, check=check)
         warp_axis = warp_axis or "vertical"
-        return cls(entries_from_names(path, warp_axis=warp_axis), crop=crop, warp_axis=warp_axis,
+        return cls(entries_from_names(path, warp_axis=warp_axis, grid=grid), crop=crop, warp_axis=warp_axis,
                    encoding=encoding, source=path, check=check)
 
     # -- geometry of the images ------------------------------------------------------------------------

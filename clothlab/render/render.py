@@ -26,7 +26,8 @@ from clothlab.render.shade import SHADERS, Counter, FabricModels, Samples, lod_w
 
 @dataclass
 class RenderResult:
-    """image (H, W, C) linear radiance; coverage (H, W) fraction of samples on the patch; timings (s);
+    """image (H, W, C) linear radiance; coverage (H, W) fraction of samples on the patch; timings (s: wall
+    clock per stage, ``shading_cpu`` / ``total_cpu`` this process's CPU time, ``<model>_seconds`` per model);
     stats: sample and model-evaluation counts, the fraction of covered pixels that ran the texture model
     (``texture_pixel_fraction``), that used only the reflectance model, footprint range (tiles)."""
 
@@ -56,7 +57,7 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
     """
     spp = scene.spp if spp is None else spp
     _check(shader, spp)
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     fabric = fabric or FabricModels.build(scene.fabric)
     t_build = time.perf_counter()
     camera = PinholeCamera(scene.camera)
@@ -77,21 +78,22 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
     front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
     samples = Samples(hits.u[front], hits.v[front], wi[front], wo[front], footprint[front], pixel[idx][front],
                       hits.distance[front])
-    t_geometry = time.perf_counter()
+    t_geometry, cpu_geometry = time.perf_counter(), time.process_time()
 
     counter = Counter()
     f_r = shade(shader, fabric, samples, scene.lod, counter)
     radiance = f_r * (irradiance[front] * wi[front, 2])[:, None]
-    t_shade = time.perf_counter()
+    t_shade, cpu_shade = time.perf_counter(), time.process_time()
 
     channels = len(fabric.channels)
     image = np.stack([np.bincount(samples.pixel, radiance[:, c], minlength=h * w) for c in range(channels)],
                      axis=-1) / spp
     coverage = np.bincount(pixel[idx], minlength=h * w) / spp
-    t_end = time.perf_counter()
+    t_end, cpu_end = time.perf_counter(), time.process_time()
 
     timings = {"setup": t_build - start, "geometry": t_geometry - t_build, "shading": t_shade - t_geometry,
-               "accumulate": t_end - t_shade, "total": t_end - start}
+               "accumulate": t_end - t_shade, "total": t_end - start,
+               "shading_cpu": cpu_shade - cpu_geometry, "total_cpu": cpu_end - cpu_start}
     timings.update({k: v for k, v in counter.items() if k.endswith("_seconds")})
     stats = _stats(shader, scene, samples, counter, h * w, idx.size, pixel[idx])
     return RenderResult(image=image.reshape(h, w, channels), coverage=coverage.reshape(h, w),
@@ -212,15 +214,24 @@ REFERENCE_SHADER = {"im": "im-texture", "kang": "kang-texture"}
 
 
 def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
-                reference_spp: int = 64, repeats: int = 1, fabric: FabricModels | None = None) -> list[dict]:
+                reference_spp: int = 64, repeats: int = 1, repeat_budget_s: float = float("inf"),
+                warmup: bool = True, fabric: FabricModels | None = None) -> list[dict]:
     """Render ``scene`` with the camera moved to each distance (mm from its look-at point, same direction):
     per shader family the supersampled texture-level shader (im-texture or kang-texture at ``reference_spp``
     stratified samples) as the antialiasing reference, and each shader at ``spp``.  Per distance and shader:
-    time (best of ``repeats``, s), relative L1 error vs its family's reference over fully covered pixels,
-    texture-pixel fraction, texture evaluations; and the footprint range of the view (tiles)."""
+    the render with the least shading CPU time of up to ``repeats`` (fewer once a shader has spent
+    ``repeat_budget_s`` at that distance) - total and shading seconds (wall), shading CPU seconds (this
+    process; less disturbed by other load), seconds per model - the relative L1
+    error vs its family's reference over fully covered pixels, the model evaluations (deterministic: the
+    same scene gives the same counts), texture / blend pixel fractions; and the footprint range of the view
+    (tiles).  ``warmup``: one small render per shader first, so compilation and caches are not timed."""
     for shader in shaders:
         _check(shader, spp)
     fabric = fabric or FabricModels.build(scene.fabric)
+    if warmup:
+        small = replace(scene, camera=replace(scene.camera, resolution=(4, 3)))
+        for shader in {*shaders, *(REFERENCE_SHADER[s.split("-")[0]] for s in shaders)}:
+            render(small, shader=shader, spp=1, fabric=fabric)
     rows = []
     for distance in distances:
         s = replace(scene, camera=scene.camera.at_distance(distance))
@@ -233,20 +244,28 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
                 row[f"{family}_reference_seconds"] = references[family].timings["total"]
             reference = references[family]
             mask = reference.coverage >= 1.0
-            best = None
-            for _ in range(repeats):
+            best, spent, runs = None, 0.0, 0
+            while runs < max(1, repeats) and (runs == 0 or spent < repeat_budget_s):
                 result = render(s, shader=shader, spp=spp, fabric=fabric)
-                if best is None or result.timings["total"] < best.timings["total"]:
+                spent, runs = spent + result.timings["total"], runs + 1
+                if best is None or result.timings["shading_cpu"] < best.timings["shading_cpu"]:
                     best = result
+            st = best.stats
             row[shader] = {"seconds": best.timings["total"], "shading_seconds": best.timings["shading"],
-                           "relative_error": relative_error(best.image, reference.image, mask),
-                           "texture_pixel_fraction": best.stats["texture_pixel_fraction"],
-                           "texture_evaluations": best.stats["texture_evaluations"],
-                           "reflectance_evaluations": best.stats["reflectance_evaluations"],
-                           "kang_evaluations": best.stats["kang_evaluations"]}
+                           "shading_cpu_seconds": best.timings["shading_cpu"],
+                           "runs": runs, "relative_error": relative_error(best.image, reference.image, mask),
+                           "texture_pixel_fraction": st["texture_pixel_fraction"],
+                           "blend_pixel_fraction": st["blend_pixel_fraction"],
+                           "texture_evaluations": st["texture_evaluations"],
+                           "reflectance_evaluations": st["reflectance_evaluations"],
+                           "kang_evaluations": st["kang_evaluations"],
+                           "model_evaluations": (st["texture_evaluations"] + st["reflectance_evaluations"]
+                                                 + st["kang_evaluations"]),
+                           **{f"{m}_{k}": best.timings.get(f"{m}_{k}", 0.0)
+                              for m in ("texture", "reflectance", "kang") for k in ("seconds", "cpu_seconds")}}
             row.setdefault("pixels", int(mask.sum()))
-            row.setdefault("footprint_min_tiles", best.stats["footprint_min_tiles"])
-            row.setdefault("footprint_median_tiles", best.stats["footprint_median_tiles"])
-            row.setdefault("footprint_max_tiles", best.stats["footprint_max_tiles"])
+            row.setdefault("footprint_min_tiles", st["footprint_min_tiles"])
+            row.setdefault("footprint_median_tiles", st["footprint_median_tiles"])
+            row.setdefault("footprint_max_tiles", st["footprint_max_tiles"])
         rows.append(row)
     return rows

@@ -13,7 +13,14 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      This is the paper's "seamless switching" (sec. 3.2, 7): the tile average of the texture
                      model equals the reflectance model, so the far limit of a supersampled texture and
                      the reflectance model agree (tests/test_render.py).  Where b = 1 the texture model
-                     is never called (counted); the reflectance part is evaluated once per pixel.
+                     is never called (counted); the reflectance part is evaluated once per pixel (at its
+                     first sample with b > 0).  Blend pixels do not run the texture model at all their
+                     samples: with m samples and texture weight W = sum (1 - b) the texture runs at
+                     n = ceil(W) of them, spread over the strata, each weighted W / n
+                     (:func:`blend_texture_samples`), so the texture work of a pixel falls with (1 - b)
+                     and the cost per image falls monotonically with distance once no pixel is left in
+                     the pure texture range (render_benchmark).  With one sample per pixel this is the
+                     plain blend.
 - ``kang-texture``   Kang's point shader with full yarn detail (footprint None, alpha = 0 of eq. 5).
 - ``kang-lod``       Kang's point shader with the pixel footprint: the eq. 5 mip blend, and Algorithm 1
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
@@ -74,7 +81,8 @@ class Samples:
     distance: np.ndarray
 
     def take(self, index) -> Samples:
-        return Samples(*(getattr(self, k)[index] for k in ("u", "v", "wi", "wo", "footprint", "pixel", "distance")))
+        return Samples(*(np.take(getattr(self, k), index, axis=0)
+                         for k in ("u", "v", "wi", "wo", "footprint", "pixel", "distance")))
 
 
 @dataclass
@@ -167,15 +175,17 @@ def _needed(component: str, coefficients: dict, weave) -> bool:
 
 
 class Counter(dict):
-    """Model evaluations per model (points passed in) and the time spent in each (seconds)."""
+    """Model evaluations per model (points passed in) and the time spent in each (``<model>_seconds`` wall
+    clock, ``<model>_cpu_seconds`` this process's CPU time)."""
 
     def run(self, name, n, fn, *args, **kwargs):
         import time
 
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         out = fn(*args, **kwargs)
         self[f"{name}_points"] = self.get(f"{name}_points", 0) + int(n)
         self[f"{name}_seconds"] = self.get(f"{name}_seconds", 0.0) + time.perf_counter() - start
+        self[f"{name}_cpu_seconds"] = self.get(f"{name}_cpu_seconds", 0.0) + time.process_time() - cpu
         return out
 
 
@@ -192,12 +202,33 @@ def texture_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.nda
     return combine(comps, fabric.coefficients)
 
 
+def pixel_groups(pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Samples grouped by pixel: (order, starts, group) with ``order`` the permutation that sorts the samples
+    by pixel (stable; the identity when they already are, as :func:`clothlab.render.render` emits them),
+    ``starts`` the first sorted position of each pixel's run and ``group`` (M,) the run of each sorted sample."""
+    pixel = np.asarray(pixel)
+    if pixel.size > 1 and np.any(pixel[1:] < pixel[:-1]):
+        order = np.argsort(pixel, kind="stable")
+        pixel = pixel[order]
+    else:
+        order = np.arange(pixel.size)
+    new_run = np.empty(pixel.size, dtype=bool)
+    new_run[:1] = True
+    np.not_equal(pixel[1:], pixel[:-1], out=new_run[1:])
+    starts = np.flatnonzero(new_run)
+    group = np.repeat(np.arange(starts.size), np.diff(np.append(starts, pixel.size)))
+    return order, starts, group
+
+
 def reflectance_values(fabric: FabricModels, s: Samples, counter: Counter, *, per_pixel: bool = True) -> np.ndarray:
     """IM reflectance model f_r (M, C); with ``per_pixel`` evaluated at the first sample of each pixel."""
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     if per_pixel:
-        _, first, back = np.unique(s.pixel, return_index=True, return_inverse=True)
+        order, starts, group = pixel_groups(s.pixel)
+        first = order[starts]
+        back = np.empty(len(s.u), dtype=np.intp)
+        back[order] = group
         wi, wo = s.wi[first], s.wo[first]
     else:
         back, wi, wo = slice(None), s.wi, s.wo
@@ -206,19 +237,45 @@ def reflectance_values(fabric: FabricModels, s: Samples, counter: Counter, *, pe
     return combine(comps, fabric.coefficients)[back]
 
 
+def blend_texture_samples(pixel: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which samples of the texture range (b < 1) run the texture model, and their texture weight.
+
+    Per pixel with m samples of b < 1 the full blend needs W = sum (1 - b) of texture weight.  The texture
+    runs at n = ceil(W) of the m samples (at least 1; all m where b = 0, so the pure texture range is
+    unchanged), spread evenly over the pixel's strata (rotated by the pixel index), each weighted W / n:
+    the same total texture weight with about (1 - b) of the texture work.  Returns (sample indices,
+    weights)."""
+    candidates = np.flatnonzero(b < 1.0)
+    if candidates.size == 0:
+        return candidates, np.zeros(0)
+    order, starts, group = pixel_groups(pixel[candidates])
+    sorted_idx = candidates[order]
+    m = np.diff(np.append(starts, sorted_idx.size))
+    weight_sum = np.bincount(group, 1.0 - b[sorted_idx], minlength=starts.size)
+    n = np.clip(np.ceil(weight_sum - 1e-9), 1, m)
+    # rank of each sample in its pixel, rotated by the pixel index; keep rank r iff floor((r + 1) n / m) >
+    # floor(r n / m): exactly n of the m ranks, evenly spread (ratios of integers <= m: the 1e-9 is exact)
+    rotation = pixel[sorted_idx[starts]] % m
+    rank = np.arange(sorted_idx.size) - starts[group] + rotation[group]
+    rank -= np.where(rank >= m[group], m[group], 0)
+    q = (n / m)[group]
+    keep = np.floor((rank + 1) * q + 1e-9) > np.floor(rank * q + 1e-9)
+    return sorted_idx[keep], (weight_sum / n)[group[keep]]
+
+
 def im_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) -> np.ndarray:
     """The IM level of detail (module docstring): texture, blend or reflectance by the pixel footprint."""
     b = lod_weight(s.footprint, lod.f0, lod.f1)
+    if not np.any(b > 0.0):  # the whole view resolves yarns
+        return texture_values(fabric, s, counter)
+    if np.all(b >= 1.0):  # the whole view covers many tiles
+        return reflectance_values(fabric, s, counter)
     out = _zeros(fabric, len(b))
-    near = np.flatnonzero(b < 1.0)
-    if near.size:
-        out[near] += (1.0 - b[near, None]) * texture_values(fabric, s.take(near), counter)
-    blend = np.flatnonzero((b > 0.0) & (b < 1.0))
-    if blend.size:
-        out[blend] += b[blend, None] * reflectance_values(fabric, s.take(blend), counter, per_pixel=False)
-    far = np.flatnonzero(b >= 1.0)
-    if far.size:
-        out[far] += reflectance_values(fabric, s.take(far), counter)
+    some = np.flatnonzero(b > 0.0)  # blend and far samples: the reflectance once per pixel
+    out[some] = b[some, None] * reflectance_values(fabric, s.take(some), counter)
+    index, weight = blend_texture_samples(s.pixel, b)
+    if index.size:
+        out[index] += weight[:, None] * texture_values(fabric, s.take(index), counter)
     return out
 
 

@@ -4,8 +4,10 @@ Free (any subset of :data:`TEXTURE_FREE`): the tile offset (u0, v0) in tiles, a 
 the segment length/width ratio scale s and hWidth (eq. 12), with the layout conventions of
 :mod:`clothlab.texfit.simulate_btf`.  The BRDF parameters come from a reflectance fit (or fabric.yaml) and
 are **held fixed**; ``refine`` names BRDF parameters (e.g. ``warp.umax``) that are refined as well, within
-their declared fit bounds.  At every objective evaluation the linear coefficients (kd, ks_warp, ks_weft) are
-solved by exact NNLS per channel (:func:`clothlab.fit.nnls.nnls_small`, DESIGN.md principle 3).
+their declared fit bounds, in a second stage that starts from the held optimum and keeps the better of the
+two (so refining never ends worse than holding).  At every objective evaluation the linear coefficients
+(kd, ks_warp, ks_weft) are solved by exact NNLS per channel (:func:`clothlab.fit.nnls.nnls_small`, DESIGN.md
+principle 3).
 
 Data: the **raw images**, not the unit-tile averages.  Reasons: (1) a rotated weave is smeared by averaging
 tiles along the image axes, so the rotation is only observable in the raw images; (2) the intensity noise
@@ -120,6 +122,8 @@ class TextureFit:
     message: str
     source: str
     truth: dict | None = None
+    refine_stage: dict | None = None
+    crop: dict | None = None
     measured_tiles: np.ndarray | None = field(default=None, repr=False)
     model_tiles: np.ndarray | None = field(default=None, repr=False)
 
@@ -134,6 +138,7 @@ class TextureFit:
             "free": list(self.free), "evaluations": self.nevals, "wall_time_s": self.seconds,
             "grid": self.grid, "optimizer": self.message, "source": self.source, "truth": self.truth,
             "held_fixed": "BRDF parameters of the source (reflectance fit), except 'refined'",
+            "refine_stage": self.refine_stage, "crop": self.crop,
             "data": "raw images (pixel values), noise-free model at pixel centres",
             "errors": self.errors,
         }
@@ -159,14 +164,13 @@ class _Problem:
         self.start = {"u0": 0.0, "v0": 0.0, "rotation": 0.0, "ratio": 1.0, "hwidth": float(src.params["hwidth"]),
                       **{k: float(src.params[k]) for k in refine}}
 
-    def names(self) -> list[str]:
+    def names(self, refine: bool = True) -> list[str]:
+        """Optimiser coordinates: the free texture parameters, then (``refine``) the refined BRDF ones."""
         out = []
         for name in self.free:
             out += ["u0", "v0"] if name == "offset" else [name]
-        return out + list(self.refine)
+        return out + (list(self.refine) if refine else [])
 
-    def values(self, x) -> dict:
-        return {**self.start, **dict(zip(self.names(), np.asarray(x, float).tolist(), strict=True))}
 
     def components(self, values: dict, stride: int = 1) -> np.ndarray:
         """(N, P, 3) diffuse, specular_warp, specular_weft at the (subsampled) pixels."""
@@ -197,19 +201,66 @@ class _Problem:
 
 
 def _scale_from(stack, tile_repeats, weave) -> tuple[float, float]:
-    """Tiles across (width, height): given, from a clothlab manifest, or from the images' period."""
+    """Tiles across the (cropped) images' (width, height): given (for the whole image), from a clothlab
+    manifest (whole image), or from the images' period."""
+    crop_fraction = (stack.width / stack.info.width, stack.height / stack.info.height)
     if tile_repeats is not None:
         r = np.atleast_1d(np.asarray(tile_repeats, float))
-        return (float(r[0]), float(r[-1]))
+        return (float(r[0]) * crop_fraction[0], float(r[-1]) * crop_fraction[1])
     if stack.source is not None and stack.source.suffix.lower() in (".yaml", ".yml"):
         import yaml
 
         doc = yaml.safe_load(stack.source.read_text(encoding="utf-8")) or {}
         repeats = (doc.get("simulated") or {}).get("tile_repeats")
         if repeats:
-            return (float(repeats[0]), float(repeats[1]))
+            return (float(repeats[0]) * crop_fraction[0], float(repeats[1]) * crop_fraction[1])
     period = stack.estimate_period()
     return (stack.width / period.px, stack.height / period.py)
+
+
+def crop_corner_tiles(stack, repeats) -> tuple[float, float]:
+    """Texture coordinate (tiles, offset excluded) of the crop's lower-left corner in the whole image
+    (pixel mapping of :mod:`clothlab.btf.write`: u from the left edge, v from the bottom edge); (0, 0)
+    without a crop.  ``repeats``: tiles across the cropped image."""
+    if stack.crop is None:
+        return (0.0, 0.0)
+    x0, y0, w, h = stack.crop
+    return (x0 * repeats[0] / w, (stack.info.height - y0 - h) * repeats[1] / h)
+
+
+def parse_names(text, allowed, flag: str) -> tuple[str, ...]:
+    """Comma-separated names (``--free``, ``--refine``), each one of ``allowed``; ConfigError naming a bad one."""
+    from clothlab.errors import ConfigError
+
+    names = tuple(n.strip() for n in str(text).split(","))
+    for name in names:
+        if name not in allowed:
+            raise ConfigError(f"unknown name {name!r}; choose from {', '.join(allowed)} (comma-separated)",
+                              field=flag)
+    if len(set(names)) != len(names):
+        raise ConfigError(f"a name is given twice in {text!r}", field=flag)
+    return names
+
+
+def parse_crop(text, flag: str = "--crop") -> tuple[int, int, int, int]:
+    """``x0,y0,width,height`` in pixels (x = column, y = row from the top), as :class:`BtfStack` takes it."""
+    from clothlab.errors import ConfigError
+
+    try:
+        values = [int(v) for v in str(text).split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 4:
+        raise ConfigError(f"expected x0,y0,width,height (four integers, pixels), got {text!r}", field=flag)
+    x0, y0, w, h = values
+    if x0 < 0 or y0 < 0 or w < 1 or h < 1:
+        raise ConfigError(f"expected x0, y0 >= 0 and width, height >= 1 pixels, got {text!r}", field=flag)
+    return x0, y0, w, h
+
+
+#: BRDF parameters a texture fit may refine (``refine``): the reflectance model's, but hWidth (a texture
+#: parameter here) and the segment w, l (set by ``ratio``)
+REFINABLE = ("alpha", "beta", "delta", "warp.psi", "warp.umax", "warp.kappa", "weft.psi", "weft.umax", "weft.kappa")
 
 
 def _manifest_truth(stack) -> dict | None:
@@ -225,27 +276,67 @@ def _manifest_truth(stack) -> dict | None:
     return {k: texture.get(k) for k in keys}
 
 
-def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), tile_repeats=None, grid_step: float = 0.25,
-                grid_stride: int = 2, starts: int = 3, max_evals: int = 600, seed: int = 1) -> TextureFit:
+def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), crop=None, tile_repeats=None,
+                grid_step: float = 0.25, grid_stride: int = 2, starts: int = 3, max_evals: int = 600,
+                seed: int = 1) -> TextureFit:
     """Fit the texture parameters to ``stack`` (a :class:`~clothlab.btf.BtfStack` or a path) with the BRDF of
-    ``source`` (fit directory, fabric.yaml or preset) held fixed; see the module docstring for the method."""
+    ``source`` (fit directory, fabric.yaml or preset) held fixed; see the module docstring for the method.
+
+    ``free``: texture parameters fitted (:data:`TEXTURE_FREE`); the others stay at their starts (offset 0,
+    rotation 0, ratio 1, the source's hWidth).  ``refine``: BRDF parameters (:data:`REFINABLE`) refined in a
+    second stage that starts from the held optimum (all free parameters and the refined ones together,
+    LN_SBPLX, up to ``max_evals`` evaluations); the better of the held and the refined optimum is kept, so
+    refining never ends worse than holding (``refine_stage`` in the result says which was kept).  ``crop``:
+    (x0, y0, width, height) pixels of every image; the reported offset is that of the whole image's corner.
+    ``tile_repeats``: tiles across the whole image (default: the manifest's, else from the period).  With a
+    crop a rotation turns about the crop's centre (not the whole image's), which shifts the offset found by
+    (I - R) (c_image - c_crop) - a small shift for the few degrees a rotation may take.
+    """
     from clothlab.btf import BtfStack
-    from clothlab.fit.optimize import minimize
-    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+    from clothlab.errors import ConfigError
 
     start_time = time.perf_counter()
-    stack = stack if isinstance(stack, BtfStack) else BtfStack.open(stack)
+    free, refine = tuple(free), tuple(refine)
+    for names, allowed, what in ((free, TEXTURE_FREE, "free"), (refine, REFINABLE, "refine")):
+        for name in names:
+            if name not in allowed:
+                raise ConfigError(f"unknown {what} parameter {name!r}; choose from {', '.join(allowed)}", field=what)
+    if isinstance(stack, BtfStack):
+        if crop is not None:
+            stack = BtfStack(stack.entries, crop=crop, warp_axis=stack.warp_axis, encoding=stack.encoding,
+                             source=stack.source, check=False)
+    else:
+        stack = BtfStack.open(stack, crop=crop)
     src = source if isinstance(source, TextureSource) else load_source(source)
-    unknown = [f for f in free if f not in TEXTURE_FREE]
-    bad_refine = [r for r in refine if r not in IRAWAN_PARAMS.names() or r in ("hwidth",)]
-    if unknown or bad_refine:
-        raise InputError(f"free must be among {', '.join(TEXTURE_FREE)} and refine among the BRDF parameters; got "
-                         f"{unknown + bad_refine}", field="free")
     weave = src.weave
     repeats = _scale_from(stack, tile_repeats, weave)
     problem = _Problem(stack, src, repeats, free, refine)
     w, h = weave.tile_width, weave.tile_height
     nevals = 0
+    messages: list[str] = []
+
+    def polish(base, names, x0, bounds, budget):
+        lo, hi = [b[0] for b in bounds], [b[1] for b in bounds]
+        x0 = [float(np.clip(x, a, b)) for x, a, b in zip(x0, lo, hi, strict=True)]
+
+        def objective(x):
+            return problem.solve({**base, **dict(zip(names, x.tolist(), strict=True))})[0]
+
+        result = minimize(objective, x0, lo, hi, global_algorithm=None, local_algorithm="LN_SBPLX",
+                          max_evals=max(20, budget), seed=seed, xtol_rel=1e-5)
+        messages.append(result.message)
+        return result.nevals, {**base, **dict(zip(names, result.x.tolist(), strict=True))}
+
+    def bounds_of(name, values):
+        if name == "u0":
+            return (values["u0"] - grid_step / w, values["u0"] + grid_step / w)
+        if name == "v0":
+            return (values["v0"] - grid_step / h, values["v0"] + grid_step / h)
+        return {"rotation": ROTATION_BOUNDS, "ratio": RATIO_BOUNDS, "hwidth": HWIDTH_BOUNDS}.get(name) or \
+            IRAWAN_PARAMS[name].bounds
+
+    from clothlab.fit.optimize import minimize
+    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
@@ -265,33 +356,32 @@ def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), tile_repeats=Non
                 scores.append((value, u0, v0))
                 nevals += 1
         scores.sort()
-        names = problem.names()
+        # stage 1: the texture parameters with the BRDF held, polished from the best grid points
+        held_names = problem.names(refine=False)
         best = None
-        messages = []
         for _value, u0, v0 in scores[: max(1, starts)]:
-            x0, lo, hi = [], [], []
-            for name in names:
-                if name == "u0":
-                    x0.append(u0), lo.append(u0 - grid_step / w), hi.append(u0 + grid_step / w)
-                elif name == "v0":
-                    x0.append(v0), lo.append(v0 - grid_step / h), hi.append(v0 + grid_step / h)
-                else:
-                    bounds = {"rotation": ROTATION_BOUNDS, "ratio": RATIO_BOUNDS, "hwidth": HWIDTH_BOUNDS}.get(name)
-                    if bounds is None:
-                        bounds = IRAWAN_PARAMS[name].bounds
-                    x0.append(float(np.clip(problem.start[name], *bounds))), lo.append(bounds[0]), hi.append(bounds[1])
             base = {**problem.start, "u0": u0, "v0": v0}
-
-            def objective(x, base=base):
-                return problem.solve({**base, **dict(zip(names, x.tolist(), strict=True))})[0]
-
-            result = minimize(objective, x0, lo, hi, global_algorithm=None, local_algorithm="LN_SBPLX",
-                              max_evals=max(20, max_evals // max(1, starts)), seed=seed, xtol_rel=1e-5)
-            nevals += result.nevals
-            messages.append(result.message)
-            if best is None or result.fun < best[0]:
-                best = (result.fun, {**base, **dict(zip(names, result.x.tolist(), strict=True))})
-        values = best[1]
+            n, values = polish(base, held_names, [base[k] for k in held_names],
+                               [bounds_of(k, base) for k in held_names], max_evals // max(1, starts))
+            nevals += n
+            objective_value = problem.solve(values)[0]
+            if best is None or objective_value < best[0]:
+                best = (objective_value, values)
+        held_objective, values = best
+        refine_stage = None
+        # stage 2: refine the BRDF parameters too, from the held optimum; keep the better
+        if refine:
+            names = problem.names(refine=True)
+            n, refined = polish(values, names, [values[k] for k in names], [bounds_of(k, values) for k in names],
+                                max_evals)
+            nevals += n
+            refined_objective = problem.solve(refined)[0]
+            kept = "refined" if refined_objective < held_objective else "held"
+            refine_stage = {"held_objective": held_objective, "refined_objective": refined_objective, "kept": kept,
+                            "start": {k: float(problem.start[k]) for k in refine},
+                            "refined_values": {k: float(refined[k]) for k in refine}}
+            if kept == "refined":
+                values = refined
         objective_value, coef, design, y = problem.solve(values)
         noise = noise_statistics(design, y, coef)
         model = np.einsum("npk,kc->npc", design, coef)
@@ -301,18 +391,22 @@ def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), tile_repeats=Non
     shape = problem.pixels.shape
     errors, measured_tiles, model_tiles = image_errors(
         problem.pixels, model.reshape(shape), repeats, channels, stack)
-    offset = (float(np.mod(values["u0"], 1.0)), float(np.mod(values["v0"], 1.0)))
+    corner = crop_corner_tiles(stack, repeats)
+    offset = (float(np.mod(values["u0"] - corner[0], 1.0)), float(np.mod(values["v0"] - corner[1], 1.0)))
     return TextureFit(
         offset=offset, rotation=float(values["rotation"]), ratio=float(values["ratio"]),
         hwidth=float(values["hwidth"]), refined={k: float(values[k]) for k in refine},
         coefficients={k: coef[i] for i, k in enumerate(("kd", "ks_warp", "ks_weft"))}, channels=channels,
         objective=objective_value, noise=noise, errors=errors,
         translations=pattern_translations(weave).tolist(), repeats=repeats, angles=stack.angles,
-        files=[str(e.path.name) for e in stack.entries], free=tuple(free), nevals=nevals,
+        files=[str(e.path.name) for e in stack.entries], free=free, nevals=nevals,
         seconds=time.perf_counter() - start_time,
         grid={"step_cells": grid_step, "stride_px": grid_stride, "points": len(scores),
               "best": [{"objective": s, "u0": a, "v0": b} for s, a, b in scores[: max(1, starts)]]},
-        message="; ".join(messages), source=src.origin, truth=_manifest_truth(stack),
+        message="; ".join(messages), source=src.origin, truth=_manifest_truth(stack), refine_stage=refine_stage,
+        crop=None if stack.crop is None else {
+            "x0": stack.crop[0], "y0": stack.crop[1], "width": stack.crop[2], "height": stack.crop[3],
+            "corner_tiles": list(corner), "offset_of_crop_tiles": [float(values["u0"]), float(values["v0"])]},
         measured_tiles=measured_tiles, model_tiles=model_tiles)
 
 
@@ -377,9 +471,12 @@ def image_errors(measured, model, repeats, channels, stack=None, percentiles=(50
     return errors, tiles_measured, tiles_model
 
 
-def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False) -> int:
-    """CLI body of ``clothlab fit-btf``: fit, write ``texfit.json``, ``errors.json`` and ``tiles.png`` into
-    ``out_dir`` atomically (ResultExistsError if it exists, unless ``force``); print a summary; 0 on success."""
+def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False, *, free=TEXTURE_FREE, refine=(),
+                    crop=None) -> int:
+    """CLI body of ``clothlab fit-btf``: fit (``free``, ``refine``, ``crop`` as :func:`fit_texture`; the CLI
+    strings are parsed by :func:`parse_names` / :func:`parse_crop`), write ``texfit.json``, ``errors.json``
+    and ``tiles.png`` into ``out_dir`` atomically (ResultExistsError if it exists, unless ``force``); print a
+    summary; 0 on success."""
     import json
 
     from clothlab.atomic import atomic_directory, atomic_write_bytes
@@ -390,7 +487,13 @@ def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False) ->
     out_dir = Path(out_dir)
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
         raise ResultExistsError(f"{out_dir} already exists; pass --force to replace it", path=out_dir)
-    result = fit_texture(stack_dir, fit_dir_or_yaml)
+    if isinstance(free, str):
+        free = parse_names(free, TEXTURE_FREE, "--free")
+    if isinstance(refine, str):
+        refine = parse_names(refine, REFINABLE, "--refine") if refine.strip() else ()
+    if isinstance(crop, str):
+        crop = parse_crop(crop)
+    result = fit_texture(stack_dir, fit_dir_or_yaml, free=free, refine=refine, crop=crop)
     with atomic_directory(out_dir, force=out_dir.exists()) as tmp:
         document = _json_safe(result.to_dict())
         atomic_write_bytes(tmp / "texfit.json", (json.dumps(document, indent=2) + "\n").encode())
@@ -403,6 +506,11 @@ def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False) ->
           f"ratio {result.ratio:.3f}, hWidth {result.hwidth:.3f}; noise amplitude {result.noise['amplitude']:.2f}; "
           f"tile-average relative error p50 {overall['p50']:.3g}, p80 {overall['p80']:.3g}; "
           f"{result.nevals} evaluations, {result.seconds:.1f} s -> {out_dir}")
+    if result.refine_stage is not None:
+        r = result.refine_stage
+        changes = ", ".join(f"{k} {r['start'][k]:g} -> {v:.4g}" for k, v in r["refined_values"].items())
+        print(f"  refined {changes}: objective {r['refined_objective']:.4g} vs {r['held_objective']:.4g} held; "
+              f"kept the {r['kept']} optimum")
     if not math.isfinite(result.objective):
         return 1
     return 0

@@ -21,13 +21,29 @@ def _views(angles: np.ndarray) -> tuple[np.ndarray, list]:
 
 
 def fig4_positions(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(x, y) in [-1, 1] x [0, 1] of each tile: radius by elevation ring (lowest elevation outermost),
-    direction = light azimuth.  Rings are the distinct theta_i values (0.1 deg)."""
+    """(x, y) of each tile in ring units: radius = ring number by illumination elevation (the highest
+    elevation innermost, at radius 1; a light at the pole, theta_i = 0, at the centre), direction = the
+    light's azimuth (0 deg right, 90 deg up).  Rings are the distinct theta_i values (0.1 deg)."""
     theta = np.round(angles[:, 0], 1)
     rings = np.unique(theta)  # ascending theta = descending elevation: innermost first
-    radius = (np.searchsorted(rings, theta) + 1) / len(rings) * 0.82
+    index = np.searchsorted(rings, theta)
+    radius = index + (0 if rings[0] == 0.0 else 1)
     phi = np.deg2rad(angles[:, 1])
-    return radius * np.cos(phi), 0.08 + radius * np.sin(phi)
+    return radius * np.cos(phi), radius * np.sin(phi)
+
+
+def tile_width(x: np.ndarray, y: np.ndarray, aspect: float, fill: float = 0.9) -> float:
+    """Width (ring units) of axis-aligned tiles of height ``aspect`` x width centred at (x, y) so that no two
+    overlap: w = fill x min over pairs of max(|dx|, |dy| / aspect), at most ``fill`` x one ring step (tiles
+    at one place, e.g. azimuths 0 and 360 deg, are left to overlap)."""
+    w = 1.0
+    if len(x) > 1:
+        dx = np.abs(x[:, None] - x[None, :])
+        dy = np.abs(y[:, None] - y[None, :]) / aspect
+        separation = np.maximum(dx, dy)
+        separation[separation < 1e-6] = np.inf  # itself, and coincident directions (phi 0 and 360)
+        w = min(w, float(separation.min()))
+    return fill * min(w, 1.0 / max(aspect, 1.0))
 
 
 def _display(tile: np.ndarray, scale: float) -> np.ndarray:
@@ -41,7 +57,12 @@ def _display(tile: np.ndarray, scale: float) -> np.ndarray:
 
 def tile_comparison_figure(result, *, view: int = 0, repeat: int = 2, title: str | None = None):
     """Figure of measured (left) and model (right) unit tiles of a :class:`~clothlab.texfit.fit.TextureFit`
-    in the Fig. 4 half-circle arrangement; each tile shown ``repeat`` x ``repeat`` times."""
+    in the Fig. 4 half-circle arrangement; each tile shown ``repeat`` x ``repeat`` times.
+
+    Layout: one axes per panel with equal aspect, the tiles drawn at their ring positions
+    (:func:`fig4_positions`) with the largest size at which no two tiles overlap (:func:`tile_width`, the
+    tile's own aspect kept), the rings as faint arcs, and each ring's elevation written under the baseline
+    below its right end (lights with azimuths beyond 180 deg: full circles, the elevations in the title)."""
     from matplotlib.figure import Figure
 
     angles = np.asarray(result.angles)
@@ -52,23 +73,41 @@ def tile_comparison_figure(result, *, view: int = 0, repeat: int = 2, title: str
     measured, model = result.measured_tiles[pick], result.model_tiles[pick]
     scale = float(np.percentile(measured, 99)) or 1.0
     x, y = fig4_positions(angles[pick])
-    figure = Figure(figsize=(12.0, 4.2))
-    tile_size = 0.32 / max(2, int(np.ceil(np.sqrt(len(pick)))))
-    panels = (("measured (tile averages)", measured, 0.0), ("model (fitted, noise-free)", model, 0.5))
-    for label, tiles, x0 in panels:
-        figure.text(x0 + 0.25, 0.95, label, ha="center", va="top", fontsize=11)
-        for k in range(len(pick)):
-            cx, cy = x0 + 0.25 + 0.22 * x[k], 0.05 + 0.8 * y[k]
-            height = tile_size * 12.0 / 4.2  # square axes on the 12 x 4.2 in figure
-            ax = figure.add_axes([cx - tile_size / 2, cy - height / 2, tile_size, height])
-            ax.imshow(np.tile(_display(tiles[k], scale), (repeat, repeat, 1)), interpolation="nearest")
-            ax.set_axis_off()
-        rings = np.unique(np.round(angles[pick, 0], 1))
-        for k, theta in enumerate(rings):  # elevation labels under the right end of each half circle
-            figure.text(x0 + 0.25 + 0.22 * (k + 1) / len(rings) * 0.82, 0.005, f"{90 - theta:g}\N{DEGREE SIGN}",
-                        ha="center", fontsize=8)
+    aspect = measured.shape[1] / measured.shape[2]  # tile rows / columns, shown repeat x repeat
+    w = tile_width(x, y, aspect)
+    h = aspect * w
+    theta = np.round(angles[pick, 0], 1)
+    rings = np.unique(theta)
+    radii = np.arange(len(rings)) + (0 if rings[0] == 0.0 else 1)
+    half = bool(np.all(y >= -1e-9))
+    outer = float(radii.max()) if len(radii) else 1.0
+    label_gap = 0.28
+    bottom = -h / 2 - label_gap if half else -outer - h / 2
+    top, side = outer + h / 2, outer + w / 2
+    panel_aspect = (top - bottom) / (2 * side)
+    figure = Figure(figsize=(12.0, max(2.5, 6.0 * panel_aspect + 0.9)))
+    elevations = ", ".join(f"{90 - t:g}" for t in rings)
+    panels = (("measured (tile averages)", measured), ("model (fitted, noise-free)", model))
+    for k, (label, tiles) in enumerate(panels):
+        ax = figure.add_axes([0.015 + 0.5 * k, 0.02, 0.46, 0.84])
+        arc = np.linspace(0.0, np.pi if half else 2 * np.pi, 181)
+        for radius in radii[radii > 0]:
+            ax.plot(radius * np.cos(arc), radius * np.sin(arc), color="0.85", lw=0.8, zorder=0)
+        for i in range(len(pick)):
+            ax.imshow(np.tile(_display(tiles[i], scale), (repeat, repeat, 1)), interpolation="nearest",
+                      extent=(x[i] - w / 2, x[i] + w / 2, y[i] - h / 2, y[i] + h / 2), zorder=1)
+        if half:
+            for radius, t in zip(radii, rings, strict=True):
+                ax.text(radius, -h / 2 - 0.06, f"{90 - t:g}\N{DEGREE SIGN}", ha="center", va="top", fontsize=8)
+            ax.text(-side, -h / 2 - 0.06, "elevation", ha="left", va="top", fontsize=7, color="0.4")
+        ax.set_xlim(-side, side)
+        ax.set_ylim(bottom, top)
+        ax.set_aspect("equal")
+        ax.set_axis_off()
+        ax.set_title(label if half else f"{label}; rings inside out: elevation {elevations} deg", fontsize=11)
     view_text = f"view theta_o = {views[view][0]:g}, phi_o = {views[view][1]:g} deg"
-    figure.suptitle(title or f"Unit tiles by illumination elevation (half circles, Fig. 4); {view_text}",
+    figure.suptitle(title or f"Unit tiles by illumination elevation ({'half ' if half else ''}circles, Fig. 4); "
+                    f"{view_text}",
                     fontsize=10, y=0.995)
     return figure
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clothlab.errors import InputError
+from clothlab.errors import ConfigError, InputError
 
 ELEVATIONS = (30.0, 45.0, 60.0, 75.0)  # deg, paper Fig. 4
 
@@ -196,8 +196,8 @@ def simulate_btf(source, out_dir, *, directions=None, n_directions: int = 16, si
     layout = layout or TextureLayout()
     src = source if isinstance(source, TextureSource) else load_source(source)
     if src.coefficients is None:
-        raise InputError(f"{src.origin} carries no coefficients (kd, ks); simulate from a fit directory or a "
-                         "preset", field="source")
+        raise InputError(f"{src.origin} carries no coefficients (kd, ks_warp, ks_weft); give them "
+                         "(with_coefficients; clothlab simulate --btf: --kd, --ks-warp, --ks-weft)", field="source")
     texture = IrawanTexture(src.weave, src.quadrature, seed=int(layout.seed))
     size = (int(size), int(size)) if np.ndim(size) == 0 else tuple(int(s) for s in size)
     repeats = square_pixel_repeats(src.weave, size, tile_repeats)
@@ -220,12 +220,84 @@ def simulate_btf(source, out_dir, *, directions=None, n_directions: int = 16, si
                                channel_names=list(src.channels) if src.channels else None, provenance=provenance)
 
 
+#: coefficient -> CLI flag; the defaults where neither the flags nor the source give a coefficient are those of
+#: the table simulation (``clothlab simulate``): 0.1 per channel
+COEFFICIENT_FLAGS = {"kd": "--kd", "ks_warp": "--ks-warp", "ks_weft": "--ks-weft"}
+DEFAULT_COEFFICIENT = 0.1
+DEFAULT_CHANNELS = ("R", "G", "B")
+
+
+def _values(text, flag: str, names: tuple) -> np.ndarray:
+    n = len(names)
+    if isinstance(text, str):
+        try:
+            values = np.array([float(x) for x in text.split(",")])
+        except ValueError:
+            raise ConfigError(f"expected comma-separated numbers, got {text!r}", field=flag) from None
+    else:
+        values = np.atleast_1d(np.asarray(text, dtype=np.float64))
+    if values.size == 1:
+        values = np.repeat(values, n)
+    if values.size != n or not np.all(np.isfinite(values)) or np.any(values < 0):
+        raise ConfigError(f"expected {n} non-negative value(s), one per channel ({', '.join(names)}), or one for "
+                         f"all; got {text!r}", field=flag)
+    return values
+
+
+def with_coefficients(src: TextureSource, *, kd=None, ks_warp=None, ks_weft=None, channels=None) -> tuple[
+        TextureSource, dict]:
+    """``src`` with its coefficients resolved: a flag value (comma-separated per channel, or one number for
+    all) overrides the source's own (a fit's or a preset's example colours); a coefficient neither gives is
+    0.1 per channel, as in the table simulation.  ``channels`` (names, comma-separated or a sequence; None:
+    the source's, else R,G,B).  Returns (source, {coefficient: 'flag' | 'source' | 'default'})."""
+    from dataclasses import replace
+
+    if channels is None:
+        names = tuple(src.channels) if src.channels else DEFAULT_CHANNELS
+    else:
+        names = tuple(c.strip() for c in (channels.split(",") if isinstance(channels, str) else channels))
+        if not names or not all(names) or len(set(names)) != len(names):
+            raise ConfigError(f"expected distinct comma-separated channel names, got {channels!r}", field="--channels")
+    n = len(names)
+    given = {"kd": kd, "ks_warp": ks_warp, "ks_weft": ks_weft}
+    own = src.coefficients or {}
+    coefficients, origin = {}, {}
+    for name, flag in COEFFICIENT_FLAGS.items():
+        if given[name] is not None:
+            coefficients[name], origin[name] = _values(given[name], flag, names), "flag"
+        elif name in own:
+            value = np.atleast_1d(np.asarray(own[name], dtype=np.float64))
+            if value.size not in (1, n):
+                raise ConfigError(f"{src.origin} gives {name} for {value.size} channel(s) "
+                                 f"({', '.join(src.channels or [])}) but the stack is to have {n} "
+                                 f"({', '.join(names)}); give {flag} for the {n} channel(s)", field=flag)
+            coefficients[name], origin[name] = np.broadcast_to(value, (n,)).copy(), "source"
+        else:
+            coefficients[name], origin[name] = np.full(n, DEFAULT_COEFFICIENT), "default"
+    return replace(src, coefficients=coefficients, channels=names), origin
+
+
 def simulate_btf_command(source, out_dir, *, n_directions: int = 16, size: int = 64, tile_repeats: float = 4.0,
-                         offset=(0.25, 0.4), seed: int = 0, force: bool = False) -> int:
-    """CLI body of ``clothlab simulate --btf``: write the stack, print one line; 0 on success."""
+                         offset=(0.25, 0.4), seed: int = 0, kd=None, ks_warp=None, ks_weft=None, channels=None,
+                         rule: str | None = None, nodes: int | None = None, force: bool = False) -> int:
+    """CLI body of ``clothlab simulate --btf``: write the stack, print one line; 0 on success.
+
+    ``kd``, ``ks_warp``, ``ks_weft``, ``channels``: see :func:`with_coefficients`; ``rule`` / ``nodes``
+    override the source's quadrature of the texture model."""
+    from dataclasses import replace
+
+    from clothlab.models.irawan.model import Quadrature
+
     offset = tuple(float(x) for x in (np.repeat(offset, 2) if np.ndim(offset) == 0 else offset))
-    path = simulate_btf(source, out_dir, n_directions=n_directions, size=size, tile_repeats=tile_repeats,
+    src = load_source(source)
+    if rule is not None or nodes is not None:
+        src = replace(src, quadrature=Quadrature(rule or src.quadrature.rule,
+                                                 int(nodes) if nodes is not None else src.quadrature.nodes))
+    src, origin = with_coefficients(src, kd=kd, ks_warp=ks_warp, ks_weft=ks_weft, channels=channels)
+    path = simulate_btf(src, out_dir, n_directions=n_directions, size=size, tile_repeats=tile_repeats,
                         layout=TextureLayout(offset=offset, seed=int(seed)), force=force)
+    coefs = "; ".join(f"{k} = {', '.join(f'{c:g}' for c in v)} ({origin[k]})" for k, v in src.coefficients.items())
     print(f"wrote simulated BTF stack {path} ({n_directions} images, {size} px, {tile_repeats:g} tiles across, "
-          f"offset {offset[0]:g}, {offset[1]:g} tiles, noise seed {seed})")
+          f"offset {offset[0]:g}, {offset[1]:g} tiles, noise seed {seed}; channels {', '.join(src.channels)}: "
+          f"{coefs})")
     return 0
