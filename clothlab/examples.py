@@ -57,7 +57,7 @@ def fabric_yaml(name: str, variant: str) -> str:
         "  free: [" + ", ".join(free) + "]",
         "  metric: relative",
         "  cv_folds: 5",
-        "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: 8, seed: 1}",
+        "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: 4, seed: 1}",
         "  posterior: {walkers: 32, steps: 1000, max_steps: 12000}" if variant == "noisy" else "",
         "report: {percentiles: [50, 80, 95]}",
         "output: {fits: ../../fits, reports: ../../reports}",
