@@ -163,6 +163,7 @@ def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
         "wall_time_s": optimisation_seconds(fit),
         "pairs_per_second": (fit.get("evaluation_speed") or {}).get("pairs_per_second"),
         "simulated": is_simulated((fit.get("measurement") or {}).get("provenance")),
+        "generated_by": ((fit.get("measurement") or {}).get("provenance") or {}).get("model"),
         "paper": PAPER_RELATIVE_ERRORS.get(paper_key),
         "paper_fabric": paper_key,
         "link": f"../{record.name}/index.html" if report.exists() and dest.parent == reports_dir else None,
