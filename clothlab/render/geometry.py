@@ -17,6 +17,7 @@ also uses).  A differential ray parallel to the tangent plane gives an infinite 
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,7 +61,7 @@ class Hits:
         return np.maximum(extent[0], extent[1])
 
 
-class Surface:
+class Surface(ABC):
     """Base of the patch shapes: turns (s, t, frame) into fabric frame and texture coordinates."""
 
     def __init__(self, patch: Patch):
@@ -77,8 +78,9 @@ class Surface:
                     weft=c * e_s + sn * e_t, warp=c * e_t - sn * e_s, normal=normal,
                     u=(s * c + t * sn) / self.tile_mm[0], v=(-s * sn + t * c) / self.tile_mm[1])
 
-    def intersect(self, origin, directions) -> Hits:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def intersect(self, origin, directions) -> Hits:
+        """Hits of rays from ``origin`` (3,) along unit ``directions`` (M, 3)."""
 
 
 class FlatPatch(Surface):
