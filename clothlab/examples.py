@@ -57,7 +57,11 @@ def fabric_yaml(name: str, variant: str) -> str:
         "  free: [" + ", ".join(free) + "]",
         "  metric: relative",
         "  cv_folds: 5",
-        "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: 4, seed: 1}",
+        # the noise-free silk-charmeuse objective has a false basin (warp.umax 85, kappa 3.8) that all 4 starts of
+        # the noisy examples' budget miss; the recovery study (the clean sets) runs 8 starts of 750, which also
+        # recovered the other five (8 x 750 in turn missed the noisy charmeuse optimum by 1 %, 4 x 1,500 did not)
+        "  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 6000, starts: "
+        + ("4" if variant == "noisy" else "8") + ", seed: 1}",
         "  posterior: {walkers: 32, steps: 1000, max_steps: 12000}" if variant == "noisy" else "",
         "report: {percentiles: [50, 80, 95]}",
         "output: {fits: ../../fits, reports: ../../reports}",
