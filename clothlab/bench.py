@@ -257,7 +257,7 @@ def saved_coverage(fits_dir: Path, fabrics) -> dict | None:
     when one is missing.  Same shape as :func:`clothlab.fit.posterior.coverage_study`."""
     from clothlab.fit.posterior import COVERAGE_TARGET
 
-    out, walkers, max_steps = {}, set(), set()
+    out, settings = {}, []
     for name in fabrics:
         path, fit_path = fits_dir / name / "posterior.json", fits_dir / name / "fit.json"
         if not (path.is_file() and fit_path.is_file()):
@@ -265,8 +265,7 @@ def saved_coverage(fits_dir: Path, fabrics) -> dict | None:
         post, fit = json.loads(path.read_text()), json.loads(fit_path.read_text())
         conv = post["convergence"]
         covered = {n: bool(e.get("truth_in_95")) for n, e in post["parameters"].items()}
-        walkers.add(conv["walkers"])
-        max_steps.add(int(conv["rule"].rsplit("at most", 1)[-1].strip()) if "at most" in conv["rule"] else 0)
+        settings.append(fit["config"]["fit"]["posterior"])  # walkers, steps, max_steps as the fit ran them
         out[name] = {"covered": covered, "n_covered": sum(covered.values()), "n_free": len(covered),
                      "converged": conv["converged"], "steps": conv["steps"], "max_tau": max(conv["tau"].values()),
                      "fit_wall_time_s": (fit.get("timings") or {}).get("optimisation_s", float("nan")),
@@ -275,7 +274,8 @@ def saved_coverage(fits_dir: Path, fabrics) -> dict | None:
     hit = sum(r["n_covered"] for r in out.values())
     return {"fabrics": out, "covered": hit, "total": total, "fraction": hit / total, "target": COVERAGE_TARGET,
             "passed": hit / total >= COVERAGE_TARGET, "source": f"saved posteriors {fits_dir}/<fabric>/posterior.json",
-            "settings": {"walkers": min(walkers), "steps": 1000, "max_steps": max(max_steps)}}
+            "settings": {"walkers": min(c["walkers"] for c in settings), "steps": min(c["steps"] for c in settings),
+                         "max_steps": max(c["max_steps"] for c in settings)}}
 
 
 def coverage_section(quick: bool, fabrics=None, rerun: bool = False, **overrides) -> dict:
