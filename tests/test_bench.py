@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clothlab import bench
+from clothlab.studies import bench
 
 FITS = Path(__file__).resolve().parents[1] / "fits"
 
@@ -24,6 +24,7 @@ def no_cv_no_checkpoint(monkeypatch):
     """Cross-validation must not run; every posterior must checkpoint outside the repository's fits/."""
     import clothlab.fit.crossval
     import clothlab.fit.posterior
+    import clothlab.studies.posterior
 
     def no_cv(*args, **kwargs):
         raise AssertionError("cross-validation ran inside a benchmark fit")
@@ -38,6 +39,7 @@ def no_cv_no_checkpoint(monkeypatch):
 
     monkeypatch.setattr(clothlab.fit.crossval, "cross_validate", no_cv)
     monkeypatch.setattr(clothlab.fit.posterior, "run_posterior", spy)
+    monkeypatch.setattr(clothlab.studies.posterior, "run_posterior", spy)
     before = _checkpoints(FITS)
     yield calls
     assert _checkpoints(FITS) == before, "a benchmark wrote a posterior checkpoint under fits/"
@@ -146,7 +148,7 @@ def test_coverage_section_small(no_cv_no_checkpoint, capsys):
 
 def test_posterior_benchmark_samples_once(no_cv_no_checkpoint, monkeypatch):
     """One posterior, under the time cap, checkpointed in a temporary directory (the fit itself samples none)."""
-    import clothlab.fit.posterior as posterior
+    import clothlab.studies.posterior as posterior
 
     real = posterior._fabric_config
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from clothlab.btf import BtfStack, average_tiles, estimate_period, parse_angles, write_btf_stack
-from clothlab.btf.bench import btf_memory_benchmark
 from clothlab.btf.images import read_image
 from clothlab.btf.period import autocorrelation, lattice_vectors
 from clothlab.errors import InputError, ResultExistsError
+from clothlab.studies.btf_memory import btf_memory_benchmark
 
 oiio = pytest.importorskip("OpenImageIO")
 

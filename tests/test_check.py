@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from clothlab import check
-from clothlab.stiff import FAST_POSTERIOR, conditioning, run_case, stiff_cases
+from clothlab.studies import stability as check
+from clothlab.studies.stiff import FAST_POSTERIOR, conditioning, run_case, stiff_cases
 
 
 def test_fast_check_finds_no_non_finite_negative_or_non_reciprocal_value(tmp_path):

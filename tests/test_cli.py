@@ -208,7 +208,7 @@ def test_check_report_page(tmp_path):
 def test_calibrate_corrects_a_synthetic_camera(tmp_path, capsys):
     import numpy as np
 
-    from clothlab.colour_calibration import chart_reference
+    from clothlab.colour.chart import chart_reference
 
     reference = chart_reference()
     camera = np.array([[0.8, 0.15, 0.05], [0.1, 0.85, 0.05], [0.05, 0.2, 0.75]])
@@ -237,8 +237,8 @@ def test_simulate_btf_then_fit_btf_from_the_cli(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit-btf", str(stack), str(EXAMPLE / "fabric.yaml"), "-o", str(tmp_path / "texfit")]) == 0
     result = json.loads((tmp_path / "texfit" / "texfit.json").read_text())
-    from clothlab.presets import get_preset
     from clothlab.texfit.fit import offset_error_cells
+    from clothlab.weave.presets import get_preset
 
     truth = result["truth"]  # the simulator's manifest, read back by fit-btf
     assert truth["offset"] == [0.2, 0.3]

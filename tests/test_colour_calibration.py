@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clothlab.colour_calibration import Correction, chart_reference, delta_e_2000, fit_correction
+from clothlab.colour.chart import Correction, chart_reference, delta_e_2000, fit_correction
 from clothlab.errors import InputError
-from clothlab.measurement import Measurement
+from clothlab.io.measurement import Measurement
 
 colour = pytest.importorskip("colour")
 

@@ -302,7 +302,7 @@ def test_bounds_for_a_fixed_parameter(tmp_path):
 def test_unknown_preset(tmp_path):
     good = load_config(project(tmp_path, edit(FULL, "weaves/lining.wv", "preset:polyester-lining")))
     assert good.model.weave_preset == "polyester-lining" and good.model.weave_path is None
-    # spellings clothlab.presets accepts name the same preset (and give the same hash)
+    # spellings clothlab.weave.presets accepts name the same preset (and give the same hash)
     other = load_config(project(tmp_path, edit(FULL, "weaves/lining.wv", "preset:Polyester_Lining")))
     assert other.model.weave == "preset:polyester-lining" and other.hash == good.hash
     text = edit(FULL, "weaves/lining.wv", "preset:polyester-linin")

@@ -12,9 +12,9 @@ from scipy.optimize import nnls
 
 from clothlab.config import load_config
 from clothlab.fit.crossval import cross_validate, fold_labels
+from clothlab.fit.metrics import relative_errors
 from clothlab.fit.problem import FitProblem
 from clothlab.fit.runner import build_problem
-from clothlab.metrics import relative_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from clothlab.config import load_config
+from clothlab.fit.metrics import error_percentiles
 from clothlab.fit.runner import build_problem, run_fit, save_fit
-from clothlab.metrics import error_percentiles
 
 ROOT = Path(__file__).resolve().parents[1]
 MEASUREMENTS = ROOT / "measurements"

@@ -10,9 +10,9 @@ import pytest
 from clothlab.errors import InputError
 from clothlab.io.astm import read_astm, write_astm
 from clothlab.io.loader import FORMATS, detect_format, load_measurement
+from clothlab.io.measurement import Measurement
 from clothlab.io.pabopto import read_pabopto
 from clothlab.io.table import write_table
-from clothlab.measurement import Measurement
 
 
 def unit_vector(theta_deg, phi_deg):

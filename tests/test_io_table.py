@@ -10,8 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clothlab.errors import ConfigError, InputError, ResultExistsError
+from clothlab.io.measurement import Measurement
 from clothlab.io.table import read_table, write_table
-from clothlab.measurement import Measurement
 
 VALID = """\
 # clothlab-table: 1

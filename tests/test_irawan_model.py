@@ -22,7 +22,7 @@ from clothlab.models.irawan.model import (
 )
 from clothlab.models.irawan.phase import von_mises
 from clothlab.models.irawan.spine import axis_ratio, spine_radius
-from clothlab.presets import PRESET_NAMES, get_preset
+from clothlab.weave.presets import PRESET_NAMES, get_preset
 
 RNG = np.random.default_rng(12345)
 

@@ -10,9 +10,9 @@ import pytest
 from clothlab.errors import ConfigError, ParameterError
 from clothlab.frames import spherical_to_vector
 from clothlab.models.kang import KANG_PARAMS, KangModel, default_parameters, lod, microfacet, yarn
-from clothlab.presets import PRESET_NAMES, get_preset
-from clothlab.weave import Segment, Weave, YarnGeometry
-from clothlab.weave_lookup import locate_segments
+from clothlab.weave.lookup import locate_segments
+from clothlab.weave.model import Segment, Weave, YarnGeometry
+from clothlab.weave.presets import PRESET_NAMES, get_preset
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "measurements"
@@ -463,7 +463,7 @@ def test_unknown_parameter_and_bad_options():
 # --- what a BRDF table can determine; ambient occlusion; the fit path ------------------------------------
 
 def paper_directions():
-    from clothlab.simulate import paper_sampling
+    from clothlab.simulate.gonio import paper_sampling
 
     ti, pi_, to, po = paper_sampling()
     return spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
@@ -552,7 +552,7 @@ def test_example_kang_fits_use_the_alternating_model_and_the_adaptive_node_count
     and no fixed tile_nodes (a fixed 4 is off by up to 20 % at the fitted parameters, docs/kang.md)."""
     from clothlab.config import load_config
     from clothlab.models.registry import build_model
-    from clothlab.presets import resolve_weave
+    from clothlab.weave.presets import resolve_weave
 
     config = load_config(EXAMPLES / name / "kang.yaml")
     model = build_model("kang", resolve_weave(config.model.weave, config.base_dir), **config.model.options)

@@ -1,10 +1,10 @@
-"""Error figures and fit metrics (clothlab.metrics)."""
+"""Error figures and fit metrics (clothlab.fit.metrics)."""
 
 import numpy as np
 import pytest
 
 from clothlab.errors import InputError
-from clothlab.metrics import (
+from clothlab.fit.metrics import (
     METRICS,
     error_percentiles,
     linear_weights,

@@ -18,9 +18,10 @@ from scipy.optimize import nnls
 from clothlab.config import load_config
 from clothlab.errors import InputError
 from clothlab.fit.optimize import minimize
-from clothlab.fit.posterior import NOISE_NAME, _Likelihood, coverage_study, run_posterior
+from clothlab.fit.posterior import NOISE_NAME, _Likelihood, run_posterior
 from clothlab.fit.problem import FitProblem
 from clothlab.fit.runner import build_problem
+from clothlab.studies.posterior import coverage_study
 
 ROOT = Path(__file__).resolve().parents[1]
 FABRICS = ("cotton-denim", "silk-shantung", "silk-charmeuse", "cotton-twill", "wool-gabardine", "polyester-lining")

@@ -10,10 +10,10 @@ from clothlab.errors import ConfigError, ResultExistsError
 from clothlab.models.components import combine
 from clothlab.models.irawan.texture import IrawanTexture
 from clothlab.render import compare_lod, load_scene, render, render_command, save_render, scene_from_dict
-from clothlab.render.bench import receding_plane_scene
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Patch
 from clothlab.render.shade import FabricModels, lod_weight
+from clothlab.studies.render_lod import receding_plane_scene
 
 REPO = Path(__file__).resolve().parents[1]
 LIGHT = np.array([0.3, -0.2, 1.0])
@@ -311,7 +311,7 @@ def test_receding_plane_error_bound_and_monotone_cost_at_a_tiny_resolution(tmp_p
     """The benchmark's statements on a 16 x 12 image: the LoD error within ERROR_BOUND at every distance;
     from the first distance with no pixel in the texture range on, the model evaluations per image never
     increase; beyond f1 one reflectance evaluation per pixel; flat rows of scalars; the plot is written."""
-    from clothlab.render.bench import ERROR_BOUND, render_benchmark
+    from clothlab.studies.render_lod import ERROR_BOUND, render_benchmark
 
     distances = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 16.0, 64.0, 256.0)
     result = render_benchmark(resolution=(16, 12), distances=distances, reference_spp=16, repeats=1,

@@ -9,9 +9,9 @@ import pytest
 from clothlab.btf import BtfStack
 from clothlab.cli import main
 from clothlab.errors import ConfigError, InputError, ResultExistsError
-from clothlab.presets import get_preset
+from clothlab.simulate.btf import TextureLayout, fig4_directions, load_source, simulate_btf
 from clothlab.texfit.fit import fit_btf_command, fit_texture, offset_error_cells, pattern_translations
-from clothlab.texfit.simulate_btf import TextureLayout, fig4_directions, load_source, simulate_btf
+from clothlab.weave.presets import get_preset
 
 OFFSET_TOL_CELLS = 0.1  # recovered tile offset within a tenth of a weave cell (modulo the weave's symmetries)
 HWIDTH_TOL = 0.03
@@ -68,7 +68,7 @@ def test_round_trip_recovers_offset_and_hwidth(denim_stack):
     # the exponential noise (mean 1, sd 1) is detected in the residuals
     assert result.noise["present"] and 0.6 < result.noise["amplitude"] < 1.5
     # and the kd recovered by NNLS is the preset's (noise only touches the specular part)
-    from clothlab.examples import YARN_COLOURS
+    from clothlab.simulate.examples import YARN_COLOURS
 
     np.testing.assert_allclose(result.coefficients["kd"], YARN_COLOURS["cotton-denim"]["kd"], rtol=0.05)
 
@@ -211,7 +211,7 @@ def test_fit_btf_cli_recovers_the_simulated_truth(tmp_path, capsys):
     assert abs(result["hwidth"] - truth["hwidth"]) < HWIDTH_TOL
     assert result["free"] == ["offset", "hwidth"] and result["rotation_deg"] == 0.0 and result["ratio_scale"] == 1.0
     assert result["refine_stage"]["refined_objective"] >= 0 and "warp.umax" in result["refined"]
-    from clothlab.examples import YARN_COLOURS
+    from clothlab.simulate.examples import YARN_COLOURS
 
     fitted_kd = [result["coefficients"]["kd"][c] for c in ("R", "G", "B")]
     np.testing.assert_allclose(fitted_kd, YARN_COLOURS["polyester-lining"]["kd"], rtol=0.05)
@@ -248,7 +248,7 @@ def test_simulate_btf_passes_coefficients_through(tmp_path, capsys):
     assert channels == ["R", "G", "B"]
     assert coefs == {"kd": [0.3, 0.05, 0.02], "ks_warp": [0.2, 0.2, 0.2], "ks_weft": [0.1, 0.1, 0.1]}
     # a preset gives its own example colours; a flag overrides one of them
-    from clothlab.examples import YARN_COLOURS
+    from clothlab.simulate.examples import YARN_COLOURS
 
     assert main(["simulate", "preset:cotton-denim", "--btf", str(tmp_path / "b"), *common, "--ks-weft", "0"]) == 0
     coefs, _ = coefficients(tmp_path / "b")

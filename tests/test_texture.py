@@ -20,8 +20,8 @@ from clothlab.errors import GeometryWarning
 from clothlab.frames import spherical_to_vector, to_yarn_frame
 from clothlab.models.irawan.model import IrawanModel, Quadrature, specular_albedo
 from clothlab.models.irawan.texture import IrawanTexture
-from clothlab.noise import INTENSITY_CAP, exponential_noise, hash_bits, hash_uniform, perlin_1d
-from clothlab.presets import PRESET_NAMES, get_preset
+from clothlab.models.irawan.texture_noise import INTENSITY_CAP, exponential_noise, hash_bits, hash_uniform, perlin_1d
+from clothlab.weave.presets import PRESET_NAMES, get_preset
 
 ALBEDO_RULE = Quadrature("support", 4)  # a_j only scales both sides alike
 REFERENCE_RULE = Quadrature("adaptive", 8)
@@ -277,7 +277,7 @@ def test_texture_is_fast():
 
 def test_hash_is_splitmix64():
     """Known outputs of splitmix64 from state 0 (published test vector): the mixer is the standard one."""
-    from clothlab.noise import _mix
+    from clothlab.models.irawan.texture_noise import _mix
 
     z = _mix(np.zeros(1, dtype=np.uint64))
     assert int(z[0]) == 0xE220A8397B1DCDAF
@@ -309,7 +309,7 @@ def test_texture_same_in_float32_and_float64_and_across_runs():
     code = (
         "import numpy as np\n"
         "from clothlab.models.irawan.texture import IrawanTexture\n"
-        "from clothlab.presets import get_preset\n"
+        "from clothlab.weave.presets import get_preset\n"
         "from clothlab.frames import spherical_to_vector\n"
         "t = IrawanTexture(get_preset('cotton-denim'), seed=5)\n"
         "u = np.linspace(-7.3, 9.1, 64); v = np.linspace(3.7, -12.2, 64)\n"
@@ -479,7 +479,7 @@ def test_eval_with_u_v_is_the_texture_model_at_those_points(tmp_path, capsys):
     from clothlab.cli import main
     from clothlab.config import load_config
     from clothlab.fit.store import load_fitted
-    from clothlab.presets import resolve_weave
+    from clothlab.weave.presets import resolve_weave
 
     root = Path(__file__).resolve().parents[1]
     rng = np.random.default_rng(11)

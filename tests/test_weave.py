@@ -11,10 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clothlab.errors import ConfigError, InputError
-from clothlab.presets import PRESET_NAMES, get_preset, resolve_weave
-from clothlab.weave import Weave
-from clothlab.weave_lookup import locate_segments, segment_constraint_violations
-from clothlab.wvfile import format_wv, parse_wv, parse_wv_text
+from clothlab.weave.lookup import locate_segments, segment_constraint_violations
+from clothlab.weave.model import Weave
+from clothlab.weave.presets import PRESET_NAMES, get_preset, resolve_weave
+from clothlab.weave.wvformat import format_wv, parse_wv, parse_wv_text
 
 
 def assert_same_weave(a: Weave, b: Weave) -> None:

@@ -4,7 +4,7 @@
 :mod:`clothlab.models.irawan.texture`, wrapped with its parameters and coefficients).  It receives
 
 - ``u, v``: (H, W) float64 texture coordinates in weave tiles, u along the weft (fabric x) and v along
-  the warp (fabric y), as :mod:`clothlab.weave_lookup`;
+  the warp (fabric y), as :mod:`clothlab.weave.lookup`;
 - ``wi, wo``: (3,) unit vectors in the fabric frame (:mod:`clothlab.frames`),
 
 and returns (H, W, C) (or (H * W, C), or (H, W)) linear values, e.g. BRDF in 1/sr.

@@ -24,8 +24,8 @@ import time
 
 import numpy as np
 
+from clothlab.fit.metrics import error_percentiles
 from clothlab.fit.problem import FitProblem
-from clothlab.metrics import error_percentiles
 
 DEFAULT_LOCAL = "LN_BOBYQA"
 

@@ -4,9 +4,9 @@ For free parameters theta (declared units) the objective is
 
     F(theta) = mean_{n,c} r(measured[n,c], sum_k c_k[c] component_k(theta)[n])^2
 
-with r the chosen metric (:mod:`clothlab.metrics`) and the coefficients c_k >= 0 solved per channel at
+with r the chosen metric (:mod:`clothlab.fit.metrics`) and the coefficients c_k >= 0 solved per channel at
 every evaluation by non-negative least squares with the metric's linearised row weights
-(:func:`clothlab.metrics.linear_weights`; the paper fits kd and ks linearly too, sec. 8).  Parameters are
+(:func:`clothlab.fit.metrics.linear_weights`; the paper fits kd and ks linearly too, sec. 8).  Parameters are
 seen by the optimiser in [0, 1]: x = (T(theta) - T(lo)) / (T(hi) - T(lo)) with T = log for parameters
 declared with a log transform, identity otherwise (numerics.md item 12: scales differ by orders of magnitude).
 """
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from clothlab.errors import ConfigError, GeometryWarning
+from clothlab.fit.metrics import linear_weights, metric_residuals, objective_value
 from clothlab.fit.nnls import nnls_small
-from clothlab.metrics import linear_weights, metric_residuals, objective_value
 
 
 @dataclass(frozen=True)

@@ -21,9 +21,9 @@ import numpy as np
 
 from clothlab import __version__
 from clothlab.errors import GeometryWarning
+from clothlab.fit.metrics import error_percentiles
 from clothlab.fit.problem import FitProblem, Solution
 from clothlab.frames import spherical_to_vector
-from clothlab.metrics import error_percentiles
 from clothlab.models.components import coefficient_name
 
 VERSIONED = ("numpy", "scipy", "numba", "nlopt", "matplotlib", "PyYAML", "emcee")
@@ -67,7 +67,7 @@ def build_problem(config, measurement=None):
     """Measurement, weave and model of a configuration -> FitProblem."""
     from clothlab.io.loader import load_measurement
     from clothlab.models.registry import build_model
-    from clothlab.presets import resolve_weave
+    from clothlab.weave.presets import resolve_weave
 
     if measurement is None:
         measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
@@ -181,7 +181,6 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     (``fit.posterior``, or ``posterior`` = a PosteriorConfig given here, e.g. by ``clothlab fit --posterior``),
     resumable from its checkpoint (:func:`checkpoint_path`) if interrupted.
     """
-    from clothlab.models.irawan.model import geometry_warnings
 
     started = time.perf_counter()
     problem = build_problem(config, measurement)
@@ -196,8 +195,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     coefficients = {coefficient_name(n): solution.coefficients[i] for i, n in enumerate(names)}
     errors = error_percentiles(problem.y, solution.prediction, config.report.percentiles, channels)
     notes = []
-    if config.model.kind == "irawan":
-        notes += geometry_warnings(params, problem.model.weave.name)
+    notes += problem.model.geometry_warnings(params)
     for name, lo, hi in zip(problem.free, optimum.at_lower, optimum.at_upper, strict=True):
         if lo or hi:
             notes.append(f"{name} ended at its {'lower' if lo else 'upper'} bound "
@@ -289,9 +287,7 @@ def fit_summary(result: FitResult) -> dict:
         "config_hash": cfg.hash,
         "config": cfg.canonical(),
         "model": {"kind": cfg.model.kind, "weave": cfg.canonical()["model"]["weave"],
-                  # the quadrature rule applies to the IM yarn integrals only; other kinds record their options
-                  **({"quadrature": {"rule": cfg.model.quadrature.rule, "nodes": cfg.model.quadrature.nodes}}
-                     if cfg.model.kind == "irawan" else {"options": dict(cfg.model.options)})},
+                  **problem.model.settings()},  # the quadrature of integrating models, else the options
         "measurement": {"path": cfg.canonical()["measurement"]["path"], "n": m.n, "channels": channels,
                         "provenance": {k: v for k, v in (m.provenance or {}).items()}},
         "parameters": _parameter_entries(result),
@@ -404,14 +400,11 @@ def save_fit(result: FitResult, *, force: bool = False, fits_dir=None):
 
     cfg = result.config
     dest = (fits_dir if fits_dir is not None else cfg.output.fits) / cfg.name
-    from clothlab.models.irawan.parameters import apply_parameters
-    from clothlab.wvfile import format_wv
+    from clothlab.weave.wvformat import format_wv
 
     config_text = cfg.path.read_text() if cfg.path is not None else None
     extra = posterior_files(result)
-    weave = result.problem.model.weave
-    if cfg.model.kind == "irawan":
-        weave = apply_parameters(weave, result.params)
+    weave = result.problem.model.fitted_weave(result.params)
     out = write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
                                weave_text=format_wv(weave), extra=extra, force=force)

@@ -89,7 +89,7 @@ def read_fit_json(fit_dir) -> dict:
 def load_fitted(fit_dir):
     """(model, params, coefficients {name: (C,)}, channels) of a saved fit, ready to evaluate."""
     from clothlab.models.registry import build_model
-    from clothlab.wvfile import parse_wv
+    from clothlab.weave.wvformat import parse_wv
 
     fit_dir = Path(fit_dir)
     fit = read_fit_json(fit_dir)

@@ -19,6 +19,7 @@ import numpy as np
 from clothlab.atomic import atomic_write_text
 from clothlab.errors import InputError, ResultExistsError
 from clothlab.frames import azimuth_from_clothlab
+from clothlab.io.measurement import Measurement
 from clothlab.io.table import (
     ANGLE_COLUMNS,
     RawRows,
@@ -28,7 +29,6 @@ from clothlab.io.table import (
     read_text_lines,
     rows_to_measurement,
 )
-from clothlab.measurement import Measurement
 
 _ANGLE_ALIASES = {
     "theta_i": "theta_i", "phi_i": "phi_i",

@@ -19,9 +19,9 @@ from pathlib import Path
 
 from clothlab.errors import InputError
 from clothlab.io.astm import read_astm
+from clothlab.io.measurement import Measurement
 from clothlab.io.pabopto import read_pabopto
 from clothlab.io.table import find_sidecar, read_table
-from clothlab.measurement import Measurement
 
 READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto}
 FORMATS = tuple(READERS)

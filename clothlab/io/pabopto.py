@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import InputError
+from clothlab.io.measurement import Measurement
 from clothlab.io.table import (
     DSF,
     RawRows,
@@ -41,7 +42,6 @@ from clothlab.io.table import (
     parse_rows,
     read_text_lines,
 )
-from clothlab.measurement import Measurement
 
 FORMAT_QUANTITY = {"DSF": DSF, "BSDF": "brdf", "BRDF": "brdf", "BTDF": "brdf"}
 COLORIMETRY_CHANNELS = {"CIE-Y": ("Y",), "CIE-XYZ": ("X", "Y", "Z")}

@@ -22,7 +22,7 @@ Columns may come in any order: the four angles, one column per channel, and opti
 (one-standard-deviation uncertainty, same quantity and unit as the value) for all channels or none.
 Blank lines are ignored; ``#`` lines are only allowed in the header block.
 
-Loading converts once into clothlab's form (:class:`~clothlab.measurement.Measurement`): degrees, azimuth via
+Loading converts once into clothlab's form (:class:`~clothlab.io.measurement.Measurement`): degrees, azimuth via
 :func:`clothlab.frames.azimuth_to_clothlab`, BRDF in 1/sr (reflectance_factor / pi, cosine_weighted /
 cos theta_i; sigma the same).  When a file's conventions differ from clothlab's own (deg, brdf, weft, ccw),
 they are recorded in ``provenance['source_header']``.  Polar angles must lie in [0, 90] deg (90 included).
@@ -44,7 +44,7 @@ import yaml
 from clothlab.atomic import atomic_write_text
 from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_from_clothlab, azimuth_to_clothlab
-from clothlab.measurement import Measurement
+from clothlab.io.measurement import Measurement
 
 TABLE_VERSION = 1
 ANGLE_COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")

@@ -1,7 +1,12 @@
-"""Model kinds by name (a registry, not an if-chain): ``kind`` in fabric.yaml -> model class."""
+"""Model kinds by name (a registry, not an if-chain): ``kind`` in fabric.yaml -> model class.
+
+This is the only place that knows which kinds exist; everything else asks the model
+(:class:`clothlab.models.base.Model`).  A new model is one package plus one line here.
+"""
 
 from __future__ import annotations
 
+import inspect
 from importlib import import_module
 
 from clothlab.errors import ConfigError
@@ -10,9 +15,11 @@ MODEL_KINDS = {
     "irawan": ("clothlab.models.irawan.model", "IrawanModel"),
     "kang": ("clothlab.models.kang.model", "KangModel"),
 }
+DEFAULT_KIND = "irawan"
 
 
 def model_class(kind: str):
+    """The model class registered as ``kind`` (ConfigError at ``model.kind`` for an unknown one)."""
     try:
         module, name = MODEL_KINDS[kind]
     except KeyError:
@@ -23,8 +30,6 @@ def model_class(kind: str):
 
 def build_model(kind: str, weave, quadrature=None, **options):
     """An instance of the model ``kind`` for ``weave``; ``quadrature`` = (rule, nodes) for integrating models."""
-    import inspect
-
     cls = model_class(kind)
     accepted = [p.name for p in inspect.signature(cls.__init__).parameters.values()
                 if p.kind == p.KEYWORD_ONLY]
@@ -32,9 +37,4 @@ def build_model(kind: str, weave, quadrature=None, **options):
         if name not in accepted:
             raise ConfigError(f"model kind {kind!r} takes no option {name!r}; options: {', '.join(accepted) or 'none'}",
                               field=f"model.options.{name}")
-    if kind == "irawan":
-        from clothlab.models.irawan.model import Quadrature
-
-        q = quadrature if quadrature is None or isinstance(quadrature, Quadrature) else Quadrature(*quadrature)
-        return cls(weave, q, **options)
-    return cls(weave, **options)
+    return cls.from_config(weave, quadrature, **options)

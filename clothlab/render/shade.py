@@ -51,7 +51,7 @@ import numpy as np
 from clothlab.errors import ConfigError
 from clothlab.models.components import combine
 from clothlab.render.scene import Fabric, Lod
-from clothlab.weave import YARN_KINDS
+from clothlab.weave.model import YARN_KINDS
 
 SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture")
 #: finite stand-in for an infinite footprint (grazing differentials) handed to the Kang shader
@@ -104,7 +104,7 @@ class FabricModels:
     def build(cls, spec: Fabric) -> FabricModels:
         from clothlab.models.irawan.model import COMPONENTS, IrawanModel
         from clothlab.models.irawan.texture import IrawanTexture
-        from clothlab.presets import resolve_weave
+        from clothlab.weave.presets import resolve_weave
 
         if spec.fit is not None:
             from clothlab.fit.store import load_fitted

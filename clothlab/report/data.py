@@ -227,9 +227,9 @@ def error_percentiles(table: dict, channels, percentiles=(50, 80, 95)) -> dict:
 
     ``overall`` pools every (sample, channel) value, ``per_channel`` has one entry per channel; samples
     with measured <= 0 or non-finite values are skipped (``n`` counts the rest).  Computed by
-    :func:`clothlab.metrics.error_percentiles` (Irawan & Marschner 2012, sec. 8).
+    :func:`clothlab.fit.metrics.error_percentiles` (Irawan & Marschner 2012, sec. 8).
     """
-    from clothlab.metrics import error_percentiles as percentiles_of
+    from clothlab.fit.metrics import error_percentiles as percentiles_of
 
     measured = np.stack([table[f"measured_{c}"] for c in channels], axis=1)
     model = np.stack([table[f"model_{c}"] for c in channels], axis=1)

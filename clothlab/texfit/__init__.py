@@ -1,6 +1,6 @@
 """Texture (BTF) simulation and fitting of the Irawan-Marschner texture model (issue 4 items 3-4).
 
-- :mod:`clothlab.texfit.simulate_btf`: simulated BTF stacks in the paper's Fig. 4 arrangement;
+- :mod:`clothlab.simulate.btf`: simulated BTF stacks in the paper's Fig. 4 arrangement;
 - :mod:`clothlab.texfit.fit`: fit the texture-only parameters (tile offset, rotation, segment ratio, hWidth,
   noise statistics) to a BTF stack with the reflectance fit's BRDF parameters held;
 - :mod:`clothlab.texfit.plots`: measured vs model tiles in the Fig. 4 half circles, per-image errors.

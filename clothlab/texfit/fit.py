@@ -2,7 +2,7 @@
 
 Free (any subset of :data:`TEXTURE_FREE`): the tile offset (u0, v0) in tiles, a small rotation rho (deg),
 the segment length/width ratio scale s and hWidth (eq. 12), with the layout conventions of
-:mod:`clothlab.texfit.simulate_btf`.  The BRDF parameters come from a reflectance fit (or fabric.yaml) and
+:mod:`clothlab.simulate.btf`.  The BRDF parameters come from a reflectance fit (or fabric.yaml) and
 are **held fixed**; ``refine`` names BRDF parameters (e.g. ``warp.umax``) that are refined as well, within
 their declared fit bounds, in a second stage that starts from the held optimum and keeps the better of the
 two (so refining never ends worse than holding).  At every objective evaluation the linear coefficients
@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import GeometryWarning, InputError
-from clothlab.texfit.simulate_btf import (
+from clothlab.simulate.btf import (
     TextureSource,
     fabric_coordinates,
     image_centre,
@@ -63,7 +63,7 @@ def pattern_translations(weave, samples: int = 4, atol: float = 1e-3) -> np.ndar
     """(K, 2) shifts (du, dv) in tiles, whole cells within one tile, that leave the noise-free texture
     unchanged (same yarn kind and local (x, y) to ``atol`` cells at every point; the published segment
     centres carry 4 digits, e.g. 0.0833); (0, 0) first."""
-    from clothlab.weave_lookup import locate_segments
+    from clothlab.weave.lookup import locate_segments
 
     w, h = weave.tile_width, weave.tile_height
     grid = (np.arange(samples) + 0.5) / samples
@@ -441,7 +441,7 @@ def image_errors(measured, model, repeats, channels, stack=None, percentiles=(50
     Returns (errors dict, measured tiles, model tiles), tiles (N, ny, nx, C) averaged with the period
     (W / repeats_u, H / repeats_v) px from the image's corner."""
     from clothlab.btf.period import average_tiles
-    from clothlab.metrics import error_percentiles
+    from clothlab.fit.metrics import error_percentiles
 
     n, height, width, c = measured.shape
     period = (width / repeats[0], height / repeats[1])

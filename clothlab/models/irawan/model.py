@@ -32,14 +32,14 @@ from functools import lru_cache
 
 import numpy as np
 
-from clothlab.errors import GeometryWarning, ParameterError
+from clothlab.errors import ConfigError, GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
-from clothlab.models.components import combine
+from clothlab.models.base import Model
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, apply_parameters, weave_parameters
 from clothlab.models.irawan.phase import phase_function
 from clothlab.models.irawan.quadrature import RULES
 from clothlab.models.irawan.yarn import yarn_integral
-from clothlab.weave import YARN_KINDS, Weave
+from clothlab.weave.model import YARN_KINDS, Weave
 
 PSI_FILAMENT_THRESHOLD = 1e-3  # radians
 ALBEDO_SAMPLES = 2**16
@@ -139,13 +139,32 @@ def _specular_albedo_cached(key, samples):
     return float(np.pi * values.mean())
 
 
-class IrawanModel:
+class IrawanModel(Model):
     """Irawan-Marschner reflectance model of one weave (the pure model: no I/O, no state but the weave)."""
 
     kind = "irawan"
     params = IRAWAN_PARAMS
     component_names = COMPONENTS
     coefficient_meaning = "kd: diffuse albedo; ks_<kind>: mean specular albedo of that segment type"
+    default_free = ("warp.umax", "weft.umax", "warp.kappa", "weft.kappa", "alpha", "beta")
+    has_texture = True
+
+    @classmethod
+    def from_config(cls, weave: Weave, quadrature=None, **options) -> IrawanModel:
+        if options:
+            raise ConfigError(f"model kind 'irawan' takes no option {next(iter(options))!r}; options: none",
+                              field=f"model.options.{next(iter(options))}")
+        q = quadrature if quadrature is None or isinstance(quadrature, Quadrature) else Quadrature(*quadrature)
+        return cls(weave, q)
+
+    def geometry_warnings(self, params: dict) -> list[str]:
+        return geometry_warnings(self.resolve(params), self.weave.name)
+
+    def fitted_weave(self, params: dict) -> Weave:
+        return apply_parameters(self.weave, self.resolve(params))
+
+    def settings(self) -> dict:
+        return {"quadrature": {"rule": self.quadrature.rule, "nodes": self.quadrature.nodes}}
 
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
@@ -167,13 +186,6 @@ class IrawanModel:
 
     def default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
-
-    def resolve(self, params: dict | None) -> dict[str, float]:
-        """The weave's parameters overridden by ``params``, validated against the declarations."""
-        full = self.default_parameters()
-        if params:
-            full.update(IRAWAN_PARAMS.validate(params))
-        return full
 
     def with_parameters(self, params: dict) -> Weave:
         return apply_parameters(self.weave, self.resolve(params))
@@ -216,9 +228,3 @@ class IrawanModel:
                                       f"normalised specular_{kind} is 0 everywhere", GeometryWarning, stacklevel=2)
             out[name] = value
         return out
-
-    def evaluate(self, wi, wo, coefficients: dict, params: dict | None = None) -> np.ndarray:
-        """f_r (N, C) = sum_k coefficients[k] * component_k; coefficients map 'kd', 'ks_warp', 'ks_weft'
-        (or component names) to (C,) arrays."""
-        comps = self.components(wi, wo, params)
-        return combine(comps, coefficients)

@@ -7,7 +7,7 @@ model).  ``valid`` is the physical range, ``bounds`` the default fit bounds.
 from __future__ import annotations
 
 from clothlab.params import ParamSpec, ParamTable
-from clothlab.weave import YARN_KINDS, Weave
+from clothlab.weave.model import YARN_KINDS, Weave
 
 FIBRE_SPECS = [
     ParamSpec("alpha", "1", (0.0, 100.0), (0.0, 0.5), 0.05, "linear", "uniform scattering, eq. 7"),

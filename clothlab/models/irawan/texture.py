@@ -2,7 +2,7 @@
 
 The reflectance integrand of eq. 10 "unrolled" onto each yarn segment.  For a texture point (u, v):
 
-1. :func:`clothlab.weave_lookup.locate_segments` finds the segment and the local coordinates (x across,
+1. :func:`clothlab.weave.lookup.locate_segments` finds the segment and the local coordinates (x across,
    y along the yarn, cells from the segment centre); any real u, v (negative, many repeats) and segment
    centres outside the tile are handled there.
 2. Eq. 11 maps the point onto the yarn surface: u_yarn = 2 umax y / l (staple), v_yarn = pi x / w (filament).
@@ -35,13 +35,13 @@ when each segment's pattern cells form its w x l rectangle centred on the segmen
 presets).  Reciprocity: T depends on wi, wo only through h, |wi + wo|, ci cr / (ci + cr) and wi.wo, so
 swapping wi and wo leaves every point's value unchanged (noise does not depend on directions).
 
-Noise (sec. 7.2.1; :mod:`clothlab.noise`), only when ``noise=True``:
+Noise (sec. 7.2.1; :mod:`clothlab.models.irawan.texture_noise`), only when ``noise=True``:
 
 - Intensity: if weave.fineness = k > 0, each segment *instance* (a physical segment, keyed by its
   absolute centre; :class:`TexturePoints`) is split into k x k rectangles (k across, k along; cell size
   w/k by l/k; the paper's "k by k rectangles in a yarn segment"; a non-integer k leaves a narrower last
   rectangle), and the specular components are multiplied by an exponential variate of mean 1 per
-  rectangle (capped at 10, rescaled to mean exactly 1: :func:`clothlab.noise.exponential_noise`).
+  rectangle (capped at 10, rescaled to mean exactly 1: :func:`clothlab.models.irawan.texture_noise.exponential_noise`).
 - umax modulation: if period > 0 and any dumax != 0, every warp yarn (a column of the fabric, keyed by its
   centre in half cells) and weft yarn (a row) carries a 1-D Perlin function P in [-1, 1] of the position
   along it, in cells / period (``period``: Perlin lattice spacing in weave cells).  A segment with centre
@@ -73,9 +73,9 @@ from clothlab.models.irawan.model import (
 )
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 from clothlab.models.irawan.phase import phase_function
-from clothlab.noise import exponential_noise, perlin_1d
-from clothlab.weave import YARN_KINDS, Weave
-from clothlab.weave_lookup import locate_segments
+from clothlab.models.irawan.texture_noise import exponential_noise, perlin_1d
+from clothlab.weave.lookup import locate_segments
+from clothlab.weave.model import YARN_KINDS, Weave
 
 UMAX_MIN = 0.1  # degrees: lower clamp of the noise-modulated umax
 UMAX_MAX = 89.9  # degrees: upper clamp

@@ -30,15 +30,16 @@ import numpy as np
 
 from clothlab.errors import ConfigError
 from clothlab.frames import to_yarn_frame
+from clothlab.models.base import Model
 from clothlab.models.kang import lod, microfacet, yarn
 from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters, resolve_parameters
-from clothlab.weave import YARN_KINDS, Weave
-from clothlab.weave_lookup import locate_segments
+from clothlab.weave.lookup import locate_segments
+from clothlab.weave.model import YARN_KINDS, Weave
 
 WEAVE_LEVELS = ("prefiltered", "flat")
 
 
-class KangModel:
+class KangModel(Model):
     """Kang's procedural fabric shader behind the clothlab model interface.
 
     Options: ``alternating`` (default True, the paper's model): the weft lobe is the warp lobe rotated by
@@ -52,6 +53,8 @@ class KangModel:
     """
 
     kind = "kang"
+    params = KANG_PARAMS  # the class-level declarations (all options); an instance narrows them
+    has_texture = True
     #: tile-averaged components (components(), what a fit solves coefficients for)
     component_names = ("diffuse", "specular_warp", "specular_weft")
     #: point components (point_components(), for textures and renders)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from clothlab.errors import ParameterError
 from clothlab.params import ParamSpec, ParamTable
-from clothlab.weave import YARN_KINDS
+from clothlab.weave.model import YARN_KINDS
 
 #: largest fibre / yarn curvature (eqs. 3-4) for which the perturbed normal stays a unit vector.
 MAX_CURVATURE = 0.7

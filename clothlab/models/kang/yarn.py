@@ -7,7 +7,7 @@ it, z the macro normal.  In that frame eqs. 3 (weft) and 4 (warp) are one formul
     delta_along  = c_f (2 fract(N_xi (y - s_f x)) - 1)               (fibre ridges, sawtooth in [-c_f, c_f])
     n_p = (delta_across, delta_along, sqrt(1 - delta_across^2 - delta_along^2)),   ao = n_p.z
 
-x, y are the point's offsets across / along the yarn in weave cells (clothlab.weave_lookup), w the yarn
+x, y are the point's offsets across / along the yarn in weave cells (clothlab.weave.lookup), w the yarn
 width in cells.  Readings of the printed text: the z component is sqrt(1 - dx^2 - dy^2) (the squares are
 lost in the printed "sqrt(1.0 - dx - dy)", which would not give a unit normal); the fibre phase is sheared
 by the offset *across* the yarn (s_f the fibre slope), the reading in which s_f slants the fibre ridges.

@@ -69,7 +69,7 @@ def _model_source(source, rule, nodes):
     else:
         from clothlab.config import load_config
         from clothlab.models.registry import build_model
-        from clothlab.presets import resolve_weave
+        from clothlab.weave.presets import resolve_weave
 
         cfg = load_config(source)
         q = cfg.model.quadrature

@@ -1,8 +1,8 @@
 """The six fabrics of Irawan & Marschner 2012 (sec. 8, Table I) as named weave presets.
 
-The presets are the ``.wv`` files shipped in ``clothlab/presets/`` (the one source of truth; their numbers
+The presets are the ``.wv`` files shipped in ``clothlab/weave/data/`` (the one source of truth; their numbers
 are the published ones, see shared/reference/irawan-presets.md); :func:`get_preset` reads them with
-:func:`clothlab.wvfile.parse_wv_text`.  :func:`resolve_weave` interprets the ``weave:`` field of
+:func:`clothlab.weave.wvformat.parse_wv_text`.  :func:`resolve_weave` interprets the ``weave:`` field of
 fabric.yaml: ``preset:<name>`` or a path to a ``.wv`` file.
 """
 
@@ -13,8 +13,8 @@ from importlib import resources
 from pathlib import Path
 
 from clothlab.errors import ConfigError
-from clothlab.weave import Weave
-from clothlab.wvfile import parse_wv, parse_wv_text
+from clothlab.weave.model import Weave
+from clothlab.weave.wvformat import parse_wv, parse_wv_text
 
 PRESET_NAMES = (
     "cotton-denim",
@@ -38,7 +38,7 @@ def canonical_preset_name(name: str) -> str:
 
 @cache
 def _load_preset(key: str) -> Weave:
-    resource = resources.files("clothlab").joinpath("presets", f"{key}.wv")
+    resource = resources.files("clothlab.weave").joinpath("data", f"{key}.wv")
     return parse_wv_text(resource.read_text(encoding="utf-8"), source=str(resource))
 
 

@@ -276,7 +276,7 @@ def cmd_report(args) -> int:
 # ---------------------------------------------------------------------------------------------- eval
 
 def cmd_eval(args) -> int:
-    from clothlab.evaluate import evaluate_directions_file
+    from clothlab.fit.evaluate import evaluate_directions_file
 
     text = evaluate_directions_file(args.source, args.directions, components=args.components, rule=args.rule,
                                     nodes=args.nodes)
@@ -309,7 +309,7 @@ def _channel_values(text, field, n):
 
 def cmd_simulate(args) -> int:
     if args.btf is not None:
-        from clothlab.texfit.simulate_btf import simulate_btf_command
+        from clothlab.simulate.btf import simulate_btf_command
 
         if not args.source:
             raise ConfigError("--btf needs a source: preset:<name>, a fabric.yaml or a fit directory")
@@ -333,7 +333,7 @@ def cmd_simulate(args) -> int:
                                     channels=None if args.channels == "R,G,B" else args.channels,
                                     rule=args.rule, nodes=args.nodes, force=args.force)
     if args.paper_examples is not None:
-        from clothlab.examples import write_paper_examples
+        from clothlab.simulate.examples import write_paper_examples
 
         for path in write_paper_examples(args.paper_examples, force=args.force):
             print(path)
@@ -343,8 +343,8 @@ def cmd_simulate(args) -> int:
                           "or --paper-examples DIR")
     from clothlab.io.table import write_table
     from clothlab.models.registry import build_model
-    from clothlab.presets import resolve_weave
-    from clothlab.simulate import NoiseModel, simulate
+    from clothlab.simulate.gonio import NoiseModel, simulate
+    from clothlab.weave.presets import resolve_weave
 
     source = args.source
     params, rule, nodes, kind = {}, "trapezoid", 11, "irawan"
@@ -371,7 +371,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from clothlab.bench import SECTIONS, run_benchmarks
+    from clothlab.studies.bench import SECTIONS, run_benchmarks
 
     sections = SECTIONS
     if args.sections:
@@ -398,7 +398,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from clothlab.check import exit_code, run_check
+    from clothlab.studies.stability import exit_code, run_check
 
     result = run_check(full=args.full, json_path=args.json, seed=args.seed, figures_dir=args.figures or args.report)
     if args.report:
@@ -425,7 +425,7 @@ def cmd_render(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from clothlab.calibrate import calibrate_command
+    from clothlab.colour.calibrate import calibrate_command
 
     return calibrate_command(args.chart, method=args.method, degree=args.degree, apply=args.apply,
                              output=args.output, report=args.report, force=args.force)

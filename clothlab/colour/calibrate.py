@@ -2,7 +2,7 @@
 
 The chart file is a CSV with columns R, G, B (linear camera values, one row per patch in the chart's
 standard order, 24 rows for the ColorChecker 24; an optional ``patch`` column is kept for the report).
-The correction (:mod:`clothlab.colour_calibration`, colour-science) maps camera RGB to linear sRGB (D65)
+The correction (:mod:`clothlab.colour.chart`, colour-science) maps camera RGB to linear sRGB (D65)
 of the chart's reference values; its delta E 2000 before / after is printed and, with ``report``, written
 as a page.  ``apply`` corrects a measurement table (values and sigma) and writes a new clothlab table;
 values a correction maps below zero (colours outside the chart's gamut) are raised to 1e-6 of the channel
@@ -53,7 +53,7 @@ def read_chart(path) -> tuple[np.ndarray, list[str]]:
 
 def calibrate_command(chart, *, method="Cheung 2004", degree=None, apply=None, output=None, report=None,
                       force=False) -> int:
-    from clothlab.colour_calibration import chart_reference, delta_e_2000, fit_correction
+    from clothlab.colour.chart import chart_reference, delta_e_2000, fit_correction
 
     measured, names = read_chart(chart)
     reference = chart_reference()

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from clothlab.frames import vector_to_spherical
-from clothlab.measurement import Measurement
+from clothlab.io.measurement import Measurement
 from clothlab.models.components import combine
 
 EXITANT_DIRECTIONS = ((0.0, 0.0), (30.0, 0.0), (30.0, 90.0), (45.0, 45.0), (45.0, 135.0), (60.0, 0.0), (60.0, 90.0))

@@ -9,7 +9,7 @@ Likelihood (per value n, channel c; model m = sum_k c_k[c] component_k(theta)[n]
 
 * measurement with ``sigma``: Gaussian, log L = -1/2 sum ((y - m) / sigma)^2;
 * without ``sigma``: log-normal, log(m / y) ~ N(0, s^2) with s sampled (log-uniform prior on ``NOISE_RANGE``),
-  log L = -sum [ log(m / y)^2 / (2 s^2) + log s ]  (m floored as in :data:`clothlab.metrics.LOG_FLOOR`).
+  log L = -sum [ log(m / y)^2 / (2 s^2) + log s ]  (m floored as in :data:`clothlab.fit.metrics.LOG_FLOOR`).
 
 **The linear coefficients (kd, ks per channel and yarn type) are profiled out, not sampled**: at every
 posterior point they are re-solved by weighted NNLS (weights 1 / sigma, or 1 / y for the log-normal case,
@@ -50,9 +50,9 @@ import numpy as np
 
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError, ParameterError
+from clothlab.fit.metrics import LOG_FLOOR, linear_weights
 from clothlab.fit.nnls import nnls_small
 from clothlab.fit.optimize import BOUND_TOLERANCE
-from clothlab.metrics import LOG_FLOOR, linear_weights
 
 NOISE_NAME = "noise.s"
 NOISE_UNIT = "1 (std. dev. of log(model / measured))"
@@ -718,98 +718,3 @@ class PosteriorResult:
 
 def _finite(matrix: np.ndarray) -> list:
     return [[float(v) if math.isfinite(v) else None for v in row] for row in np.asarray(matrix)]
-
-
-# ---------------------------------------------------------------------------------------------- studies
-def _fabric_config(fabric: str, variant: str = "noisy"):
-    from clothlab.config import load_config
-
-    root = Path(__file__).resolve().parents[2] / "measurements" / fabric
-    return load_config(root / ("fabric.yaml" if variant == "noisy" else "fabric-clean.yaml"))
-
-
-def optimisation_only(config, **optimizer):
-    """``config`` with cross-validation and the posterior switched off (``fit.cv_folds`` 0, ``fit.posterior``
-    None) and the given ``fit.optimizer`` fields replaced: ``run_fit`` then runs the optimisation alone and
-    writes no checkpoint (the studies below run the posterior themselves, checkpointing into a temporary
-    directory)."""
-    from dataclasses import replace
-
-    fit = replace(config.fit, cv_folds=0, posterior=None)
-    if optimizer:
-        fit = replace(fit, optimizer=replace(fit.optimizer, **optimizer))
-    return replace(config, fit=fit)
-
-
-def _study_posterior(fit, **kwargs) -> PosteriorResult:
-    """run_posterior at a fit's optimum, checkpointing into a temporary directory (never under fits/)."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory(prefix="clothlab-posterior-") as tmp:
-        return run_posterior(fit.problem, fit.params, checkpoint_path=Path(tmp) / "checkpoint.npz", **kwargs)
-
-
-def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 10.0, *, walkers: int = 32,
-                        seed: int = 1, progress: bool = True) -> dict:
-    """A full posterior (the fabric's six free parameters, noisy data) run to the tau criterion.
-
-    The optimum comes from the fabric's fabric.yaml optimiser settings (cross-validation and the configured
-    posterior off; its wall time is reported apart); the posterior then runs once, with a minimum of 1,000 steps,
-    and stops by the tau rule, at 50,000 steps or after ``max_minutes``.  Returns the wall times, tau, steps,
-    acceptance and whether it converged within the limit.
-    """
-    import os
-
-    from clothlab.fit.runner import run_fit
-
-    fit = run_fit(optimisation_only(_fabric_config(fabric)))
-    post = _study_posterior(fit, walkers=walkers, steps=1000, max_steps=50_000, seed=seed, progress=progress,
-                            max_seconds=60.0 * max_minutes)
-    summary = post.to_json()
-    return {"fabric": fabric, "free": list(fit.problem.free), "fit_wall_time_s": fit.timings["optimisation_s"],
-            "posterior_wall_time_s": post.wall_time, "converged": post.converged, "stop_reason": post.stop_reason,
-            "within_limit": post.converged and post.wall_time <= 60.0 * max_minutes, "limit_minutes": max_minutes,
-            "steps": post.steps, "walkers": post.walkers, "tau": summary["convergence"]["tau"],
-            "ess": summary["convergence"]["ess"], "acceptance_mean": float(np.mean(post.acceptance)),
-            "not_determined": summary["not_determined"], "cpu_count": os.cpu_count(),
-            "parameters": {n: {k: e[k] for k in ("median", "p2.5", "p97.5", "truth", "truth_in_95") if k in e}
-                           for n, e in summary["parameters"].items()}}
-
-
-COVERAGE_FABRICS = ("cotton-denim", "silk-shantung", "silk-charmeuse", "cotton-twill", "wool-gabardine",
-                    "polyester-lining")
-COVERAGE_TARGET = 0.9
-"""Pass criterion: the 95 % intervals contain the generating value for at least this fraction of the free
-parameters, over the six noisy simulated sets."""
-
-
-def coverage_study(fabrics=COVERAGE_FABRICS, *, walkers: int = 32, steps: int = 1000, max_steps: int = 20_000,
-                   seed: int = 1, progress: bool = False, optimizer: dict | None = None,
-                   check_every: int = 100) -> dict:
-    """Coverage of the 95 % intervals over the noisy simulated sets (measurements/<fabric>/fabric.yaml, six free
-    parameters each): each set is fitted with its fabric.yaml optimiser settings (``optimizer`` replaces some,
-    e.g. a smaller budget; cross-validation and the configured posterior off), then one posterior runs at the
-    optimum (``steps`` minimum, ``max_steps`` cap, tau rule).  The generating values ("truth") are the simulated
-    data's recorded parameters (measurement provenance).  Returns per fabric the covered flags, intervals,
-    convergence and wall times, and overall the covered / total counts, the fraction and the pass verdict."""
-    from clothlab.fit.runner import run_fit
-
-    rows, inside, total = {}, 0, 0
-    for fabric in fabrics:
-        fit = run_fit(optimisation_only(_fabric_config(fabric), **(optimizer or {})))
-        post = _study_posterior(fit, walkers=walkers, steps=steps, max_steps=max_steps, seed=seed,
-                                progress=progress, check_every=check_every)
-        params = post.to_json()["parameters"]
-        hits = {n: e["truth_in_95"] for n, e in params.items() if "truth_in_95" in e}
-        inside += sum(hits.values())
-        total += len(hits)
-        rows[fabric] = {"covered": hits, "n_covered": int(sum(hits.values())), "n_free": len(hits),
-                        "converged": post.converged, "stop_reason": post.stop_reason, "steps": post.steps,
-                        "walkers": post.walkers, "max_tau": float(np.max(post.tau)),
-                        "fit_wall_time_s": fit.timings["optimisation_s"], "wall_time_s": post.wall_time,
-                        "intervals": {n: [e["p2.5"], e["p97.5"], e.get("truth")] for n, e in params.items()}}
-    fraction = inside / total if total else math.nan
-    return {"fabrics": rows, "covered": inside, "total": total, "fraction": fraction, "target": COVERAGE_TARGET,
-            "passed": bool(total and fraction >= COVERAGE_TARGET),
-            "settings": {"walkers": walkers, "steps": steps, "max_steps": max_steps, "seed": seed,
-                         "optimizer": dict(optimizer or {})}}

@@ -29,7 +29,7 @@ tile fractions with V measured from the *bottom* of the tile (values outside [0,
 When the pattern spans several lines, each line must hold exactly one row (``tileWidth`` numbers);
 a one-line pattern (as Mitsuba's own writer emits) is accepted too.
 
-Units and field mapping onto :class:`~clothlab.weave.Weave` (no unit conversion: the file's angles are
+Units and field mapping onto :class:`~clothlab.weave.model.Weave` (no unit conversion: the file's angles are
 degrees and so are clothlab's; Mitsuba converts psi, umax and the dUmax fields to radians on reading):
 
 =====================  ==========================  ========  =========================
@@ -70,7 +70,7 @@ import numpy as np
 
 from clothlab.errors import InputError, ParameterError
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
-from clothlab.weave import YARN_KINDS, Segment, Weave, YarnGeometry
+from clothlab.weave.model import YARN_KINDS, Segment, Weave, YarnGeometry
 
 #: Weave-level scalar fields of the format (file spelling) and the Weave attribute each one fills.
 WEAVE_FLOAT_FIELDS = {

@@ -14,7 +14,7 @@ Three parts, printed as a summary and returned as a dict (``run_check``):
    JUMP_TOLERANCE are listed with where they happen.  Expected: at the psi filament threshold (measured
    separately) and, with delta = 0, at the filament cutoff |u| = umax (numerics.md); anything else is a
    finding (e.g. a trapezoid node crossing a support end of the staple integrand).
-3. stiff fits (``full`` only) - :func:`clothlab.stiff.run_stiff`.
+3. stiff fits (``full`` only) - :func:`clothlab.studies.stiff.run_stiff`.
 
 The full run evaluates more than 10^6 (parameter, direction) configurations per rule.
 
@@ -297,7 +297,7 @@ def run_check(full: bool = False, json_path=None, seed: int = 0, figures_dir=Non
     result["totals"] = totals
     result["verdict"] = verdict(totals)
     if full:
-        from clothlab.stiff import run_stiff
+        from clothlab.studies.stiff import run_stiff
 
         result["stiff"] = run_stiff(seed=seed, figures_dir=figures_dir)
     result["wall_time_s"] = time.perf_counter() - started
@@ -343,7 +343,7 @@ def print_check(result: dict) -> None:
               f"median {r['median_rel']:.2e}, 80th "
               f"{r['p80_rel']:.2e}, max {r['max_rel']:.2e}; sum below {r['sum_below']:.5g}, above {r['sum_above']:.5g}")
     if "stiff" in result:
-        from clothlab.stiff import print_stiff
+        from clothlab.studies.stiff import print_stiff
 
         print_stiff(result["stiff"])
     v = result.get("verdict") or verdict(result["totals"])

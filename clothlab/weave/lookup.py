@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.weave import YARN_KINDS, Weave
+from clothlab.weave.model import YARN_KINDS, Weave
 
 
 def _segment_tables(weave: Weave):

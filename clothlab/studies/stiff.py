@@ -3,9 +3,9 @@
 Cases (numerics.md item 12): silk charmeuse (beta 7.3, kappa 2), polyester lining (filament, kappa -0.7),
 a very narrow highlight (cotton-denim geometry with umax 2 deg on both yarns, beta 50) and a weak weft
 under a strong warp (cotton-denim with ks_weft = ks_warp / 20).  For each: noisy data are simulated
-(:func:`clothlab.simulate.simulate`, the examples' noise: 5 % log-normal + 2e-4 1/sr), then fitted with the
-examples' free parameters (:func:`clothlab.examples.free_parameters`) from the default start
-(:data:`clothlab.examples.START`) with the default optimiser (GN_CRS2_LM + LN_BOBYQA) and from perturbed
+(:func:`clothlab.simulate.gonio.simulate`, the examples' noise: 5 % log-normal + 2e-4 1/sr), then fitted with the
+examples' free parameters (:func:`clothlab.simulate.examples.free_parameters`) from the default start
+(:data:`clothlab.simulate.examples.START`) with the default optimiser (GN_CRS2_LM + LN_BOBYQA) and from perturbed
 starts with the local polish alone (LN_BOBYQA).  At the best optimum: the Jacobian of the relative residuals
 (coefficients re-solved by NNLS at every point, as in the objective) by central finite differences in the unit
 box, its condition number (ratio of extreme singular values), and the nearly dependent parameter groups
@@ -37,7 +37,7 @@ STRONG_CORRELATION = 0.7
 
 def stiff_cases() -> list[dict]:
     """The stiff problems: preset, parameter changes, coefficients (albedos, R G B)."""
-    from clothlab.examples import YARN_COLOURS
+    from clothlab.simulate.examples import YARN_COLOURS
 
     denim = YARN_COLOURS["cotton-denim"]
     return [
@@ -54,7 +54,7 @@ def stiff_cases() -> list[dict]:
 
 def residuals(problem, x) -> np.ndarray:
     """Relative residuals (all values, all channels) at unit-box point ``x`` (coefficients by NNLS)."""
-    from clothlab.metrics import metric_residuals
+    from clothlab.fit.metrics import metric_residuals
 
     solution = problem.solve(problem.from_unit(x))
     return np.ravel(metric_residuals(problem.y, solution.prediction, problem.metric))
@@ -101,11 +101,11 @@ def _fit(problem, x0, global_algorithm, max_evals, seed):
 def run_case(case: dict, *, seed: int = 0, perturbed: int = 3, max_evals: int = 3000, posterior=None) -> dict:
     """Simulate, fit from the default and ``perturbed`` starts, condition the best optimum and sample a short
     posterior there (``posterior``: run_posterior settings, default :data:`POSTERIOR`)."""
-    from clothlab.examples import START, free_parameters
     from clothlab.fit.problem import FitProblem
     from clothlab.models.irawan.model import IrawanModel
-    from clothlab.presets import get_preset
-    from clothlab.simulate import NoiseModel, simulate
+    from clothlab.simulate.examples import START, free_parameters
+    from clothlab.simulate.gonio import NoiseModel, simulate
+    from clothlab.weave.presets import get_preset
 
     started = time.perf_counter()
     model = IrawanModel(get_preset(case["preset"]))

@@ -26,9 +26,9 @@ from pathlib import Path
 from typing import Any
 
 from clothlab.errors import ConfigError, ParameterError
+from clothlab.models.registry import DEFAULT_KIND, MODEL_KINDS, model_class
 
 FORMATS = ("auto", "clothlab", "astm", "pabopto")
-MODEL_KINDS = ("irawan", "kang")
 QUADRATURE_RULES = ("trapezoid", "gauss", "support", "adaptive")
 METRICS = ("relative", "log", "cube-root")
 GLOBAL_ALGORITHMS = ("GN_CRS2_LM", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH", "G_MLSL_LDS")
@@ -39,10 +39,6 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 NODES_RANGE = (2, 1000)
 SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
 
-DEFAULT_FREE = {
-    "irawan": ("warp.umax", "weft.umax", "warp.kappa", "weft.kappa", "alpha", "beta"),
-    "kang": (),
-}
 DEFAULT_PERCENTILES = (50.0, 80.0, 95.0)
 DEFAULT_WALKERS = 32
 DEFAULT_STEPS = 4000
@@ -74,7 +70,7 @@ class QuadratureConfig:
 class ModelConfig:
     """``model``: kind, weave (``preset:<name>`` or the resolved path of a .wv file, or None), start values."""
 
-    kind: str = "irawan"
+    kind: str = DEFAULT_KIND
     weave: str | None = None
     quadrature: QuadratureConfig = field(default_factory=QuadratureConfig)
     params: dict = field(default_factory=dict)
@@ -500,7 +496,7 @@ class _Validator:
     def model(self, value: Any) -> ModelConfig:
         p = ("model",)
         m = self.section(value, p, ("kind", "weave", "quadrature", "params", "options"))
-        kind = _as_choice(m.get("kind", "irawan"), self.r.at(p + ("kind",)), MODEL_KINDS)
+        kind = _as_choice(m.get("kind", DEFAULT_KIND), self.r.at(p + ("kind",)), MODEL_KINDS)
         weave = None
         if m.get("weave") is not None:
             weave = self.weave(m["weave"], self.r.at(p + ("weave",)))
@@ -534,11 +530,11 @@ class _Validator:
                            options=copy.deepcopy(options))
 
     def weave(self, value: Any, at: _Field) -> str:
-        """``preset:<name>`` (spelled as clothlab.presets accepts it) -> ``preset:<key>``; a .wv file ->
+        """``preset:<name>`` (spelled as clothlab.weave.presets accepts it) -> ``preset:<key>``; a .wv file ->
         its resolved path."""
         text = _as_str(value, at).strip()
         if text.lower().startswith(PRESET_PREFIX):
-            from clothlab.presets import PRESET_NAMES, canonical_preset_name
+            from clothlab.weave.presets import PRESET_NAMES, canonical_preset_name
 
             preset = text[len(PRESET_PREFIX):].strip()
             try:
@@ -562,7 +558,7 @@ class _Validator:
         p = ("fit",)
         f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds"))
         table = _param_table(model.kind)
-        free = self.free(f.get("free", list(DEFAULT_FREE[model.kind])), table)
+        free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
         for name in free:  # explicit bounds were checked against the start above; the declared ones here
             if table is not None and name not in bounds and name in model.params:
@@ -704,16 +700,8 @@ class _Validator:
 
 
 def _param_table(kind: str):
-    """The model's parameter declarations, or None when this module does not validate them (kang)."""
-    if kind == "irawan":
-        from clothlab.models.irawan.parameters import IRAWAN_PARAMS
-
-        return IRAWAN_PARAMS
-    if kind == "kang":
-        from clothlab.models.kang.parameters import KANG_PARAMS
-
-        return KANG_PARAMS
-    return None
+    """The parameter declarations of model ``kind`` (the registry's class)."""
+    return model_class(kind).declared_parameters()
 
 
 def _check_parameter(table, name: str, value: float, at: _Field) -> float:

@@ -33,7 +33,7 @@ START = {"warp.umax": 20.0, "weft.umax": 20.0, "warp.psi": 0.0, "weft.psi": 0.0,
 
 
 def free_parameters(name: str) -> tuple[str, ...]:
-    from clothlab.presets import get_preset
+    from clothlab.weave.presets import get_preset
 
     weave = get_preset(name)
     return STAPLE_FREE if weave.warp.psi != 0.0 or weave.weft.psi != 0.0 else FILAMENT_FREE
@@ -105,8 +105,8 @@ def write_paper_examples(root, *, force: bool = False) -> list:
     from clothlab.errors import GeometryWarning
     from clothlab.io.table import write_table
     from clothlab.models.irawan.model import IrawanModel
-    from clothlab.presets import get_preset
-    from clothlab.simulate import NoiseModel, simulate
+    from clothlab.simulate.gonio import NoiseModel, simulate
+    from clothlab.weave.presets import get_preset
 
     written = []
     for name, colours in YARN_COLOURS.items():
@@ -152,7 +152,7 @@ def _geometry_note(name: str) -> str:
     """A README line for each yarn of the preset that violates the segment constraint of sec. 5.3."""
     from clothlab.models.irawan.model import geometry_warnings
     from clothlab.models.irawan.parameters import weave_parameters
-    from clothlab.presets import get_preset
+    from clothlab.weave.presets import get_preset
 
     return "".join(f"- Note: {message}; the model says so with a warning whenever it is evaluated.\n"
                    for message in geometry_warnings(weave_parameters(get_preset(name)), name))

@@ -66,7 +66,7 @@ def load_source(source) -> TextureSource:
     """A fit directory (fit.json + weave.wv, Irawan model), a fabric.yaml, or ``preset:<name>`` / a preset name."""
     from clothlab.models.irawan.model import IrawanModel, Quadrature
     from clothlab.models.irawan.parameters import weave_parameters
-    from clothlab.presets import PRESET_NAMES, get_preset
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
 
     text = str(source)
     path = Path(text)
@@ -80,7 +80,7 @@ def load_source(source) -> TextureSource:
         return TextureSource(model.weave, model.quadrature, params, coefficients, channels, f"fit:{path}")
     if path.suffix.lower() in (".yaml", ".yml") and path.is_file():
         from clothlab.config import load_config
-        from clothlab.presets import resolve_weave
+        from clothlab.weave.presets import resolve_weave
 
         config = load_config(path)
         if config.model.kind != "irawan":
@@ -94,7 +94,7 @@ def load_source(source) -> TextureSource:
     if name.strip().lower().replace("_", "-") not in PRESET_NAMES:
         raise InputError(f"texture source '{text}' is neither a fit directory, a fabric.yaml nor a preset "
                          f"({', '.join(PRESET_NAMES)})", field="source")
-    from clothlab.examples import YARN_COLOURS
+    from clothlab.simulate.examples import YARN_COLOURS
 
     weave = get_preset(name)
     colours = YARN_COLOURS.get(weave.name)

@@ -14,7 +14,7 @@ space - with colour-science (imported inside the functions; ``import colour`` co
   ``degree``).  Only 3x3 and root-polynomial corrections are scale-invariant: apply the others only to data
   on the chart's exposure scale.
 - :meth:`Correction.apply` for (..., 3) tables and images, :meth:`Correction.apply_measurement` for a
-  :class:`~clothlab.measurement.Measurement` (sigma propagated through the local Jacobian).
+  :class:`~clothlab.io.measurement.Measurement` (sigma propagated through the local Jacobian).
 - :func:`delta_e_2000`: CIEDE2000 between linear sRGB triplets: RGB (IEC 61966-2-1 primaries, D65 white,
   no transfer function) -> XYZ (white Y = 1) -> CIE Lab with the D65 white -> ``colour.delta_E(...,
   method="CIE 2000")``.

@@ -149,8 +149,8 @@ def quad_reference(wi, wo, params, kind):
 
 def accuracy_section(quick: bool) -> list[dict]:
     from clothlab.models.irawan.model import IrawanModel, Quadrature, yarn_specular
-    from clothlab.presets import PRESET_NAMES, get_preset
-    from clothlab.simulate import paper_sampling
+    from clothlab.simulate.gonio import paper_sampling
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
 
     ti, pi_, to, po = paper_sampling()
     from clothlab.frames import spherical_to_vector
@@ -183,8 +183,8 @@ def speed_section(quick: bool) -> dict:
     from clothlab.frames import spherical_to_vector
     from clothlab.models.components import combine
     from clothlab.models.irawan.model import IrawanModel
-    from clothlab.presets import get_preset
-    from clothlab.simulate import paper_sampling
+    from clothlab.simulate.gonio import paper_sampling
+    from clothlab.weave.presets import get_preset
 
     ti, pi_, to, po = paper_sampling()
     wi, wo = spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
@@ -226,10 +226,10 @@ def fit_section(quick: bool, max_evals=None) -> dict:
     so the reported wall time is the optimisation's (FitResult.timings["optimisation_s"]: loading, all
     stages, coefficients at the optimum) against FIT_TARGET_S."""
     from clothlab.config import load_config
-    from clothlab.fit.posterior import optimisation_only
     from clothlab.fit.runner import run_fit
+    from clothlab.studies.posterior import optimisation_only
 
-    root = Path(__file__).resolve().parents[1] / "measurements" / "polyester-lining" / "fabric.yaml"
+    root = Path(__file__).resolve().parents[2] / "measurements" / "polyester-lining" / "fabric.yaml"
     if not root.is_file():
         return {"skipped": f"{root} not found (bench runs from a source checkout)"}
     config = load_config(root)
@@ -254,7 +254,7 @@ def fit_section(quick: bool, max_evals=None) -> dict:
 def saved_coverage(fits_dir: Path, fabrics) -> dict | None:
     """The coverage study as the example fits ran it: fits/<fabric>/posterior.json of each noisy set (written by
     ``clothlab fit measurements/*/fabric.yaml``: the fabric.yaml optimum, then emcee to the tau rule), or None
-    when one is missing.  Same shape as :func:`clothlab.fit.posterior.coverage_study`."""
+    when one is missing.  Same shape as :func:`clothlab.studies.posterior.coverage_study`."""
     from clothlab.fit.posterior import COVERAGE_TARGET
 
     out, settings = {}, []
@@ -282,13 +282,13 @@ def coverage_section(quick: bool, fabrics=None, rerun: bool = False, **overrides
     """Coverage of the 95 % posterior intervals over the six noisy simulated sets (six free parameters each).
     Full run: the example fits' own posteriors (:func:`saved_coverage`; the fabric.yaml fits, 32 walkers, tau
     rule) when all six are saved and ``rerun`` is false - sampling them again would take ~45 min - else
-    :func:`clothlab.fit.posterior.coverage_study` (32 walkers, at least 1,000 steps, tau rule, at most 20,000).
+    :func:`clothlab.studies.posterior.coverage_study` (32 walkers, at least 1,000 steps, tau rule, at most 20,000).
     Quick run: two starts, 3,000 evaluations in all, and a fixed 400-step chain of 16 walkers per set
     (unconverged; indicative only)."""
-    from clothlab.fit.posterior import COVERAGE_FABRICS, coverage_study
+    from clothlab.studies.posterior import COVERAGE_FABRICS, coverage_study
 
     if not quick and not rerun and not overrides:
-        saved = saved_coverage(Path(__file__).resolve().parents[1] / "fits", tuple(fabrics or COVERAGE_FABRICS))
+        saved = saved_coverage(Path(__file__).resolve().parents[2] / "fits", tuple(fabrics or COVERAGE_FABRICS))
         if saved is not None:
             return {**saved, "quick": False}
     settings = ({"walkers": 16, "steps": 400, "max_steps": 400, "optimizer": {"max_evals": 3000, "starts": 2}}
@@ -347,7 +347,7 @@ def _print_accuracy(rows):
 TRADEOFF_RULES = tuple((r, n) for r in ("trapezoid", "gauss") for n in (3, 5, 7, 11, 21, 41, 81)) + (
     ("support", 4), ("support", 8), ("support", 16), ("adaptive", 4), ("split", 4), ("split", 6), ("split", 8))
 """Rules of the error-against-time study; ``split`` is the experimental rule of
-:mod:`clothlab.models.irawan.rules_experimental` (benchmark only)."""
+:mod:`clothlab.studies.quadrature_rules` (benchmark only)."""
 
 FIT_DATA = ("polyester-lining", "cotton-denim")
 
@@ -355,7 +355,7 @@ FIT_DATA = ("polyester-lining", "cotton-denim")
 def _split_integral(wi, wo, params, kind, nodes):
     from clothlab.frames import to_yarn_frame
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
-    from clothlab.models.irawan.rules_experimental import split_yarn_integral
+    from clothlab.studies.quadrature_rules import split_yarn_integral
 
     return split_yarn_integral(
         to_yarn_frame(wi, kind), to_yarn_frame(wo, kind), psi=math.radians(params[f"{kind}.psi"]),
@@ -423,11 +423,11 @@ def tradeoff_section(quick: bool, figures_dir=None, fabrics=None, n_reference=No
     model value (all channels) against the converged reference on ``n_reference`` seeded directions (all
     1,575 in the full run).  The specular normalisations scale_j are fixed (pi x the mean reference f_c I_j
     over the set) so that only the quadrature differs between rules."""
-    from clothlab.examples import YARN_COLOURS
     from clothlab.frames import spherical_to_vector
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD, IrawanModel
-    from clothlab.presets import PRESET_NAMES, get_preset
-    from clothlab.simulate import paper_sampling
+    from clothlab.simulate.examples import YARN_COLOURS
+    from clothlab.simulate.gonio import paper_sampling
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
 
     fabrics = tuple(fabrics or PRESET_NAMES)
     repeats = repeats or (5 if quick else 9)
@@ -691,7 +691,7 @@ def fit_algorithms_section(quick: bool, figures_dir=None, fabrics=FIT_DATA, max_
     from clothlab.fit.runner import build_problem
 
     max_evals = max_evals or (300 if quick else 3000)
-    root = Path(__file__).resolve().parents[1] / "measurements"
+    root = Path(__file__).resolve().parents[2] / "measurements"
     out = {"max_evals": max_evals, "fabrics": {}}
     runs = [(g, "LN_BOBYQA") for g in SUPPORTED_GLOBAL] + [(None, loc) for loc in SUPPORTED_LOCAL]
     for name in fabrics:
@@ -768,13 +768,13 @@ def models_section(quick: bool) -> list[dict]:
     from clothlab.frames import spherical_to_vector
     from clothlab.models.irawan.model import IrawanModel, Quadrature
     from clothlab.models.kang.model import KangModel
-    from clothlab.presets import PRESET_NAMES, get_preset
     from clothlab.report.data import optimisation_seconds
-    from clothlab.simulate import paper_sampling
+    from clothlab.simulate.gonio import paper_sampling
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
 
     ti, pi_, to, po = paper_sampling()
     wi, wo = spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
-    fits = Path(__file__).resolve().parents[1] / "fits"
+    fits = Path(__file__).resolve().parents[2] / "fits"
 
     def fitted(fit_name, fallback):
         if (fits / fit_name / "fit.json").is_file():
@@ -827,14 +827,14 @@ def print_models(rows) -> None:
 def posterior_section(quick: bool) -> dict:
     """A full six-parameter posterior to the tau criterion (polyester-lining, noisy), limit 10 minutes; the
     quick run caps it at 1 minute (and will usually report 'not converged')."""
-    from clothlab.fit.posterior import posterior_benchmark
+    from clothlab.studies.posterior import posterior_benchmark
 
     return posterior_benchmark("polyester-lining", max_minutes=1.0 if quick else 10.0, progress=False)
 
 
 def btf_section(quick: bool) -> dict:
     """Load and tile-average a synthetic 256 x 256 BTF stack (6,561 images; 200 in the quick run)."""
-    from clothlab.btf.bench import btf_memory_benchmark
+    from clothlab.studies.btf_memory import btf_memory_benchmark
 
     return btf_memory_benchmark(quick=quick, verbose=False)
 
@@ -842,7 +842,7 @@ def btf_section(quick: bool) -> dict:
 def render_section(quick: bool, figures_dir=None) -> dict:
     """Receding plane: LoD vs always-texture render cost and error against a supersampled reference (and the
     plot render_lod.png into ``figures_dir``)."""
-    from clothlab.render.bench import render_benchmark
+    from clothlab.studies.render_lod import render_benchmark
 
     return render_benchmark(quick=quick, figures_dir=figures_dir)
 
