@@ -14,7 +14,8 @@ def add_parser(sub):
     p = sub.add_parser("render", help="render a scene (flat or cylindrical cloth patch) to EXR and PNG, with the "
                                       "texture model only where the pixel footprint resolves yarns",
                        description="Render a scene YAML to STEM.exr (linear) and STEM.png (sRGB).")
-    p.add_argument("scene", type=Path, help="scene YAML (see measurements/scenes/receding_plane.yaml)")
+    p.add_argument("scene", type=Path,
+                   help="scene YAML: patch, camera, light, fabric and render sections (format: clothlab.render.scene)")
     add_output(p, "output path stem (writes STEM.exr, STEM.png)", metavar="STEM", required=True)
     p.add_argument("--shader", default="im-lod", type=one_of(SHADERS, "shader"),
                    help=LazyText(lambda: f"one of {', '.join(SHADERS())} (default im-lod)"))
