@@ -124,3 +124,60 @@ def test_bad_input_is_a_clear_error():
     assert isinstance(correction, Correction)
     with pytest.raises(InputError, match="last axis of 3"):
         correction.apply(np.ones((4, 4)))
+
+
+def test_calibrate_chart_reads_the_file_and_scores_every_patch(tmp_path):
+    import json
+
+    from clothlab.colour.calibrate import calibrate_chart
+
+    reference = chart_reference()
+    measured = _camera(reference, exposure=0.9)
+    chart = tmp_path / "chart.csv"
+    chart.write_text("patch,R,G,B\n" + "".join(f"p{i},{r!r},{g!r},{b!r}\n" for i, (r, g, b) in enumerate(measured)))
+    calibration = calibrate_chart(chart, method="Finlayson 2015", degree=2)
+    np.testing.assert_array_equal(calibration.measured, measured)  # repr round trip of the file
+    # the correction is the one fitted directly to the same values
+    np.testing.assert_allclose(calibration.correction.matrix,
+                               fit_correction(measured, reference, "Finlayson 2015", degree=2).matrix, rtol=1e-12)
+    patches = calibration.patches()
+    assert [p["patch"] for p in patches] == [f"p{i}" for i in range(24)]
+    after = np.array([p["delta_e_after"] for p in patches])
+    before = np.array([p["delta_e_before"] for p in patches])
+    summary = calibration.correction.summary
+    assert after.mean() == pytest.approx(summary["delta_e_2000_after"]["mean"], rel=1e-12)
+    assert before.max() == pytest.approx(summary["delta_e_2000_before"]["max"], rel=1e-12)
+    assert after.mean() < 1.0 < before.mean()
+    document = json.loads(json.dumps(calibration.to_dict()))
+    assert document["method"] == "Finlayson 2015" and len(document["patches"]) == 24
+    short = tmp_path / "short.csv"
+    short.write_text("R,G,B\n" + "".join(f"{r!r},{g!r},{b!r}\n" for r, g, b in measured[:20]))
+    with pytest.raises(InputError, match="20 patches"):
+        calibrate_chart(short)
+
+
+def test_correct_measurement_raises_out_of_gamut_values_to_the_floor_and_warns(caplog):
+    from clothlab.colour.calibrate import FLOOR, correct_measurement
+
+    correction = Correction(matrix=np.array([[1.2, -0.3, 0.0], [-0.4, 1.3, 0.0], [0.0, -0.2, 1.1]]),
+                            method="Cheung 2004", options={"terms": 3})
+    # a saturated red maps green below zero; the other rows stay in gamut
+    values = np.array([[0.5, 0.01, 0.02], [0.2, 0.3, 0.4], [0.3, 0.3, 0.3]])
+    m = Measurement(theta_i=np.array([10.0, 20.0, 30.0]), phi_i=np.zeros(3), theta_o=np.zeros(3),
+                    phi_o=np.zeros(3), values=values, channels=("R", "G", "B"))
+    direct = values @ correction.matrix.T
+    floor = FLOOR * direct.max(axis=0)
+    low = direct < floor
+    assert low.sum() == 1  # the test case does what it says
+    with caplog.at_level("WARNING", logger="clothlab"):
+        out = correct_measurement(correction, m)
+    np.testing.assert_allclose(out.values, np.where(low, floor, direct), rtol=1e-12)
+    assert out.provenance["colour_correction_floored_values"] == 1
+    warned = [r for r in caplog.records if r.levelname == "WARNING" and r.name.startswith("clothlab.colour")]
+    assert len(warned) == 1 and "1 corrected values" in warned[0].getMessage()
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="clothlab"):
+        inside = correct_measurement(correction, Measurement(
+            theta_i=m.theta_i[1:], phi_i=m.phi_i[1:], theta_o=m.theta_o[1:], phi_o=m.phi_o[1:], values=values[1:],
+            channels=("R", "G", "B")))
+    assert "colour_correction_floored_values" not in inside.provenance and not caplog.records

@@ -9,7 +9,7 @@ import pytest
 from clothlab.errors import ConfigError, ResultExistsError
 from clothlab.models.components import combine
 from clothlab.models.irawan.texture import IrawanTexture
-from clothlab.render import compare_lod, load_scene, render, render_command, save_render, scene_from_dict
+from clothlab.render import compare_lod, load_scene, render, render_to_files, save_render, scene_from_dict
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Patch
 from clothlab.render.shade import FabricModels, lod_weight
@@ -256,19 +256,20 @@ def test_saved_exr_round_trips_and_png_is_srgb(tmp_path, pixel_type, rtol):
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["view.exr", "view.png"]  # no temp files
 
 
-def test_render_command_writes_and_refuses_to_overwrite(tmp_path, capsys):
+def test_render_to_files_writes_and_refuses_to_overwrite(tmp_path, capsys):
     import yaml
 
     scene = tmp_path / "scene.yaml"
     scene.write_text(yaml.safe_dump({"patch": {"size_mm": [40, 40], "tile_mm": [1, 2]},
                                      "camera": {"position": [0, -20, 20], "resolution": [8, 6]},
                                      "light": {"direction": [0, 0, 1]}, "render": {"spp": 1}}))
-    assert render_command(scene, tmp_path / "r", "im-lod", 2, False) == 0
-    assert (tmp_path / "r.exr").is_file() and (tmp_path / "r.png").is_file()
-    assert "texture model in" in capsys.readouterr().out
+    result, exr, png = render_to_files(scene, tmp_path / "r", "im-lod", 2, False)
+    assert (exr, png) == (tmp_path / "r.exr", tmp_path / "r.png") and exr.is_file() and png.is_file()
+    assert result.spp == 2 and result.image.shape[:2] == (6, 8)
+    assert capsys.readouterr().out == ""  # the CLI prints, the renderer returns
     with pytest.raises(ResultExistsError):
-        render_command(scene, tmp_path / "r", "im-lod", 2, False)
-    assert render_command(scene, tmp_path / "r", "kang-lod", 1, True) == 0
+        render_to_files(scene, tmp_path / "r", "im-lod", 2, False)
+    assert render_to_files(scene, tmp_path / "r", "kang-lod", 1, True)[0].shader == "kang-lod"
 
 
 def test_blend_pixels_evaluate_reflectance_once_and_texture_at_a_share_of_their_samples():

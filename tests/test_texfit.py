@@ -10,7 +10,7 @@ from clothlab.btf import BtfStack
 from clothlab.cli import main
 from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.simulate.btf import TextureLayout, fig4_directions, load_source, simulate_btf
-from clothlab.texfit.fit import fit_btf_command, fit_texture, offset_error_cells, pattern_translations
+from clothlab.texfit.fit import fit_btf, fit_texture, offset_error_cells, pattern_translations
 from clothlab.weave.presets import get_preset
 
 OFFSET_TOL_CELLS = 0.1  # recovered tile offset within a tenth of a weave cell (modulo the weave's symmetries)
@@ -98,7 +98,7 @@ def test_noise_free_stack_reports_no_noise(tmp_path):
     assert len(result.errors["images"]) == 8
 
 
-def test_fit_btf_command_writes_json_and_png(denim_stack, tmp_path, monkeypatch, capsys):
+def test_fit_btf_writes_json_and_png(denim_stack, tmp_path, monkeypatch, capsys):
     import clothlab.texfit.fit as texfit
 
     path, _ = denim_stack
@@ -106,13 +106,14 @@ def test_fit_btf_command_writes_json_and_png(denim_stack, tmp_path, monkeypatch,
     monkeypatch.setattr(texfit, "fit_texture",
                         lambda s, f, **kw: original(s, f, free=("offset",), starts=1, max_evals=20))
     out = tmp_path / "out"
-    assert fit_btf_command(path, "preset:cotton-denim", out) == 0
+    result = fit_btf(path, "preset:cotton-denim", out)
+    assert result.free == ("offset",) and np.isfinite(result.objective)
     document = json.loads((out / "texfit.json").read_text())
     assert len(document["errors"]["images"]) == 8 and "p80" in document["errors"]["images"][0]["tile"]
     assert (out / "tiles.png").stat().st_size > 1000
-    assert "offset" in capsys.readouterr().out
+    assert capsys.readouterr().out == ""  # the CLI prints, the fit returns
     with pytest.raises(ResultExistsError):
-        fit_btf_command(path, "preset:cotton-denim", out)
+        fit_btf(path, "preset:cotton-denim", out)
 
 
 def test_bad_source_is_a_clear_error(denim_stack):

@@ -1,22 +1,26 @@
-"""``clothlab calibrate``: a colour correction from a photographed ColorChecker, applied to a table.
+"""A colour correction from a photographed ColorChecker (what ``clothlab calibrate`` does), applied to a table.
 
 The chart file is a CSV with columns R, G, B (linear camera values, one row per patch in the chart's
-standard order, 24 rows for the ColorChecker 24; an optional ``patch`` column is kept for the report).
-The correction (:mod:`clothlab.colour.chart`, colour-science) maps camera RGB to linear sRGB (D65)
-of the chart's reference values; its delta E 2000 before / after is printed and, with ``report``, written
-as a page.  ``apply`` corrects a measurement table (values and sigma) and writes a new clothlab table;
-values a correction maps below zero (colours outside the chart's gamut) are raised to 1e-6 of the channel
-maximum, counted and recorded in the table's provenance.
+standard order, 24 rows for the ColorChecker 24; an optional ``patch`` column names the patches).
+:func:`calibrate_chart` fits the correction (:mod:`clothlab.colour.chart`, colour-science) from camera RGB to
+linear sRGB (D65) of the chart's reference values and returns it with its delta E 2000 before / after per
+patch; :func:`correct_measurement` corrects a measurement (values and sigma); values a correction maps below
+zero (colours outside the chart's gamut) are raised to 1e-6 of the channel maximum, counted and recorded in
+the provenance.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from clothlab.colour.chart import Correction, chart_reference, delta_e_2000, fit_correction
 from clothlab.errors import InputError
+from clothlab.progress import get_logger
 
 
 def read_chart(path) -> tuple[np.ndarray, list[str]]:
@@ -51,45 +55,57 @@ def read_chart(path) -> tuple[np.ndarray, list[str]]:
     return np.array(values), names
 
 
-def calibrate_command(chart, *, method="Cheung 2004", degree=None, apply=None, output=None, report=None,
-                      force=False) -> int:
-    from clothlab.colour.chart import chart_reference, delta_e_2000, fit_correction
+@dataclass
+class ChartCalibration:
+    """A colour correction fitted to a photographed chart: the :class:`~clothlab.colour.chart.Correction`
+    (its ``summary`` holds delta E 2000 before / after), the patch names, the measured camera values and the
+    chart's reference values, both (N, 3) linear RGB."""
 
+    correction: Correction
+    names: list[str]
+    measured: np.ndarray
+    reference: np.ndarray
+
+    def patches(self) -> list[dict]:
+        """Per patch: its name and delta E 2000 before and after the correction."""
+        before = delta_e_2000(self.measured, self.reference)
+        after = delta_e_2000(self.correction.apply(self.measured), self.reference)
+        return [{"patch": n, "delta_e_before": float(b), "delta_e_after": float(a)}
+                for n, b, a in zip(self.names, before, after, strict=True)]
+
+    def to_dict(self) -> dict:
+        """The calibration as a JSON-ready document (method, options, matrix, summary, patches)."""
+        c = self.correction
+        return {"method": c.method, "options": c.options, "matrix": c.matrix.tolist(), "summary": c.summary,
+                "patches": self.patches()}
+
+
+def calibrate_chart(chart, *, method: str = "Cheung 2004", degree: int | None = None) -> ChartCalibration:
+    """Fit ``method`` (one of :data:`~clothlab.colour.chart.METHODS`) from the chart CSV ``chart`` (see
+    :func:`read_chart`) to the ColorChecker reference in linear sRGB (D65)."""
     measured, names = read_chart(chart)
     reference = chart_reference()
     if len(measured) != len(reference):
         raise InputError(f"the chart has {len(measured)} patches, the ColorChecker reference {len(reference)}",
                          path=chart)
-    correction = fit_correction(measured, reference, method, degree=degree)
-    s = correction.summary
-    before_s, after_s = s["delta_e_2000_before"], s["delta_e_2000_after"]
-    print(f"{method}: delta E 2000 before mean {before_s['mean']:.2f} (max {before_s['max']:.2f}), "
-          f"after mean {after_s['mean']:.2f} (max {after_s['max']:.2f})")
-    if apply is not None:
-        from clothlab.io.loader import load_measurement
-        from clothlab.io.table import write_table
+    return ChartCalibration(fit_correction(measured, reference, method, degree=degree), names, measured, reference)
 
-        if output is None:
-            raise InputError("--apply needs -o OUTPUT for the corrected table", field="--output")
-        import dataclasses
 
-        corrected = correction.apply_measurement(load_measurement(apply))
-        floor = 1e-6 * np.max(corrected.values, axis=0, keepdims=True)
-        low = corrected.values < floor
-        if low.any():  # out-of-gamut colours map below zero; a BRDF table holds no negative values
-            print(f"warning: {int(low.sum())} corrected values below {floor.min():.3g} (out of the chart's gamut) "
-                  "were raised to 1e-6 x the channel maximum; recorded in the table's provenance")
-            corrected = dataclasses.replace(
-                corrected, values=np.where(low, floor, corrected.values),
-                provenance={**corrected.provenance, "colour_correction_floored_values": int(low.sum())})
-        print(write_table(corrected, output, overwrite=force))
-    if report is not None:
-        from clothlab.report.studies import write_study_report
+FLOOR = 1e-6
+"""Corrected values below FLOOR x the channel maximum (colours outside the chart's gamut) are raised to it."""
 
-        after = delta_e_2000(correction.apply(measured), reference)
-        before = delta_e_2000(measured, reference)
-        result = {"method": method, "options": correction.options, "matrix": correction.matrix.tolist(),
-                  "summary": s, "patches": [{"patch": n, "delta_e_before": float(b), "delta_e_after": float(a)}
-                                            for n, b, a in zip(names, before, after, strict=True)]}
-        print(f"report: {write_study_report(result, report, title='clothlab calibrate: colour correction')}")
-    return 0
+
+def correct_measurement(correction: Correction, measurement):
+    """``measurement`` corrected (values and sigma, :meth:`Correction.apply_measurement`), with values below
+    :data:`FLOOR` x the channel maximum raised to it (a BRDF table holds no negative values); the number
+    raised is logged as a warning and recorded in the provenance (``colour_correction_floored_values``)."""
+    corrected = correction.apply_measurement(measurement)
+    floor = FLOOR * np.max(corrected.values, axis=0, keepdims=True)
+    low = corrected.values < floor
+    if not low.any():
+        return corrected
+    get_logger(__name__).warning(
+        f"{int(low.sum())} corrected values below {floor.min():.3g} (out of the chart's gamut) were raised to "
+        f"{FLOOR:g} x the channel maximum; recorded in the table's provenance")
+    return dataclasses.replace(corrected, values=np.where(low, floor, corrected.values),
+                               provenance={**corrected.provenance, "colour_correction_floored_values": int(low.sum())})

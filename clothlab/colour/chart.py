@@ -1,4 +1,4 @@
-"""Colour calibration from a photographed colour chart (issue 4 item 6; formats.md "Colour").
+"""Colour calibration from a photographed colour chart: reference values, correction, delta E 2000.
 
 The paper put its renderings into the camera's colour space with a colour-chart calibration (Irawan &
 Marschner 2012, sec. 8).  This module goes the other way round - from a camera's linear RGB to a standard

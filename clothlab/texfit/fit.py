@@ -33,7 +33,6 @@ bright; its coefficient of variation is the fitted noise ``amplitude`` (1 for th
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -471,12 +470,12 @@ def image_errors(measured, model, repeats, channels, stack=None, percentiles=(50
     return errors, tiles_measured, tiles_model
 
 
-def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False, *, free=TEXTURE_FREE, refine=(),
-                    crop=None) -> int:
-    """CLI body of ``clothlab fit-btf``: fit (``free``, ``refine``, ``crop`` as :func:`fit_texture`; the CLI
-    strings are parsed by :func:`parse_names` / :func:`parse_crop`), write ``texfit.json``, ``errors.json``
-    and ``tiles.png`` into ``out_dir`` atomically (ResultExistsError if it exists, unless ``force``); print a
-    summary; 0 on success."""
+def fit_btf(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False, *, free=TEXTURE_FREE, refine=(),
+            crop=None) -> TextureFit:
+    """Fit a BTF stack and save the result directory (what ``clothlab fit-btf`` does): fit (``free``,
+    ``refine``, ``crop`` as :func:`fit_texture`; comma-separated strings are parsed by :func:`parse_names` /
+    :func:`parse_crop`), write ``texfit.json``, ``errors.json`` and ``tiles.png`` into ``out_dir`` atomically
+    (ResultExistsError if it exists, unless ``force``); returns the fit."""
     import json
 
     from clothlab.atomic import atomic_directory, atomic_write_bytes
@@ -500,17 +499,4 @@ def fit_btf_command(stack_dir, fit_dir_or_yaml, out_dir, force: bool = False, *,
         atomic_write_bytes(tmp / "errors.json", (json.dumps(document["errors"], indent=2) + "\n").encode())
         figure = tile_comparison_figure(result)
         figure.savefig(tmp / "tiles.png", dpi=110)
-    overall = result.errors["overall"]["tile"]
-    print(f"texture fit of {stack_dir} ({len(result.files)} images) with the BRDF of {result.source}: offset "
-          f"({result.offset[0]:.4f}, {result.offset[1]:.4f}) tiles, rotation {result.rotation:.3f} deg, "
-          f"ratio {result.ratio:.3f}, hWidth {result.hwidth:.3f}; noise amplitude {result.noise['amplitude']:.2f}; "
-          f"tile-average relative error p50 {overall['p50']:.3g}, p80 {overall['p80']:.3g}; "
-          f"{result.nevals} evaluations, {result.seconds:.1f} s -> {out_dir}")
-    if result.refine_stage is not None:
-        r = result.refine_stage
-        changes = ", ".join(f"{k} {r['start'][k]:g} -> {v:.4g}" for k, v in r["refined_values"].items())
-        print(f"  refined {changes}: objective {r['refined_objective']:.4g} vs {r['held_objective']:.4g} held; "
-              f"kept the {r['kept']} optimum")
-    if not math.isfinite(result.objective):
-        return 1
-    return 0
+    return result

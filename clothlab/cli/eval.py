@@ -1,0 +1,39 @@
+"""``clothlab eval SOURCE directions.csv``: a fitted or configured model at the directions of a CSV
+(CSV out, optionally one column per component and channel)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
+
+
+def add_parser(sub):
+    p = sub.add_parser("eval", help="evaluate a fitted or configured model at the directions of a CSV",
+                       description="Evaluate the model of a fit directory or a fabric.yaml at the directions of a "
+                                   "CSV (with u, v columns: the Irawan-Marschner texture model).")
+    p.add_argument("source", type=Path, help="a fit directory (fits/<name>) or a fabric.yaml")
+    p.add_argument("directions", type=Path, help="CSV with theta_i, phi_i, theta_o, phi_o in degrees")
+    add_output(p, "output CSV (default: stdout)", metavar="CSV")
+    p.add_argument("--components", action="store_true", help="add one column per component and channel")
+    add_force(p, "output file")
+    add_quadrature_overrides(p)
+    return p
+
+
+def run(args) -> int:
+    from clothlab.fit.evaluate import evaluate_directions_file
+
+    text = evaluate_directions_file(args.source, args.directions, components=args.components, rule=args.rule,
+                                    nodes=args.nodes)
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    from clothlab.atomic import atomic_write_text
+    from clothlab.errors import ResultExistsError
+
+    if args.output.exists() and not args.force:
+        raise ResultExistsError(f"{args.output} exists; pass --force to overwrite it", path=args.output)
+    atomic_write_text(args.output, text)
+    return 0

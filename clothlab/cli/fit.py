@@ -1,0 +1,96 @@
+"""``clothlab fit fabric.yaml ...``: fit the configured model to its measurement, save ``fits/<name>/``,
+print a summary (:func:`present_fit`); optionally the report too.
+
+Progress of the optimiser and the posterior is shown by the fit package itself (``clothlab.progress``);
+``--quiet`` here is the global ``-q``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
+
+
+def add_parser(sub):
+    p = sub.add_parser("fit", help="fit a model to a measurement as configured in fabric.yaml -> fits/<name>/",
+                       description="Fit the model of each fabric.yaml to its measurement and save fits/<name>/ "
+                                   "atomically (parameters, coefficients, error percentiles, trace).")
+    p.add_argument("configs", nargs="+", type=Path, metavar="fabric.yaml",
+                   help="one or more fabric.yaml files, fitted one after the other")
+    add_force(p, "fits/<name>/")
+    p.add_argument("--max-evals", type=int, help="optimiser evaluation budget (overrides the yaml)")
+    p.add_argument("--seed", type=int, help="optimiser seed (overrides the yaml)")
+    add_output(p, "write the fit directories <name>/ under DIR (default: the yaml's output.fits)", metavar="DIR",
+               deprecated=("--fits-dir",))
+    p.add_argument("--report", action="store_true", help="also build reports/<name>/ afterwards (output.reports)")
+    p.add_argument("--posterior", action="store_true",
+                   help="also sample the posterior with emcee (fit.posterior settings, else the defaults); an "
+                        "interrupted run continues from its checkpoint when the same command is run again")
+    p.add_argument("--no-posterior", action="store_true", help="skip the posterior even if fabric.yaml asks for it")
+    p.add_argument("--cv", type=int, metavar="K", help="k-fold cross-validated error percentiles (K >= 2)")
+    add_quadrature_overrides(p)
+    return p
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from clothlab.config import PosteriorConfig, apply_overrides, load_config
+    from clothlab.errors import ConfigError, ResultExistsError
+    from clothlab.fit.runner import run_fit, save_fit
+
+    if args.cv is not None and args.cv < 2:
+        raise ConfigError(f"--cv needs at least 2 folds, got {args.cv}", field="--cv")
+    configs = []
+    for path in args.configs:  # every yaml is checked (and no result overwritten) before the first fit starts
+        cfg = apply_overrides(load_config(path), rule=args.rule, nodes=args.nodes, max_evals=args.max_evals,
+                              seed=args.seed)
+        if args.cv is not None:
+            cfg = replace(cfg, fit=replace(cfg.fit, cv_folds=args.cv))
+        if args.no_posterior:
+            cfg = replace(cfg, fit=replace(cfg.fit, posterior=None))
+        elif args.posterior and cfg.fit.posterior is None:
+            walkers = max(32, 2 * len(cfg.fit.free) + 2)
+            cfg = replace(cfg, fit=replace(cfg.fit, posterior=PosteriorConfig(walkers=walkers)))
+        dest = (args.output or cfg.output.fits) / cfg.name
+        if dest.exists() and not args.force:
+            raise ResultExistsError(f"{dest} exists; pass --force to replace it", path=dest)
+        configs.append(cfg)
+    for cfg in configs:
+        result = run_fit(cfg, fits_dir=args.output)
+        out = save_fit(result, force=args.force, fits_dir=args.output)
+        print(present_fit(result, saved_to=out))
+        if args.report:
+            from clothlab.report.build import build_report
+
+            report = build_report(out, cfg.output.reports, force=args.force, percentiles=cfg.report.percentiles)
+            print(f"  report: {report / 'index.html'}")
+    return 0
+
+
+def present_fit(result, saved_to=None) -> str:
+    """The summary printed after a fit: ``result.fit_report()`` when the result offers one, else the
+    parameters (with bound flags), coefficients, error percentiles, evaluations and time.  ``saved_to``: the
+    fit directory, named in the summary."""
+    fit_report = getattr(result, "fit_report", None)
+    if fit_report is not None:
+        text = fit_report()
+        return text if saved_to is None else f"{text}\n  saved to {saved_to}"
+    p = result.problem
+    lines = [f"{result.name}: {p.model.kind} fit of {p.measurement.n} directions x {len(p.measurement.channels)} "
+             f"channels" + (f" -> {saved_to}" if saved_to is not None else "")]
+    for i, name in enumerate(p.free):
+        spec = p.model.params[name]
+        flag = ("  (at lower bound)" if result.optimum.at_lower[i] else
+                "  (at upper bound)" if result.optimum.at_upper[i] else "")
+        lines.append(f"  {name:12s} = {result.params[name]:10.4g} {spec.unit}{flag}")
+    for name, coef in result.coefficients.items():
+        lines.append(f"  {name:12s} = " + ", ".join(f"{c:.4g}" for c in coef))
+    e = result.errors["overall"]
+    lines.append("  relative error: " + ", ".join(
+        f"{'median' if k == 'p50' else k[1:] + 'th'} {100 * e[k]:.2f} %" for k in e if k.startswith("p")))
+    lines.append(f"  {int(result.optimum.nevals)} evaluations, {result.wall_time:.1f} s")
+    for w in result.warnings:
+        lines.append(f"  warning: {w}")
+    return "\n".join(lines)

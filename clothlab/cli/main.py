@@ -1,0 +1,145 @@
+"""The ``clothlab`` parser, its global options, dispatch to a subcommand, and errors -> exit codes.
+
+Global options: ``-v/--verbose`` (repeatable: debug messages) and ``-q/--quiet`` (warnings and errors only,
+no progress; wins over ``-v``).  Both may be given before or after the command name
+(``clothlab -q fit ...`` = ``clothlab fit ... -q``).  They call :func:`clothlab.progress.configure` for the
+duration of the command.  Messages (log records, warnings) go to stderr, results to stdout.
+
+Exit codes: 0 success; 1 a command's own failure verdict (e.g. ``check`` found a violation); 2 a user
+mistake (:class:`clothlab.errors.ClothlabError`: one line ``clothlab: error: ...``, no traceback) or a usage
+error; 130 interrupted (Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import sys
+
+from clothlab import __version__
+from clothlab.cli import bench, calibrate, check, fit, fit_btf, render, report, simulate
+from clothlab.cli import eval as eval_
+from clothlab.cli.options import DEPRECATED
+from clothlab.errors import ClothlabError
+
+SUBCOMMANDS = (fit, report, eval_, simulate, fit_btf, render, calibrate, check, bench)
+"""The subcommand modules, in the order ``clothlab --help`` lists them; each has ``add_parser(sub)``
+(returning its parser) and ``run(args) -> int``."""
+
+_VERBOSE_HELP = "more messages (-v: debug); before or after the command name"
+_QUIET_HELP = "warnings and errors only, no progress; before or after the command name; wins over -v"
+
+
+def _add_verbosity(parser, dest_suffix: str = "") -> None:
+    parser.add_argument("-v", "--verbose", action="count", default=0, dest="verbose" + dest_suffix,
+                        help=_VERBOSE_HELP)
+    parser.add_argument("-q", "--quiet", action="store_true", dest="quiet" + dest_suffix, help=_QUIET_HELP)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole ``clothlab`` parser (subcommand modules add their own options)."""
+    parser = argparse.ArgumentParser(
+        prog="clothlab",
+        description="Measure, fit and report the appearance of woven cloth (Irawan-Marschner, Kang).",
+        epilog="Run `clothlab COMMAND --help` for the options of a command.")
+    parser.add_argument("--version", action="version", version=f"clothlab {__version__}",
+                        help="print the version and exit")
+    _add_verbosity(parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands",
+                                help="the command to run")
+    for module in SUBCOMMANDS:
+        p = module.add_parser(sub)
+        _add_verbosity(p, "_after")  # the same options after the command name (a separate dest, then summed)
+        p.set_defaults(run=module.run)
+    return parser
+
+
+def verbosity(args) -> int:
+    """-1 quiet, 0 normal, n >= 1 with n times -v (before and after the command name together)."""
+    if args.quiet or getattr(args, "quiet_after", False):
+        return -1
+    return args.verbose + getattr(args, "verbose_after", 0)
+
+
+def main(argv=None) -> int:
+    """The console entry point: parse ``argv`` (default ``sys.argv[1:]``), run the command, return its exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    log = logging.getLogger("clothlab.cli")
+    try:
+        with _configured(verbosity(args)), _geometry_warnings_logged():
+            for old, new in getattr(args, DEPRECATED, []):
+                log.warning(f"{old} is deprecated; use {new}")
+            return args.run(args)
+    except ClothlabError as exc:
+        print(f"clothlab: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("\nclothlab: interrupted", file=sys.stderr)
+        return 130
+
+
+class _Formatter(logging.Formatter):
+    """Log records as the user reads them: ``clothlab: warning: ...`` / ``clothlab: error: ...``, plain text
+    for information."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        if record.levelno >= logging.ERROR:
+            return f"clothlab: error: {text}"
+        if record.levelno >= logging.WARNING:
+            return f"clothlab: warning: {text}"
+        return text
+
+
+@contextlib.contextmanager
+def _configured(level: int):
+    """:func:`clothlab.progress.configure` for one command, then the logging and progress state as before
+    (so that calling :func:`main` in-process, e.g. from a test or a notebook, leaves nothing behind)."""
+    from clothlab import progress
+
+    logger = logging.getLogger(progress.ROOT_LOGGER)
+    saved = (list(logger.handlers), logger.level, logger.propagate, dict(progress._settings))
+    progress.configure(level)
+    for handler in logger.handlers:
+        if getattr(handler, "_clothlab", False):
+            handler.setFormatter(_Formatter("%(message)s"))
+    try:
+        yield
+    finally:
+        for handler in list(logger.handlers):
+            logger.removeHandler(handler)
+        for handler in saved[0]:
+            logger.addHandler(handler)
+        logger.setLevel(saved[1])
+        logger.propagate = saved[2]
+        progress._settings.update(saved[3])
+
+
+@contextlib.contextmanager
+def _geometry_warnings_logged():
+    """A GeometryWarning (e.g. a segment violating w sin(umax) < l, Irawan & Marschner sec. 5.3) reaches the
+    user as one ``clothlab: warning: ...`` line per distinct message, however often the model raises it."""
+    import warnings
+
+    from clothlab.errors import GeometryWarning
+
+    log = logging.getLogger("clothlab.cli")
+    seen = set()
+    previous = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, GeometryWarning):
+            return previous(message, category, filename, lineno, file, line)
+        if str(message) not in seen:
+            seen.add(str(message))
+            log.warning(str(message))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", GeometryWarning)
+        warnings.showwarning = show
+        yield

@@ -1,0 +1,92 @@
+"""Option builders shared by the subcommands: the output option, hidden deprecated spellings, the
+quadrature overrides, and lists of names read from the module that owns them only when they are needed.
+
+Building the parser imports nothing heavy: a list such as the quadrature rules or the bench sections is
+imported when an option is given (:func:`one_of`) or when its help is shown (:class:`LazyText`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from importlib import import_module
+from pathlib import Path
+
+DEPRECATED = "_deprecated_options"
+"""Namespace attribute listing (old spelling, new spelling) of every deprecated option given."""
+
+
+def names_of(module: str, attribute: str) -> Callable[[], Sequence[str]]:
+    """A function returning ``module.attribute`` (a tuple of names), imported when called."""
+    return lambda: tuple(getattr(import_module(module), attribute))
+
+
+class LazyText:
+    """Help text computed when it is shown, e.g. from a list of names in a module that is slow to import.
+
+    argparse formats help as ``help % params``; this object supports that and ``strip()``."""
+
+    def __init__(self, make: Callable[[], str]):
+        self._make = make
+
+    def __str__(self) -> str:
+        return self._make()
+
+    def strip(self) -> str:
+        return str(self).strip()
+
+    def __mod__(self, params) -> str:
+        return str(self) % params
+
+
+def one_of(names: Callable[[], Sequence[str]], what: str) -> Callable[[str], str]:
+    """An argparse ``type`` accepting one of ``names()`` (a usage error listing them otherwise)."""
+
+    def check(text: str) -> str:
+        allowed = names()
+        if text not in allowed:
+            raise argparse.ArgumentTypeError(f"unknown {what} {text!r}; choose one of {', '.join(allowed)}")
+        return text
+
+    check.__name__ = what.replace(" ", "_")
+    return check
+
+
+class DeprecatedAlias(argparse.Action):
+    """A hidden old spelling of an option: stores into the new option's ``dest`` and records itself under
+    :data:`DEPRECATED` so that the command can say which spelling to use instead."""
+
+    def __init__(self, option_strings, dest, *, new: str, nargs=None, **kwargs):
+        kwargs["help"] = argparse.SUPPRESS
+        super().__init__(option_strings, dest, nargs=nargs, default=argparse.SUPPRESS, **kwargs)
+        self.new = new
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        given = list(getattr(namespace, DEPRECATED, []))
+        setattr(namespace, DEPRECATED, [*given, (option_string, self.new)])
+
+
+def add_output(parser, help: str, *, deprecated: Sequence[str] = (), **kwargs) -> None:
+    """``-o/--output`` (a Path) with ``help``; ``deprecated`` old spellings stay as hidden aliases."""
+    kwargs.setdefault("type", Path)
+    parser.add_argument("-o", "--output", help=help, **kwargs)
+    for old in deprecated:
+        parser.add_argument(old, dest="output", type=kwargs["type"], metavar=kwargs.get("metavar"),
+                            action=DeprecatedAlias, new="-o/--output")
+
+
+def add_quadrature_overrides(parser) -> None:
+    """``--rule`` and ``--nodes``: the quadrature of the model, overriding fabric.yaml."""
+    rules = names_of("clothlab.config", "QUADRATURE_RULES")
+    parser.add_argument("--rule", type=one_of(rules, "quadrature rule"),
+                        help=LazyText(lambda: f"quadrature rule, one of {', '.join(rules())} "
+                                              "(overrides fabric.yaml model.quadrature.rule)"))
+    parser.add_argument("--nodes", type=int, help="quadrature nodes (per piece for the support and adaptive rules; "
+                                                  "overrides fabric.yaml model.quadrature.nodes)")
+
+
+def add_force(parser, what: str) -> None:
+    """``--force``: replace an existing ``what`` (nothing is overwritten without it)."""
+    parser.add_argument("--force", action="store_true", help=f"replace existing {what}")
+

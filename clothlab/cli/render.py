@@ -1,0 +1,46 @@
+"""``clothlab render scene.yaml -o STEM``: a flat or cylindrical cloth patch to EXR and PNG, the texture model
+only where the pixel footprint resolves yarns."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from clothlab.cli.options import LazyText, add_force, add_output, names_of, one_of
+
+SHADERS = names_of("clothlab.render.shade", "SHADERS")
+
+
+def add_parser(sub):
+    p = sub.add_parser("render", help="render a scene (flat or cylindrical cloth patch) to EXR and PNG, with the "
+                                      "texture model only where the pixel footprint resolves yarns",
+                       description="Render a scene YAML to STEM.exr (linear) and STEM.png (sRGB).")
+    p.add_argument("scene", type=Path,
+                   help="scene YAML: patch, camera, light, fabric and render sections (format: clothlab.render.scene)")
+    add_output(p, "output path stem (writes STEM.exr, STEM.png)", metavar="STEM", required=True)
+    p.add_argument("--shader", default="im-lod", type=one_of(SHADERS, "shader"),
+                   help=LazyText(lambda: f"one of {', '.join(SHADERS())} (default im-lod)"))
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
+    add_force(p, "STEM.exr and STEM.png")
+    return p
+
+
+def run(args) -> int:
+    from clothlab.render import render_to_files
+
+    result, exr, png = render_to_files(args.scene, args.output, shader=args.shader, spp=args.spp, force=args.force)
+    print(present_render(args.scene, result, exr, png))
+    return 0
+
+
+def present_render(scene, result, exr, png) -> str:
+    """What a render did: shader, samples, size, time, the share of pixels that ran the texture model, the
+    footprint range in weave tiles, the files written."""
+    s, t = result.stats, result.timings
+    height, width = result.image.shape[:2]
+    return "\n".join([
+        f"rendered {scene} with {result.shader}, {result.spp} spp, {width} x {height} px in {t['total']:.2f} s "
+        f"(shading {t['shading']:.2f} s)",
+        f"  covered pixels {s['covered_pixels']}/{s['pixels']}; texture model in "
+        f"{100 * s['texture_pixel_fraction']:.1f} % of them; footprint {s['footprint_min_tiles']:.3g}.."
+        f"{s['footprint_max_tiles']:.3g} tiles",
+        f"  wrote {exr} and {png}"])

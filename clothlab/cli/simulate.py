@@ -1,0 +1,124 @@
+"""``clothlab simulate``: a virtual gonioreflectometer (model + the paper's sampling + a noise model ->
+a measurement table), the six paper-fabric example sets, or a simulated BTF stack."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
+
+
+def add_parser(sub):
+    p = sub.add_parser("simulate", help="virtual gonioreflectometer: model + paper sampling + noise -> table",
+                       description="Simulate a measurement table (-o), the paper-fabric example sets "
+                                   "(--paper-examples DIR) or a BTF stack (--btf DIR) from a weave and a model.")
+    p.add_argument("source", nargs="?", help="preset:<name>, a .wv file or a fabric.yaml "
+                                             "(with --btf also a fit directory)")
+    add_output(p, "output table (clothlab CSV)", metavar="TABLE")
+    p.add_argument("--paper-examples", type=Path, metavar="DIR",
+                   help="write the six simulated paper-fabric example sets into DIR")
+    p.add_argument("--btf", type=Path, metavar="DIR",
+                   help="write a simulated BTF stack (texture model, EXR + manifest) of the source into DIR "
+                        "(source: preset:<name>, a fabric.yaml or a fit directory)")
+    p.add_argument("--btf-directions", type=int, default=16, help="(light, view) pairs of the BTF stack (default 16)")
+    p.add_argument("--btf-size", type=int, default=64, help="BTF image size in pixels (default 64)")
+    p.add_argument("--btf-tiles", type=float, default=4.0, help="weave tiles across a BTF image (default 4)")
+    p.add_argument("--btf-offset", default="0.25,0.4", help="BTF tile offset u0,v0 in tiles (default 0.25,0.4)")
+    p.add_argument("--kd", help="diffuse albedo per channel, e.g. 0.2,0.1,0.1 (default 0.1 each)")
+    p.add_argument("--ks-warp", help="warp specular albedo per channel (default 0.1 each)")
+    p.add_argument("--ks-weft", help="weft specular albedo per channel (default 0.1 each)")
+    p.add_argument("--channels", default="R,G,B",
+                   help="channel names (default R,G,B; with --btf the source's own when it has coefficients)")
+    p.add_argument("--noise-mult", type=float, default=0.0, help="multiplicative log-normal sigma (0.05 = 5 %%)")
+    p.add_argument("--noise-add", type=float, default=0.0, help="additive Gaussian sigma in 1/sr")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    add_force(p, "output (table, example sets or BTF stack)")
+    add_quadrature_overrides(p)
+    return p
+
+
+def channel_values(text: str, field: str, n: int):
+    """(n,) non-negative values from ``"0.2,0.1,0.1"`` (one value: the same in every channel)."""
+    import numpy as np
+
+    from clothlab.errors import ConfigError
+
+    try:
+        values = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise ConfigError(f"expected comma-separated numbers, got {text!r}", field=field) from None
+    if values.size == 1:
+        values = np.repeat(values, n)
+    if values.size != n or np.any(values < 0) or not np.all(np.isfinite(values)):
+        raise ConfigError(f"expected {n} non-negative values (one per channel), got {text!r}", field=field)
+    return values
+
+
+def run(args) -> int:
+    from clothlab.errors import ConfigError
+
+    if args.btf is not None:
+        return _run_btf(args)
+    if args.paper_examples is not None:
+        from clothlab.simulate.examples import write_paper_examples
+
+        for path in write_paper_examples(args.paper_examples, force=args.force):
+            print(path)
+        return 0
+    if not args.source or args.output is None:
+        raise ConfigError("give a source (preset:<name>, a .wv file or a fabric.yaml) and -o OUTPUT, "
+                          "or --paper-examples DIR")
+    from clothlab.io.table import write_table
+    from clothlab.models.registry import DEFAULT_KIND, build_model
+    from clothlab.simulate.gonio import NoiseModel, simulate
+    from clothlab.weave.presets import resolve_weave
+
+    source = args.source
+    params, rule, nodes, kind = {}, "trapezoid", 11, DEFAULT_KIND
+    if source.endswith((".yaml", ".yml")):
+        from clothlab.config import load_config
+
+        cfg = load_config(source)
+        weave = resolve_weave(cfg.model.weave, cfg.base_dir)
+        params, rule, nodes, kind = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes, \
+            cfg.model.kind
+    else:
+        weave = resolve_weave(source, Path.cwd())
+    channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
+    n = len(channels)
+    coefficients = {"kd": channel_values(args.kd or "0.1", "--kd", n),
+                    "ks_warp": channel_values(args.ks_warp or "0.1", "--ks-warp", n),
+                    "ks_weft": channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
+    model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes))
+    noise = NoiseModel(args.noise_mult, args.noise_add, args.seed)
+    m = simulate(model, params, coefficients, channels=channels, noise=noise,
+                 provenance={"sample_name": f"{weave.name} (SIMULATED)"})
+    print(write_table(m, args.output, overwrite=args.force))
+    return 0
+
+
+def _run_btf(args) -> int:
+    from clothlab.errors import ConfigError
+    from clothlab.simulate.btf import simulate_btf_command
+
+    if not args.source:
+        raise ConfigError("--btf needs a source: preset:<name>, a fabric.yaml or a fit directory")
+    not_applicable = [flag for flag, value in (("-o/--output", args.output), ("--paper-examples",
+                      args.paper_examples), ("--noise-mult", args.noise_mult or None),
+                      ("--noise-add", args.noise_add or None)) if value is not None]
+    if not_applicable:
+        raise ConfigError(f"{' and '.join(not_applicable)} {'does' if len(not_applicable) == 1 else 'do'} not "
+                          "apply to --btf: the stack is written into the --btf directory, and its noise is the "
+                          "texture model's intensity noise (paper sec. 7.2.1, seeded by --seed), not the table "
+                          "simulation's measurement noise", field=not_applicable[0].split("/")[-1])
+    try:
+        offset = tuple(float(x) for x in args.btf_offset.split(","))
+    except ValueError:
+        offset = ()
+    if len(offset) != 2:
+        raise ConfigError(f"expected u0,v0 numbers, got {args.btf_offset!r}", field="--btf-offset")
+    return simulate_btf_command(args.source, args.btf, n_directions=args.btf_directions, size=args.btf_size,
+                                tile_repeats=args.btf_tiles, offset=offset, seed=args.seed, kd=args.kd,
+                                ks_warp=args.ks_warp, ks_weft=args.ks_weft,
+                                channels=None if args.channels == "R,G,B" else args.channels,
+                                rule=args.rule, nodes=args.nodes, force=args.force)
