@@ -451,8 +451,11 @@ def test_mangled_yaml_gives_a_config_or_a_config_error(tmp_path, start, length, 
 
 
 def test_reference_lists_every_key_choice_and_parameter():
-    from clothlab import config as cfg
+    from clothlab.config.choices import GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS
+    from clothlab.io.loader import FORMAT_CHOICES
     from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+    from clothlab.models.irawan.quadrature import RULES
+    from clothlab.models.registry import MODEL_KINDS
 
     doc = (Path(__file__).parent.parent / "docs" / "fabric-yaml.md").read_text()
     keys = ["name", "measurement.path", "measurement.format", "measurement.options", "model.kind",
@@ -462,8 +465,7 @@ def test_reference_lists_every_key_choice_and_parameter():
             "fit.posterior.steps", "fit.posterior.max_steps", "fit.cv_folds", "report.percentiles",
             "output.fits", "output.reports"]
     words = keys + [f"`{name}`" for name in IRAWAN_PARAMS.names()]
-    for group in (cfg.FORMATS, cfg.MODEL_KINDS, cfg.QUADRATURE_RULES, cfg.METRICS, cfg.GLOBAL_ALGORITHMS,
-                  cfg.LOCAL_ALGORITHMS):
+    for group in (FORMAT_CHOICES, MODEL_KINDS, RULES, METRICS, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS):
         words += [f"`{c}`" for c in group]
     missing = [w for w in words if w not in doc]
     assert not missing
