@@ -17,7 +17,9 @@ from clothlab.errors import ClothlabError, ConfigError, ResultExistsError
 
 
 def _add_quadrature_overrides(p):
-    p.add_argument("--rule", choices=("trapezoid", "gauss", "support", "adaptive"),
+    from clothlab.models.irawan.quadrature import RULES
+
+    p.add_argument("--rule", choices=RULES,
                    help="quadrature rule (overrides fabric.yaml model.quadrature.rule)")
     p.add_argument("--nodes", type=int, help="quadrature nodes (per piece for support/adaptive)")
 

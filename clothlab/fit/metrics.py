@@ -30,9 +30,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from clothlab.config.choices import METRICS
 from clothlab.errors import InputError
-
-METRICS = ("relative", "log", "cube-root")
 
 LOG_FLOOR = 1e-6
 """Model values are floored at ``LOG_FLOOR * measured`` in the ``log`` metric (residual >= ln 1e-6)."""
