@@ -110,14 +110,17 @@ def build_parser() -> argparse.ArgumentParser:
                                       "texture model only where the pixel footprint resolves yarns")
     p.add_argument("scene", type=Path, help="scene YAML (see measurements/scenes/receding_plane.yaml)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output path stem (writes STEM.exr, STEM.png)")
-    p.add_argument("--shader", default="im-lod",
-                   choices=("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture"))
+    from clothlab.render.shade import SHADERS
+
+    p.add_argument("--shader", default="im-lod", choices=SHADERS)
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
     p.add_argument("--force", action="store_true")
 
     p = sub.add_parser("calibrate", help="colour correction from a photographed ColorChecker (colour-science)")
     p.add_argument("chart", type=Path, help="CSV with R, G, B linear camera values per patch (24 rows)")
-    p.add_argument("--method", default="Cheung 2004", choices=("Cheung 2004", "Finlayson 2015", "Vandermonde"))
+    from clothlab.colour.chart import METHODS
+
+    p.add_argument("--method", default="Cheung 2004", choices=METHODS)
     p.add_argument("--degree", type=int, help="root-polynomial / Vandermonde degree")
     p.add_argument("--apply", type=Path, metavar="TABLE", help="correct this measurement table")
     p.add_argument("-o", "--output", type=Path, help="corrected table (with --apply)")
