@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from clothlab.config.choices import DEFAULT_GLOBAL, DEFAULT_LOCAL
 from clothlab.models.registry import DEFAULT_KIND
 
 PRESET_PREFIX = "preset:"
@@ -72,8 +73,8 @@ class ModelConfig:
 class OptimizerConfig:
     """``fit.optimizer``: nlopt algorithm names (None = skip that stage), evaluation budget, seed, seconds."""
 
-    global_algorithm: str | None = "GN_CRS2_LM"
-    local_algorithm: str | None = "LN_BOBYQA"
+    global_algorithm: str | None = DEFAULT_GLOBAL
+    local_algorithm: str | None = DEFAULT_LOCAL
     max_evals: int = 4000
     seed: int = 1
     max_time: float | None = None
@@ -82,12 +83,17 @@ class OptimizerConfig:
 
     @property
     def polish_evals(self) -> int:
+        """Evaluations of the final polish: ``polish``, or max_evals // 3 when not given."""
         return self.max_evals // 3 if self.polish is None else self.polish
 
 
 @dataclass(frozen=True)
 class PosteriorConfig:
-    """``fit.posterior``: emcee walkers, minimum steps and the cap when running to convergence."""
+    """``fit.posterior``: emcee walkers, minimum steps and the cap when running to convergence.
+
+    emcee's affine-invariant ensemble sampler (Foreman-Mackey et al. 2013, "emcee: The MCMC Hammer") refuses
+    fewer walkers than twice the free parameters; the validator says so at the line of ``walkers``.
+    """
 
     walkers: int = DEFAULT_WALKERS
     steps: int = DEFAULT_STEPS
