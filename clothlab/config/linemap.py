@@ -57,8 +57,8 @@ class LineMap:
     def at(self, field, key: bool = False) -> Position:
         """(line, column) of the value of ``field`` (of its key with ``key=True``).
 
-        A field with no position of its own (not written, or a mapping's key asked for at the top level)
-        falls back to the key of its nearest written parent.
+        A field that was not written (a default) falls back to the key of its nearest written parent, and
+        to (None, None) when no parent was written either.
         """
         if not isinstance(field, tuple):
             return self._at_name(field, key)
