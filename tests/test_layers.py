@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -25,12 +26,32 @@ def _lint_imports() -> Path:
     return script
 
 
-def test_import_contracts_are_kept():
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    out = subprocess.run([str(_lint_imports()), "--no-cache", "--no-logo", str(ROOT / "pyproject.toml")],
-                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+def _run_contracts(root: Path) -> subprocess.CompletedProcess:
+    """lint-imports with ``root``'s pyproject.toml on the package under ``root`` (not an installed copy)."""
+    path = [str(root), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(path))
+    out = subprocess.run([str(_lint_imports()), "--no-cache", "--no-logo", str(root / "pyproject.toml")],
+                         cwd=root, env=env, capture_output=True, text=True, timeout=600)
     assert "Analyzed" in out.stdout, out.stdout + out.stderr  # the contracts were read and the graph built
+    return out
+
+
+def test_import_contracts_are_kept():
+    out = _run_contracts(ROOT)
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_contracts_catch_an_upward_import_and_a_cycle(tmp_path):
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    shutil.copytree(PACKAGE, tmp_path / "clothlab", ignore=shutil.ignore_patterns("__pycache__"))
+    with open(tmp_path / "clothlab" / "frames.py", "a", encoding="utf-8") as f:
+        f.write("\n\ndef _probe():\n    import clothlab.cli  # noqa: F401\n")
+    with open(tmp_path / "clothlab" / "io" / "astm.py", "a", encoding="utf-8") as f:
+        f.write("\n\ndef _probe():\n    import clothlab.io.loader  # noqa: F401\n")
+    out = _run_contracts(tmp_path)
+    assert out.returncode != 0
+    assert "clothlab.frames is not allowed to import clothlab.cli" in out.stdout, out.stdout
+    assert "No cycles are allowed in clothlab.io" in out.stdout, out.stdout
 
 
 def _eager_root_names() -> set[str]:
