@@ -451,8 +451,11 @@ def test_mangled_yaml_gives_a_config_or_a_config_error(tmp_path, start, length, 
 
 
 def test_reference_lists_every_key_choice_and_parameter():
-    from clothlab import config as cfg
+    from clothlab.config.choices import GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS
+    from clothlab.io.loader import FORMAT_CHOICES
     from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+    from clothlab.models.irawan.quadrature import RULES
+    from clothlab.models.registry import MODEL_KINDS
 
     doc = (Path(__file__).parent.parent / "docs" / "fabric-yaml.md").read_text()
     keys = ["name", "measurement.path", "measurement.format", "measurement.options", "model.kind",
@@ -462,8 +465,7 @@ def test_reference_lists_every_key_choice_and_parameter():
             "fit.posterior.steps", "fit.posterior.max_steps", "fit.cv_folds", "report.percentiles",
             "output.fits", "output.reports"]
     words = keys + [f"`{name}`" for name in IRAWAN_PARAMS.names()]
-    for group in (cfg.FORMATS, cfg.MODEL_KINDS, cfg.QUADRATURE_RULES, cfg.METRICS, cfg.GLOBAL_ALGORITHMS,
-                  cfg.LOCAL_ALGORITHMS):
+    for group in (FORMAT_CHOICES, MODEL_KINDS, RULES, METRICS, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS):
         words += [f"`{c}`" for c in group]
     missing = [w for w in words if w not in doc]
     assert not missing
@@ -485,3 +487,115 @@ def test_polish_must_be_a_non_negative_count(tmp_path):
     text = edit(FULL, "max_time: 30}", "max_time: 30, polish: -3}")
     err = fails(tmp_path, text)
     assert err.field == "fit.optimizer.polish" and "-3" in str(err)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the YAML line map (public API)
+
+
+def _flatten(value, prefix=()):
+    """Every key path of plain data in insertion order, computed without the line map."""
+    out = []
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, list):
+        items = enumerate(value)
+    else:
+        return out
+    for k, v in items:
+        out.append(prefix + (k,))
+        out += _flatten(v, prefix + (k,))
+    return out
+
+
+def position_of(text: str, line_snippet: str, token: str) -> tuple[int, int]:
+    """1-based (line, column) of ``token`` on the unique line containing ``line_snippet``."""
+    line = line_of(text, line_snippet)
+    return line, text.splitlines()[line - 1].index(token) + 1
+
+
+def test_line_map_positions_of_values_keys_and_defaults(tmp_path):
+    import yaml
+
+    from clothlab.config import LineMap, load_yaml_with_lines
+    from clothlab.config.linemap import dotted
+
+    path = project(tmp_path, FULL)
+    data, lines = load_yaml_with_lines(path)
+    assert data == yaml.safe_load(FULL) and isinstance(lines, LineMap) and lines.source == str(path)
+    assert lines.at("fit.optimizer.max_evals") == position_of(FULL, "optimizer:", "1234")
+    assert lines.at("fit.optimizer.max_evals", key=True) == position_of(FULL, "optimizer:", "max_evals")
+    assert lines.at("model.params.warp.umax") == position_of(FULL, "params:", "22")  # a key holding a dot
+    assert lines.at(("model", "params", "warp.umax")) == lines.at("model.params.warp.umax")
+    assert lines.at("report.percentiles[1]") == position_of(FULL, "percentiles", "50")
+    assert lines.at("name") == (1, len("name: ") + 1) and lines.at("name", key=True) == (1, 1)
+    # a default (not written) sits at the key of its nearest written parent; nothing written: no position
+    assert lines.at("fit.optimizer.polish") == position_of(FULL, "optimizer:", "optimizer")
+    assert lines.at("model.params.alpha") == position_of(FULL, "params:", "params")
+    assert lines.at("nothing.here") == (None, None) and lines.line("fit.metric") == line_of(FULL, "metric: log")
+    assert lines.fields() == [dotted(p) for p in _flatten(data)]
+    assert LineMap().at("fit.metric") == (None, None)
+
+
+def test_line_map_of_text_with_merge_keys_and_errors():
+    from clothlab.config import parse_yaml_with_lines
+
+    text = "base: &b {x: 1, y: 2}\nuse:\n  <<: *b\n  y: 3\n"
+    data, lines = parse_yaml_with_lines(text, source="t.yaml")
+    assert data["use"] == {"x": 1, "y": 3}
+    assert lines.at("use.y") == position_of(text, "  y: 3", "3")  # the explicit key wins over the merged one
+    assert lines.at("use.x") == position_of(text, "base:", "1")  # a merged key sits where the anchor wrote it
+    with pytest.raises(ConfigError) as info:
+        parse_yaml_with_lines("a: 1\nb:\n  c: 2\n  c: 3\n", source="t.yaml")
+    assert (info.value.path, info.value.line, info.value.field) == ("t.yaml", 4, "b.c")
+    assert parse_yaml_with_lines("", source="t.yaml")[0] is None
+
+
+# ---------------------------------------------------------------------------------------------------------
+# each closed list is declared once, by the module that implements it
+
+
+def test_closed_lists_come_from_their_owners(tmp_path):
+    import numpy as np
+
+    from clothlab.config import choices
+    from clothlab.fit import metrics, optimize
+    from clothlab.io.loader import FORMAT_CHOICES, FORMATS, READERS
+    from clothlab.models.irawan.model import Quadrature
+    from clothlab.models.irawan.quadrature import RULES
+
+    assert optimize.SUPPORTED_GLOBAL is choices.GLOBAL_ALGORITHMS
+    assert optimize.SUPPORTED_LOCAL is choices.LOCAL_ALGORITHMS and metrics.METRICS is choices.METRICS
+    assert set(FORMAT_CHOICES) == {"auto", *READERS} and set(FORMATS) == set(READERS)
+    measured = np.array([0.5, 1.0, 2.0])
+    for metric in choices.METRICS:  # every metric the validator accepts is one the fitter computes
+        assert np.allclose(metrics.metric_residuals(measured, measured, metric), 0.0)
+        assert np.all(metrics.metric_residuals(measured, 2 * measured, metric) > 0)
+    for rule in RULES:  # every rule the validator accepts builds a quadrature
+        config = load_config(project(tmp_path, edit(FULL, "rule: gauss", f"rule: {rule}")))
+        assert config.model.quadrature.rule == rule == apply_overrides(config, rule=rule).model.quadrature.rule
+        assert Quadrature(rule, 8).rule == rule
+    for fmt in FORMAT_CHOICES:
+        assert load_config(project(tmp_path, edit(FULL, "format: astm", f"format: {fmt}"))).measurement.format == fmt
+
+
+def test_auto_format_detects_like_no_format():
+    from clothlab.io.loader import AUTO, load_measurement
+
+    path = Path(__file__).parent.parent / "measurements" / "silk-charmeuse" / "clean.csv"
+    auto, detected = load_measurement(path, AUTO), load_measurement(path)
+    assert auto.values.shape == detected.values.shape and (auto.values == detected.values).all()
+
+
+def test_version_is_declared_once():
+    import tomllib
+
+    import clothlab
+
+    pyproject = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())
+    assert "version" not in pyproject["project"] and "version" in pyproject["project"]["dynamic"]
+    assert pyproject["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "clothlab.__version__"}
+    package = Path(clothlab.__file__).parent
+    declared = [str(f.relative_to(package)) for f in package.rglob("*.py")
+                if any(line.startswith("__version__") for line in f.read_text(encoding="utf-8").splitlines())]
+    assert declared == ["__init__.py"]

@@ -78,7 +78,7 @@ def add_output(parser, help: str, *, deprecated: Sequence[str] = (), **kwargs) -
 
 def add_quadrature_overrides(parser) -> None:
     """``--rule`` and ``--nodes``: the quadrature of the model, overriding fabric.yaml."""
-    rules = names_of("clothlab.config", "QUADRATURE_RULES")
+    rules = names_of("clothlab.models.irawan.quadrature", "RULES")
     parser.add_argument("--rule", type=one_of(rules, "quadrature rule"),
                         help=LazyText(lambda: f"quadrature rule, one of {', '.join(rules())} "
                                               "(overrides fabric.yaml model.quadrature.rule)"))

@@ -21,8 +21,8 @@ import numpy as np
 
 from clothlab.errors import InputError
 from clothlab.frames import spherical_to_vector
+from clothlab.io.table import ANGLE_COLUMNS as ANGLES
 
-ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
 TEXTURE = ("u", "v")
 
 

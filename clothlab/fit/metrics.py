@@ -30,9 +30,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from clothlab.config.choices import METRICS
+from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
-
-METRICS = ("relative", "log", "cube-root")
 
 LOG_FLOOR = 1e-6
 """Model values are floored at ``LOG_FLOOR * measured`` in the ``log`` metric (residual >= ln 1e-6)."""
@@ -93,7 +93,7 @@ def _summary(errors: np.ndarray, percentiles: Sequence[float]) -> dict:
     return out
 
 
-def error_percentiles(measured, model, percentiles: Sequence[float] = (50, 80, 95),
+def error_percentiles(measured, model, percentiles: Sequence[float] = DEFAULT_PERCENTILES,
                       channels: Sequence[str] | None = None) -> dict:
     """Percentiles and mean of the relative error (Irawan & Marschner 2012, sec. 8), as fractions.
 

@@ -26,10 +26,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-SUPPORTED_GLOBAL = ("GN_CRS2_LM", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH", "G_MLSL_LDS")
-SUPPORTED_LOCAL = ("LN_BOBYQA", "LN_NELDERMEAD", "LN_SBPLX", "LN_COBYLA", "LN_PRAXIS")
-MLSL_LOCAL = "LN_BOBYQA"
-"""The local optimiser G_MLSL_LDS runs from each of its start points."""
+from clothlab.config.choices import GLOBAL_ALGORITHMS as SUPPORTED_GLOBAL
+from clothlab.config.choices import LOCAL_ALGORITHMS as SUPPORTED_LOCAL
+from clothlab.config.choices import MLSL_LOCAL
 
 BOUND_TOLERANCE = 1e-6
 """A coordinate within this fraction of (upper - lower) of a bound is flagged at_lower / at_upper."""

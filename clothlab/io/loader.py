@@ -7,8 +7,9 @@ Detection (first 200 lines of a file):
   read as the pab-opto files of one sample;
 - ``astm``: a ``NUM_POINTS`` or ``VARS`` keyword line.
 
-``format=`` skips detection; ``**options`` go to the reader (:func:`clothlab.io.astm.read_astm`'s
-conventions, :func:`clothlab.io.pabopto.read_pabopto`'s ``up``; the clothlab table takes none).
+``format=`` (other than ``"auto"``) skips detection; ``**options`` go to the reader
+(:func:`clothlab.io.astm.read_astm`'s conventions, :func:`clothlab.io.pabopto.read_pabopto`'s ``up``; the
+clothlab table takes none).
 """
 
 from __future__ import annotations
@@ -25,6 +26,11 @@ from clothlab.io.table import find_sidecar, read_table
 
 READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto}
 FORMATS = tuple(READERS)
+"""The measurement formats clothlab reads (fabric.yaml ``measurement.format`` names one, or ``auto``)."""
+AUTO = "auto"
+"""``format="auto"`` (like None) detects the format with :func:`detect_format`."""
+FORMAT_CHOICES = (AUTO, *FORMATS)
+"""Every value ``measurement.format`` accepts."""
 _DETECT_LINES = 200
 _CLOTHLAB = re.compile(r"^#\s*clothlab-table\s*:")
 _PABOPTO = re.compile(r"^#\s*(format\s*:|intheta\b|inphi\b|incident_angle\b)", re.IGNORECASE)
@@ -60,7 +66,7 @@ def detect_format(path) -> str:
 
 def load_measurement(path, format: str | None = None, **options) -> Measurement:  # noqa: A002
     """Load a measurement in any supported format into clothlab's convention (degrees, BRDF in 1/sr)."""
-    if format is None:
+    if format is None or format == AUTO:
         format = detect_format(path)
     elif format not in READERS:
         raise InputError(f"unknown measurement format {format!r}; expected one of {', '.join(FORMATS)}",

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.atomic import atomic_directory
+from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
 from clothlab.report import html, plots
 from clothlab.report.data import (
@@ -93,7 +94,7 @@ def _agreement_notes(recorded, computed: dict, percentiles) -> list[str]:
     return notes
 
 
-def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percentiles=(50, 80, 95)) -> Path:
+def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percentiles=DEFAULT_PERCENTILES) -> Path:
     """Write ``<reports_dir>/<fit name>/`` (index.html, summary.json, PNGs) from a fit directory.
 
     Returns the report directory.  Raises :class:`InputError` naming the file if fit.json or
@@ -149,7 +150,7 @@ def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percent
 
 def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
     fit = record.fit
-    overall = error_percentiles(record.predictions, record.channels, (50, 80, 95))["overall"]
+    overall = error_percentiles(record.predictions, record.channels, DEFAULT_PERCENTILES)["overall"]
     paper_key = paper_fabric(fit)
     report = reports_dir / record.name / "index.html"
     return {

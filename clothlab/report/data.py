@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
+from clothlab.io.table import ANGLE_COLUMNS as DIRECTION_COLUMNS
 
-DIRECTION_COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
 SLICE_COLUMNS = ("theta_o", "phi_o", "signed_theta_i")
 TRACE_COLUMNS = ("evaluation", "time_s", "value", "best", "stage")
 #: Decimal places (degrees) to which exitant directions are rounded when rows are grouped by them.
@@ -222,7 +223,7 @@ def percentile_key(q: float) -> str:
     return f"p{q:g}"
 
 
-def error_percentiles(table: dict, channels, percentiles=(50, 80, 95)) -> dict:
+def error_percentiles(table: dict, channels, percentiles=DEFAULT_PERCENTILES) -> dict:
     """Percentiles and mean of |relative error| (fractions) of a predictions table, fit.json's ``errors``.
 
     ``overall`` pools every (sample, channel) value, ``per_channel`` has one entry per channel; samples

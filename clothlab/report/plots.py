@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.report.data import (
     channel_values,
     channels_of,
@@ -267,7 +268,7 @@ def plot_fit_trace(trace: dict):
     return fig
 
 
-def plot_error_histogram(predictions: dict, percentiles=(50, 80, 95)):
+def plot_error_histogram(predictions: dict, percentiles=DEFAULT_PERCENTILES):
     """Distribution of |relative error| (percent) pooled over channels, with the percentile lines (sec. 8)."""
     channels = channels_of(predictions)
     errors = {c: 100.0 * np.abs(signed_relative_error(predictions[f"measured_{c}"], predictions[f"model_{c}"]))

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import GeometryWarning, InputError
 from clothlab.simulate.btf import (
     TextureSource,
@@ -434,7 +435,7 @@ def noise_statistics(design, data, coef, *, bright: float = 0.25) -> dict:
                        "pixels; ~1 for the paper's exponential noise, ~0 without noise"}
 
 
-def image_errors(measured, model, repeats, channels, stack=None, percentiles=(50, 80, 95)):
+def image_errors(measured, model, repeats, channels, stack=None, percentiles=DEFAULT_PERCENTILES):
     """Per-image relative-error percentiles: of the unit-tile averages (``tile``; the noise averaged out, the
     figure a reader compares with the paper's Fig. 3/4 tiles) and of the raw pixel values (``pixel``).
     Returns (errors dict, measured tiles, model tiles), tiles (N, ny, nx, C) averaged with the period

@@ -1,0 +1,203 @@
+"""The validated fabric.yaml: frozen dataclasses, one per section, with the defaults of every setting.
+
+:func:`clothlab.config.load_config` builds a :class:`Config` after checking every value
+(:mod:`clothlab.config.validate`); code that runs a fit reads these objects, never the raw mapping.
+Paths are resolved (absolute); parameter values are in the units the model declares (angles in degrees).
+The default quadrature is the one Irawan & Marschner 2012, sec. 7.3 recommend for the integral of eq. 10:
+the trapezoidal rule with 11 samples.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from clothlab.config.choices import DEFAULT_GLOBAL, DEFAULT_LOCAL
+from clothlab.models.registry import DEFAULT_KIND
+
+PRESET_PREFIX = "preset:"
+"""``model.weave: preset:<name>`` names a shipped weave preset instead of a .wv file."""
+
+DEFAULT_PERCENTILES = (50.0, 80.0, 95.0)
+DEFAULT_WALKERS = 32
+DEFAULT_STEPS = 4000
+DEFAULT_MAX_STEPS = 20000
+
+
+@dataclass(frozen=True)
+class MeasurementConfig:
+    """``measurement``: the data file or directory (resolved), its format and the loader's options."""
+
+    path: Path
+    format: str = "auto"
+    options: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class QuadratureConfig:
+    """``model.quadrature``: the rule integrating over the yarn's fibre positions and its node count."""
+
+    rule: str = "trapezoid"
+    nodes: int = 11
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """``model``: kind, weave (``preset:<name>`` or the resolved path of a .wv file, or None), start values."""
+
+    kind: str = DEFAULT_KIND
+    weave: str | None = None
+    quadrature: QuadratureConfig = field(default_factory=QuadratureConfig)
+    params: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)  # passed to the model's constructor (e.g. kang tile_nodes)
+
+    @property
+    def weave_preset(self) -> str | None:
+        """The preset name when ``weave`` is ``preset:<name>``, else None."""
+        if self.weave is not None and self.weave.startswith(PRESET_PREFIX):
+            return self.weave[len(PRESET_PREFIX):]
+        return None
+
+    @property
+    def weave_path(self) -> Path | None:
+        """The .wv file when ``weave`` names one, else None."""
+        if self.weave is None or self.weave_preset is not None:
+            return None
+        return Path(self.weave)
+
+
+@dataclass(frozen=True)
+class OptimizerConfig:
+    """``fit.optimizer``: nlopt algorithm names (None = skip that stage), evaluation budget, seed, seconds."""
+
+    global_algorithm: str | None = DEFAULT_GLOBAL
+    local_algorithm: str | None = DEFAULT_LOCAL
+    max_evals: int = 4000
+    seed: int = 1
+    max_time: float | None = None
+    starts: int = 1
+    polish: int | None = None  # evaluations of the final restarted polish; None = max_evals // 3, 0 = none
+
+    @property
+    def polish_evals(self) -> int:
+        """Evaluations of the final polish: ``polish``, or max_evals // 3 when not given."""
+        return self.max_evals // 3 if self.polish is None else self.polish
+
+
+@dataclass(frozen=True)
+class PosteriorConfig:
+    """``fit.posterior``: emcee walkers, minimum steps and the cap when running to convergence.
+
+    emcee's affine-invariant ensemble sampler (Foreman-Mackey et al. 2013, "emcee: The MCMC Hammer") refuses
+    fewer walkers than twice the free parameters; the validator says so at the line of ``walkers``.
+    """
+
+    walkers: int = DEFAULT_WALKERS
+    steps: int = DEFAULT_STEPS
+    max_steps: int = DEFAULT_MAX_STEPS
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """``fit``: free parameters, their fit bounds (declared units), metric, optimiser, posterior, CV folds."""
+
+    free: tuple = ()
+    bounds: dict = field(default_factory=dict)
+    metric: str = "relative"
+    optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
+    posterior: PosteriorConfig | None = None
+    cv_folds: int = 0
+
+
+@dataclass(frozen=True)
+class ReportConfig:
+    """``report``: error percentiles to tabulate, ascending, in [0, 100]."""
+
+    percentiles: tuple = DEFAULT_PERCENTILES
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """``output``: directories under which fits/<name>/ and reports/<name>/ are written (resolved)."""
+
+    fits: Path
+    reports: Path
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated fabric.yaml.
+
+    ``path`` is the yaml file (None for :func:`config_from_dict`), ``source`` the label used in messages,
+    ``base_dir`` the absolute directory relative paths were resolved against, ``raw`` the mapping as read
+    (before defaults and overrides).
+    """
+
+    name: str
+    path: Path | None
+    base_dir: Path
+    measurement: MeasurementConfig
+    model: ModelConfig
+    fit: FitConfig
+    report: ReportConfig
+    output: OutputConfig
+    raw: dict
+    source: str = "<dict>"
+
+    def canonical(self) -> dict:
+        """The validated settings as plain JSON data with defaults filled in.
+
+        Paths are given relative to ``base_dir`` and ``output`` is left out, so the result (and
+        :attr:`hash`) does not depend on where the project sits on a machine or where results are written.
+        """
+        model = self.model
+        weave = model.weave if model.weave_path is None else self._relative(model.weave_path)
+        fit = self.fit
+        opt = fit.optimizer
+        post = fit.posterior
+        return {
+            "name": self.name,
+            "measurement": {
+                "path": self._relative(self.measurement.path),
+                "format": self.measurement.format,
+                "options": self.measurement.options,
+            },
+            "model": {
+                "kind": model.kind,
+                "weave": weave,
+                "quadrature": {"rule": model.quadrature.rule, "nodes": model.quadrature.nodes},
+                "params": dict(model.params),
+                "options": dict(model.options),
+            },
+            "fit": {
+                "free": list(fit.free),
+                "bounds": {k: list(v) for k, v in fit.bounds.items()},
+                "metric": fit.metric,
+                "optimizer": {
+                    "global": opt.global_algorithm,
+                    "local": opt.local_algorithm,
+                    "max_evals": opt.max_evals,
+                    "seed": opt.seed,
+                    "max_time": opt.max_time,
+                    "starts": opt.starts,
+                    "polish": opt.polish_evals,
+                },
+                "posterior": None if post is None else {
+                    "walkers": post.walkers, "steps": post.steps, "max_steps": post.max_steps,
+                },
+                "cv_folds": fit.cv_folds,
+            },
+            "report": {"percentiles": list(self.report.percentiles)},
+        }
+
+    @property
+    def hash(self) -> str:
+        """sha256 (hex) of the canonical JSON of :meth:`canonical` (sorted keys, no whitespace)."""
+        text = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":"), allow_nan=False)
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+    def _relative(self, path: Path) -> str:
+        return Path(os.path.relpath(path, self.base_dir)).as_posix()

@@ -1,0 +1,432 @@
+"""The rules of fabric.yaml: every key, type, range and cross-field constraint, checked section by section.
+
+:func:`load_config` reads a fabric.yaml (:func:`clothlab.config.linemap.load_yaml_with_lines`), checks it and
+returns a frozen :class:`~clothlab.config.schema.Config`; :func:`config_from_dict` checks a Python mapping
+the same way.  Every mistake raises :class:`~clothlab.errors.ConfigError` naming the file, the line, the
+dotted field (``fit.optimizer.max_evals``), the value found and what was expected.  Model parameter values
+and bounds are checked against the model's one declaration of each parameter (for the Irawan-Marschner
+model the physical ranges of Irawan & Marschner 2012, Table I); the closed lists of choices are imported
+from the modules that own them.  Relative paths (``measurement.path``, a ``.wv`` weave file, ``output.*``)
+are relative to the yaml's directory; when ``output`` is absent, results go to ``fits/`` and ``reports/``
+under the current directory.
+
+Why not pydantic (v2): its errors can name the file, line and dotted field - an error's ``loc`` is the key
+path, which a :class:`~clothlab.config.linemap.LineMap` turns into a line - but only for checks of one
+field.  A rule that relates fields (the start value against the fit bounds, ``walkers >= 2 x`` the free
+parameters, ``starts <= max_evals``, G_MLSL_LDS with a local polish, parameter names checked against the
+table of the ``kind`` chosen in the same file) runs in a model validator, and pydantic reports its error at
+the enclosing model (``fit.optimizer``, the line of the section) instead of the field at fault
+(``fit.optimizer.local``, the line of the value).  Keeping today's messages - the value with its YAML type,
+"did you mean", the allowed range - would also need a custom validator per field, so the rules would be
+written twice, once as annotations and once as functions.  The schema stays plain frozen dataclasses and the
+rules stay here, in one place.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import re
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from clothlab.config.checks import (
+    Location,
+    as_choice,
+    as_cli_int,
+    as_int,
+    as_list,
+    as_number,
+    as_str,
+    check_plain_data,
+    shown,
+    suggest,
+)
+from clothlab.config.choices import GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS, MLSL_LOCAL, NEEDS_LOCAL
+from clothlab.config.linemap import LineMap, dotted, load_yaml_with_lines
+from clothlab.config.schema import (
+    DEFAULT_MAX_STEPS,
+    DEFAULT_PERCENTILES,
+    DEFAULT_STEPS,
+    DEFAULT_WALKERS,
+    PRESET_PREFIX,
+    Config,
+    FitConfig,
+    MeasurementConfig,
+    ModelConfig,
+    OptimizerConfig,
+    OutputConfig,
+    PosteriorConfig,
+    QuadratureConfig,
+    ReportConfig,
+)
+from clothlab.errors import ConfigError, ParameterError
+from clothlab.models.registry import MODEL_KINDS, model_class
+
+NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
+NODES_RANGE = (2, 1000)
+SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
+
+
+class _Validator:
+    """The rules of each section; builds the :class:`Config` of one document or mapping."""
+
+    def __init__(self, data: Any, lines: LineMap, base_dir: Path, path: Path | None):
+        self.data = data
+        self.lines = lines
+        self.source = lines.source
+        self.base_dir = base_dir
+        self.path = path
+
+    # -- helpers --------------------------------------------------------------------------------------------
+
+    def at(self, path: tuple, key: bool = False) -> Location:
+        """The location of the value at ``path`` (of its key with ``key=True``)."""
+        return Location(self.source, dotted(path), self.lines.line(path, key=key))
+
+    def section(self, value: Any, path: tuple, keys, required=()) -> dict:
+        """Check that ``value`` is a mapping with only ``keys`` and all of ``required``; return it."""
+        if not isinstance(value, dict):
+            raise self.at(path).error(f"expected a mapping, got {shown(value)}")
+        for key in value:
+            if key not in keys:
+                raise self.at(path + (key,), key=True).error(
+                    f"unknown key '{key}'{suggest(key, keys)}; allowed here: {', '.join(keys)}"
+                )
+        for key in required:
+            if key not in value:
+                where = self.at(path, key=True)
+                raise ConfigError(f"missing required key '{key}'", path=where.source, line=where.line,
+                                  field=dotted(path + (key,)))
+        return value
+
+    def resolve(self, written: str, at: Location) -> Path:
+        """``written`` relative to the yaml's directory ('~' expanded), normalised but not symlink-resolved."""
+        if not written or "\0" in written:
+            raise at.error(f"expected a path, got {written!r}")
+        try:
+            expanded = Path(written).expanduser()
+        except RuntimeError as exc:  # '~user' with an unknown user
+            raise at.error(f"cannot expand {written!r}: {exc}") from None
+        return Path(os.path.normpath(self.base_dir / expanded))
+
+    @staticmethod
+    def is_there(path: Path, need_file: bool) -> bool:
+        try:
+            return path.is_file() if need_file else path.exists()
+        except (OSError, ValueError):  # e.g. a name too long for the file system
+            return False
+
+    # -- sections -------------------------------------------------------------------------------------------
+
+    def config(self) -> Config:
+        top = self.data
+        if not isinstance(top, dict):
+            found = "an empty document" if top is None else shown(top)
+            raise ConfigError(f"expected a mapping of settings (name:, measurement:, ...), got {found}",
+                              path=self.source, line=self.lines.line(()))
+        self.section(top, (), ("name", "measurement", "model", "fit", "report", "output"),
+                     required=("name", "measurement"))
+        name = as_str(top["name"], self.at(("name",)))
+        if not NAME_PATTERN.fullmatch(name) or name in (".", ".."):
+            raise self.at(("name",)).error(
+                f"{name!r} is not a valid name: use letters, digits, '.', '_' and '-' only "
+                "(it names the fits/ and reports/ directories)"
+            )
+        measurement = self.measurement(top["measurement"])
+        model = self.model(top.get("model", {}))
+        fit = self.fit(top.get("fit", {}), model)
+        report = self.report(top.get("report", {}))
+        output = self.output(top.get("output", {}))
+        return Config(name=name, path=self.path, base_dir=self.base_dir, measurement=measurement,
+                      model=model, fit=fit, report=report, output=output, raw=copy.deepcopy(top),
+                      source=self.source)
+
+    def measurement(self, value: Any) -> MeasurementConfig:
+        p = ("measurement",)
+        m = self.section(value, p, ("path", "format", "options"), required=("path",))
+        written = as_str(m["path"], self.at(p + ("path",)))
+        resolved = self.resolve(written, self.at(p + ("path",)))
+        if not self.is_there(resolved, need_file=False):
+            raise self.at(p + ("path",)).error(
+                f"measurement not found: {resolved} (from {written!r}, relative to {self.base_dir})"
+            )
+        fmt = as_choice(m.get("format", MeasurementConfig.format), self.at(p + ("format",)), _format_choices())
+        options = m.get("options", {})
+        if options is None:
+            options = {}
+        if not isinstance(options, dict):
+            raise self.at(p + ("options",)).error(f"expected a mapping, got {shown(options)}")
+        check_plain_data(options, self.at(p + ("options",)))
+        return MeasurementConfig(path=resolved, format=fmt, options=copy.deepcopy(options))
+
+    def model(self, value: Any) -> ModelConfig:
+        p = ("model",)
+        m = self.section(value, p, ("kind", "weave", "quadrature", "params", "options"))
+        kind = as_choice(m.get("kind", ModelConfig.kind), self.at(p + ("kind",)), MODEL_KINDS)
+        weave = None
+        if m.get("weave") is not None:
+            weave = self.weave(m["weave"], self.at(p + ("weave",)))
+        else:
+            where = self.at(p, key=True)
+            raise ConfigError(f"missing required key 'weave' (preset:<name> or a .wv file) for kind {kind}",
+                              path=where.source, line=where.line, field="model.weave")
+        q = self.section(m.get("quadrature", {}), p + ("quadrature",), ("rule", "nodes"))
+        rule = as_choice(q.get("rule", QuadratureConfig.rule), self.at(p + ("quadrature", "rule")), _quadrature_rules())
+        nodes = as_int(q.get("nodes", QuadratureConfig.nodes), self.at(p + ("quadrature", "nodes")), *NODES_RANGE)
+        params = m.get("params", {}) or {}
+        if not isinstance(params, dict):
+            raise self.at(p + ("params",)).error(f"expected a mapping, got {shown(params)}")
+        table = _param_table(kind)
+        if table is None:
+            check_plain_data(params, self.at(p + ("params",)))
+            checked = copy.deepcopy(params)
+        else:
+            checked = {}
+            for name, v in params.items():
+                at_key = self.at(p + ("params", name), key=True)
+                self.known_parameter(name, table, at_key)
+                at = self.at(p + ("params", name))
+                as_number(v, at)
+                checked[name] = _check_parameter(table, name, v, at)
+        options = m.get("options", {}) or {}
+        if not isinstance(options, dict):
+            raise self.at(p + ("options",)).error(f"expected a mapping, got {shown(options)}")
+        check_plain_data(options, self.at(p + ("options",)))
+        return ModelConfig(kind=kind, weave=weave, quadrature=QuadratureConfig(rule, nodes), params=checked,
+                           options=copy.deepcopy(options))
+
+    def weave(self, value: Any, at: Location) -> str:
+        """``preset:<name>`` (spelled as clothlab.weave.presets accepts it) -> ``preset:<key>``; a .wv file ->
+        its resolved path."""
+        text = as_str(value, at).strip()
+        if text.lower().startswith(PRESET_PREFIX):
+            from clothlab.weave.presets import PRESET_NAMES, canonical_preset_name
+
+            preset = text[len(PRESET_PREFIX):].strip()
+            try:
+                return PRESET_PREFIX + canonical_preset_name(preset)
+            except ConfigError:
+                raise at.error(f"unknown preset {preset!r}{suggest(preset, PRESET_NAMES)}; "
+                               f"known presets: {', '.join(PRESET_NAMES)}") from None
+        resolved = self.resolve(text, at)
+        if not self.is_there(resolved, need_file=True):
+            raise at.error(f"weave file not found: {resolved} (from {text!r}, relative to {self.base_dir}); "
+                           f"give a .wv file or preset:<name>")
+        return str(resolved)
+
+    def known_parameter(self, name: Any, table, at: Location) -> str:
+        if not isinstance(name, str) or name not in table:
+            raise at.error(f"unknown parameter {name!r}{suggest(name, table.names())}; "
+                           f"known: {', '.join(table.names())}")
+        return name
+
+    def fit(self, value: Any, model: ModelConfig) -> FitConfig:
+        p = ("fit",)
+        f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds"))
+        table = _param_table(model.kind)
+        free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
+        bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
+        for name in free:  # explicit bounds were checked against the start above; the declared ones here
+            if table is not None and name not in bounds and name in model.params:
+                lo, hi = table[name].bounds
+                if not lo <= model.params[name] <= hi:
+                    raise self.at(("model", "params", name)).error(
+                        f"start value {model.params[name]:g} of free parameter {name} lies outside its default fit "
+                        f"bounds [{lo:g}, {hi:g}]; move it inside or set fit.bounds.{name}")
+        metric = as_choice(f.get("metric", FitConfig.metric), self.at(p + ("metric",)), METRICS)
+        optimizer = self.optimizer(f.get("optimizer", {}))
+        posterior = self.posterior(f.get("posterior"), free)
+        cv_folds = f.get("cv_folds", 0)
+        at = self.at(p + ("cv_folds",))
+        if cv_folds is None or cv_folds is False:
+            cv_folds = 0
+        as_int(cv_folds, at, 0)
+        if cv_folds == 1:
+            raise at.error("expected 0 (no cross-validation) or at least 2 folds, got 1")
+        return FitConfig(free=free, bounds=bounds, metric=metric, optimizer=optimizer, posterior=posterior,
+                         cv_folds=cv_folds)
+
+    def free(self, value: Any, table) -> tuple:
+        p = ("fit", "free")
+        names = as_list(value, self.at(p))
+        out: list[str] = []
+        for i, name in enumerate(names):
+            at = self.at(p + (i,))
+            as_str(name, at)
+            if table is not None:
+                self.known_parameter(name, table, at)
+            if name in out:
+                raise at.error(f"parameter {name!r} is listed twice")
+            out.append(name)
+        return tuple(out)
+
+    def bounds(self, value: Any, table, free: tuple, params: dict) -> dict:
+        p = ("fit", "bounds")
+        if not isinstance(value, dict):
+            raise self.at(p).error(f"expected a mapping of parameter: [lower, upper], got {shown(value)}")
+        out = {}
+        for name, pair in value.items():
+            key_at = self.at(p + (name,), key=True)
+            if table is not None:
+                self.known_parameter(name, table, key_at)
+            if name not in free:
+                raise key_at.error(f"bounds given for {name!r}, which is not in fit.free ({', '.join(free)})")
+            at = self.at(p + (name,))
+            if not isinstance(pair, list) or len(pair) != 2:
+                raise at.error(f"expected [lower, upper], got {shown(pair)}")
+            lo, hi = (as_number(x, self.at(p + (name, i))) for i, x in enumerate(pair))
+            if table is not None:
+                for i, x in enumerate(pair):
+                    _check_parameter(table, name, x, self.at(p + (name, i)))
+            if not lo < hi:
+                raise at.error(f"lower bound must be below the upper bound, got [{lo:g}, {hi:g}]")
+            if name in params and not lo <= params[name] <= hi:
+                raise at.error(f"start value model.params.{name} = {params[name]:g} lies outside "
+                               f"these bounds [{lo:g}, {hi:g}]")
+            out[name] = (lo, hi)
+        return out
+
+    def optimizer(self, value: Any) -> OptimizerConfig:
+        p = ("fit", "optimizer")
+        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time", "starts", "polish"))
+        d = OptimizerConfig()
+        g = as_choice(o.get("global", d.global_algorithm), self.at(p + ("global",)), GLOBAL_ALGORITHMS,
+                      allow_null=True)
+        loc = as_choice(o.get("local", d.local_algorithm), self.at(p + ("local",)), LOCAL_ALGORITHMS,
+                        allow_null=True)
+        if g is None and loc is None:
+            raise self.at(p, key=True).error("global and local are both null: no optimiser would run")
+        if g in NEEDS_LOCAL and loc is None:
+            raise self.at(p + ("local",)).error(f"{g} needs a local polish after its {MLSL_LOCAL} multistart; "
+                                                f"give one of {', '.join(LOCAL_ALGORITHMS)}")
+        max_evals = as_int(o.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1)
+        seed = as_int(o.get("seed", d.seed), self.at(p + ("seed",)), *SEED_RANGE)
+        max_time = o.get("max_time")
+        if max_time is not None:
+            at = self.at(p + ("max_time",))
+            max_time = as_number(max_time, at)
+            if max_time <= 0:
+                raise at.error(f"expected a positive number of seconds or null, got {max_time:g}")
+        starts = as_int(o.get("starts", d.starts), self.at(p + ("starts",)), 1, 64)
+        if starts > max_evals:
+            raise self.at(p + ("starts",)).error(f"{starts} starts need at least as many evaluations; max_evals is "
+                                                 f"{max_evals}")
+        polish = o.get("polish")
+        if polish is not None:
+            polish = as_int(polish, self.at(p + ("polish",)), 0)
+        return OptimizerConfig(g, loc, max_evals, seed, max_time, starts, polish)
+
+    def posterior(self, value: Any, free: tuple) -> PosteriorConfig | None:
+        p = ("fit", "posterior")
+        if value is None or value is False:
+            return None
+        o = {} if value is True else self.section(value, p, ("walkers", "steps", "max_steps"))
+        if not free:
+            raise self.at(p).error("a posterior needs at least one parameter in fit.free")
+        walkers_at = self.at(p + ("walkers",))
+        walkers = as_int(o.get("walkers", max(DEFAULT_WALKERS, 2 * len(free))), walkers_at, 1)
+        if walkers < 2 * len(free):
+            raise walkers_at.error(f"walkers = {walkers} is below 2 x {len(free)} free parameters "
+                                   f"= {2 * len(free)} (emcee needs at least twice as many walkers)")
+        steps = as_int(o.get("steps", DEFAULT_STEPS), self.at(p + ("steps",)), 1)
+        max_at = self.at(p + ("max_steps",))
+        max_steps = as_int(o.get("max_steps", max(DEFAULT_MAX_STEPS, steps)), max_at, 1)
+        if max_steps < steps:
+            raise max_at.error(f"max_steps = {max_steps} is below steps = {steps}")
+        return PosteriorConfig(walkers, steps, max_steps)
+
+    def report(self, value: Any) -> ReportConfig:
+        p = ("report",)
+        r = self.section(value, p, ("percentiles",))
+        values = as_list(r.get("percentiles", list(DEFAULT_PERCENTILES)), self.at(p + ("percentiles",)))
+        if not values:
+            raise self.at(p + ("percentiles",)).error("expected at least one percentile, got []")
+        out: list[float] = []
+        for i, v in enumerate(values):
+            at = self.at(p + ("percentiles", i))
+            x = as_number(v, at)
+            if not 0.0 <= x <= 100.0:
+                raise at.error(f"percentile must lie in [0, 100], got {v!r}")
+            if x in out:
+                raise at.error(f"percentile {v!r} is listed twice")
+            out.append(x)
+        return ReportConfig(tuple(sorted(out)))
+
+    def output(self, value: Any) -> OutputConfig:
+        p = ("output",)
+        o = self.section(value, p, ("fits", "reports"))
+        dirs = {}
+        for key in ("fits", "reports"):
+            if o.get(key) is None:
+                dirs[key] = Path.cwd() / key
+            else:
+                at = self.at(p + (key,))
+                dirs[key] = self.resolve(as_str(o[key], at), at)
+        return OutputConfig(**dirs)
+
+
+def _param_table(kind: str):
+    """The parameter declarations of model ``kind`` (the registry's class)."""
+    return model_class(kind).declared_parameters()
+
+
+def _check_parameter(table, name: str, value: float, at: Location) -> float:
+    """The declared physical range check (ParamSpec.check), as a ConfigError at ``at``."""
+    try:
+        return table[name].check(value, at.field)
+    except ParameterError as exc:
+        raise at.error(exc.detail) from None
+
+
+def _quadrature_rules() -> tuple:
+    """The rules the quadrature module implements (imported on use: it loads numpy)."""
+    from clothlab.models.irawan.quadrature import RULES
+
+    return RULES
+
+
+def _format_choices() -> tuple:
+    """The measurement formats the loader reads, and ``auto`` (imported on use: it loads numpy)."""
+    from clothlab.io.loader import FORMAT_CHOICES
+
+    return FORMAT_CHOICES
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Public entry points
+
+
+def load_config(path) -> Config:
+    """Read and validate a fabric.yaml; relative paths in it are resolved against its directory."""
+    path = Path(path)
+    data, lines = load_yaml_with_lines(path)
+    return _Validator(data, lines, path.absolute().parent, path).config()
+
+
+def config_from_dict(d: dict, source: str = "<dict>", base_dir=".") -> Config:
+    """Validate a mapping with the fabric.yaml schema (API and tests); paths are relative to ``base_dir``."""
+    return _Validator(d, LineMap(source=source), Path(base_dir).absolute(), None).config()
+
+
+def apply_overrides(config: Config, *, rule=None, nodes=None, max_evals=None, seed=None) -> Config:
+    """A copy of ``config`` with command-line overrides (``--rule --nodes --max-evals --seed``) applied.
+
+    Values are checked as in the yaml; errors name the option, e.g. field ``--nodes``.
+    """
+    quadrature = config.model.quadrature
+    optimizer = config.fit.optimizer
+    if rule is not None:
+        quadrature = replace(quadrature, rule=as_choice(rule, Location(None, "--rule"), _quadrature_rules()))
+    if nodes is not None:
+        quadrature = replace(quadrature, nodes=as_cli_int(nodes, Location(None, "--nodes"), *NODES_RANGE))
+    if max_evals is not None:
+        optimizer = replace(optimizer, max_evals=as_cli_int(max_evals, Location(None, "--max-evals"), 1))
+    if seed is not None:
+        optimizer = replace(optimizer, seed=as_cli_int(seed, Location(None, "--seed"), *SEED_RANGE))
+    return replace(
+        config,
+        model=replace(config.model, quadrature=quadrature),
+        fit=replace(config.fit, optimizer=optimizer),
+    )
