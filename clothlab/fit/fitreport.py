@@ -222,13 +222,15 @@ def _error_section(fit: dict) -> Section:
                    header, rows, lines)
 
 
-def _time_section(fit: dict) -> Section:
+def _time_section(fit: dict, posterior: dict | None) -> Section:
     t = fit.get("timings") or {}
     rows = [["optimisation", _seconds(t.get("optimisation_s"))]]
     if "cross_validation_s" in t:
         rows.append(["cross-validation", _seconds(t["cross_validation_s"])])
     if "posterior_s" in t:
-        rows.append(["posterior", _seconds(t["posterior_s"]) + (" (summed over resumed sessions)")])
+        resumed = ((posterior or {}).get("convergence") or {}).get("resumed_from_step")
+        rows.append(["posterior", _seconds(t["posterior_s"])
+                     + (f" (resumed at step {resumed}: the sessions' sum)" if resumed else "")])
     rows.append(["total", _seconds(t.get("total_s", fit.get("wall_time_s")))])
     return Section("Time", "", None, rows)
 
@@ -248,7 +250,7 @@ def report_sections(fit: dict, posterior: dict | None = None, *,
     """The report of a fit summary (fit.json content) and its posterior summary (posterior.json, or None)."""
     return [_fit_section(fit), _parameter_section(fit, posterior),
             _correlation_section(fit, posterior, correl_threshold), _coefficient_section(fit),
-            _error_section(fit), _time_section(fit), _notes_section(fit, posterior)]
+            _error_section(fit), _time_section(fit, posterior), _notes_section(fit, posterior)]
 
 
 # ---------------------------------------------------------------------------------------------- rendering

@@ -30,33 +30,37 @@ MAX_CONDITION = 1e12
 """J^T J with a larger condition number is treated as singular (the parameters are not separately determined)."""
 
 
-def _residuals(problem, x) -> np.ndarray:
-    solution = problem.solve(problem.from_unit(x))
+def _residuals(problem, x, fixed: dict | None = None) -> np.ndarray:
+    at = problem.from_unit(x)
+    params = at if fixed is None else {**fixed, **{name: at[name] for name in problem.free}}
+    solution = problem.solve(params)
     return metric_residuals(problem.y, solution.prediction, problem.metric).ravel()
 
 
-def jacobian(problem, x, step=STEP) -> np.ndarray:
+def jacobian(problem, x, step=STEP, fixed: dict | None = None) -> np.ndarray:
     """(n, k) derivative of the profiled residual vector with respect to the unit-box coordinates at ``x``
-    (``step`` a scalar or one per coordinate)."""
+    (``step`` a scalar or one per coordinate); the other parameters from ``fixed`` (default: the problem's
+    start values)."""
     x = np.asarray(x, dtype=np.float64)
     steps = np.broadcast_to(np.asarray(step, dtype=np.float64), x.shape)
     columns = []
     for j in range(x.size):
         hi, lo = x.copy(), x.copy()
         hi[j], lo[j] = min(x[j] + steps[j], 1.0), max(x[j] - steps[j], 0.0)
-        columns.append((_residuals(problem, hi) - _residuals(problem, lo)) / (hi[j] - lo[j]))
+        columns.append((_residuals(problem, hi, fixed) - _residuals(problem, lo, fixed)) / (hi[j] - lo[j]))
     return np.stack(columns, axis=1) if columns else np.zeros((problem.y.size, 0))
 
 
 def gauss_newton(problem, params: dict, step: float = STEP) -> dict:
-    """Standard errors [declared units] and correlations of ``problem``'s free parameters at ``params``.
+    """Standard errors [declared units] and correlations of ``problem``'s free parameters at ``params`` (all
+    parameters: the free ones are varied, the others held at their values there).
 
     Returns ``{"method", "names", "stderr" {name: value or None}, "correlation" {"names", "matrix"}, "dof",
     "scale" (s^2), "notes"}``; None where the Gauss-Newton matrix is singular in that direction."""
     names = list(problem.free)
     k = len(names)
     x = problem.to_unit(params)
-    r = _residuals(problem, x)
+    r = _residuals(problem, x, params)
     n_coefficients = len(problem.component_names) * problem.y.shape[1]
     dof = int(r.size - k - n_coefficients)
     out = {"method": METHOD, "names": names, "stderr": {}, "correlation": {"names": names, "matrix": []},
@@ -67,7 +71,7 @@ def gauss_newton(problem, params: dict, step: float = STEP) -> dict:
         out["notes"].append(f"no standard errors: {r.size} values for {k + n_coefficients} fitted quantities")
         out["stderr"] = dict.fromkeys(names)
         return out
-    J = jacobian(problem, x, step)
+    J = jacobian(problem, x, step, params)
     scale = float(r @ r) / dof
     jtj = J.T @ J
     diag = np.sqrt(np.diag(jtj))
