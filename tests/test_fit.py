@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MEASUREMENTS = ROOT / "measurements"
 FABRICS = ("cotton-denim", "silk-shantung", "silk-charmeuse", "cotton-twill", "wool-gabardine", "polyester-lining")
 
-# Tolerances of the recovery test (issue: umax within 1 deg, psi within 2 deg, beta within 5 %).
+# Tolerances of the recovery test (umax within 1 deg, psi within 2 deg, beta within 5 %).
 TOLERANCE = {"umax": 1.0, "psi": 2.0, "kappa": 0.1, "alpha": 0.1, "beta": 0.05}
 # The cotton-twill weft violates the segment constraint of sec. 5.3 (2 sin 36 deg > 1): its spine is the
 # degenerate R = 0 limit and its specular is weak (ks 0.02 under a 0.05 warp); its umax is determined only to
@@ -65,7 +65,7 @@ def test_recovery_fast(fabric):
 @pytest.mark.slow
 @pytest.mark.parametrize("fabric", FABRICS)
 def test_recovery_all_six(fabric):
-    """The full study of the issue: each noise-free set, its shipped fabric-clean.yaml, default start."""
+    """The full recovery study: each noise-free set, its shipped fabric-clean.yaml, default start."""
     result = run_fit(_config(fabric))
     truth = result.problem.measurement.provenance["parameters"]
     colours = result.problem.measurement.provenance["coefficients"]

@@ -145,6 +145,8 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
 
     started = time.perf_counter()
     like = _Likelihood(problem)
+    if like.ndim == 0:
+        raise ValueError("nothing to sample: the problem has no free parameter (its coefficients are solved exactly)")
     notes: list[str] = []
     need = 2 * like.ndim
     if walkers < need or walkers % 2:
