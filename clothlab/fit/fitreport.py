@@ -74,6 +74,13 @@ def _seconds(value) -> str:
 
 
 # ---------------------------------------------------------------------------------------------- sections
+def _values(fit: dict, k: int) -> str:
+    m = fit.get("measurement") or {}
+    n = (m.get("n") or 0) * len(m.get("channels") or [])
+    coefficients = sum(len(v) for v in (fit.get("coefficients") or {}).values())
+    return f"{k}, and {coefficients} linear coefficients (NNLS), for {n} values"
+
+
 def _evaluations(fit: dict, any_free: bool) -> str:
     if not any_free:
         return f"{fit.get('evaluations')} (one NNLS solve, no optimiser)"
@@ -100,7 +107,7 @@ def _fit_section(fit: dict) -> Section:
         ["model", f"{model.get('kind')} (weave {model.get('weave')}{', ' + setting if setting else ''})"],
         ["measurement", f"{m.get('path')}{simulated}: {m.get('n')} directions x {len(channels)} channels "
                         f"({', '.join(channels)})"],
-        ["free parameters", f"{len(free)}" + (" (linear coefficients only)" if not free else "")],
+        ["free parameters", _values(fit, len(free))],
         ["metric", str(fit.get("metric"))],
         ["evaluations", _evaluations(fit, bool(free))],
         ["objective", f"{_num(objective.get('start'))} at the start -> {_num(objective.get('final'))}"],
@@ -225,6 +232,8 @@ def _error_section(fit: dict) -> Section:
 def _time_section(fit: dict, posterior: dict | None) -> Section:
     t = fit.get("timings") or {}
     rows = [["optimisation", _seconds(t.get("optimisation_s"))]]
+    if "standard_errors_s" in t:
+        rows.append(["standard errors", _seconds(t["standard_errors_s"])])
     if "cross_validation_s" in t:
         rows.append(["cross-validation", _seconds(t["cross_validation_s"])])
     if "posterior_s" in t:

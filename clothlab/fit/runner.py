@@ -121,10 +121,12 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     errors = error_percentiles(problem.y, solution.prediction, config.report.percentiles,
                                problem.measurement.channels)
     notes = _notes_at_optimum(problem, params, optimum, coefficients)
-    uncertainty = gauss_newton(problem, params)
     optimised = time.perf_counter() - started
     result = FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
-                       optimised, notes, timings={"optimisation_s": optimised}, uncertainty=uncertainty)
+                       optimised, notes, timings={"optimisation_s": optimised})
+    tic = time.perf_counter()
+    result.uncertainty = gauss_newton(problem, params)
+    result.timings["standard_errors_s"] = time.perf_counter() - tic
     result.evaluation_speed = evaluation_speed(problem, params)
     if config.fit.cv_folds >= 2:
         result.cross_validation = crossval.cross_validate(problem, params, k=config.fit.cv_folds, seed=opt.seed,

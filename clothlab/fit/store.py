@@ -196,7 +196,8 @@ def fit_summary(result) -> dict:
         "wall_time_s": result.wall_time,
         "timings": {"total_s": result.wall_time, **result.timings,
                     "note": "optimisation_s: global + local stages of all starts (the fit proper); "
-                            "cross_validation_s and posterior_s follow it; posterior_s sums resumed sessions"},
+                            "standard_errors_s (Gauss-Newton), cross_validation_s and posterior_s follow it; "
+                            "posterior_s sums resumed sessions"},
         "seed": cfg.fit.optimizer.seed,
         "optimizer": {"global": cfg.fit.optimizer.global_algorithm, "local": cfg.fit.optimizer.local_algorithm,
                       "max_evals": cfg.fit.optimizer.max_evals, "status": getattr(opt, "message", "")},
