@@ -124,6 +124,8 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     optimised = time.perf_counter() - started
     result = FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
                        optimised, notes, timings={"optimisation_s": optimised})
+    log.debug("%s: optimisation %d evaluations, %.1f s, objective %.6g", config.name, optimum.nevals, optimised,
+              optimum.fun)
     tic = time.perf_counter()
     result.uncertainty = gauss_newton(problem, params)
     result.timings["standard_errors_s"] = time.perf_counter() - tic
@@ -132,6 +134,8 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
         result.cross_validation = crossval.cross_validate(problem, params, k=config.fit.cv_folds, seed=opt.seed,
                                                            percentiles=config.report.percentiles)
         result.timings["cross_validation_s"] = result.cross_validation["wall_time_s"]
+        log.debug("%s: cross-validation %.1f s, held-out median %.4g", config.name,
+                  result.timings["cross_validation_s"], result.cross_validation["held_out"]["p50"])
     post = posterior or config.fit.posterior
     if post is not None and not problem.free:
         result.warnings.append(NOTHING_TO_SAMPLE)
@@ -144,5 +148,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
             checkpoint_path=path, progress=posterior_progress)
         result.warnings += [w for w in result.posterior.to_json()["warnings"] if w not in result.warnings]
         result.timings["posterior_s"] = result.posterior.wall_time
+        log.debug("%s: posterior %d steps, %.1f s, %s", config.name, result.posterior.steps,
+                  result.posterior.wall_time, "converged" if result.posterior.converged else "not converged")
     result.wall_time = time.perf_counter() - started
     return result

@@ -3,7 +3,7 @@
 Sampled coordinates are the unit box of :class:`clothlab.fit.problem.FitProblem` (x = (T(theta) - T(lo)) /
 (T(hi) - T(lo)), T = log for log-scaled parameters), plus one coordinate for a noise scale when the data carry
 no uncertainties.  So the **prior is uniform in the optimiser's transform**: uniform within the fit bounds for
-linear parameters, log-uniform within them for log-scaled ones zero outside.
+linear parameters, log-uniform within them for log-scaled ones, zero outside.
 
 Likelihood (per value n, channel c; model m = sum_k c_k[c] component_k(theta)[n]):
 
@@ -13,8 +13,8 @@ Likelihood (per value n, channel c; model m = sum_k c_k[c] component_k(theta)[n]
 
 **The linear coefficients (kd, ks per channel and yarn type) are profiled out, not sampled**: at every
 posterior point they are re-solved by weighted NNLS (weights 1 / sigma, or 1 / y for the log-normal case,
-:func:`clothlab.fit.nnls.nnls_small`; paper sec. 8 fits them linearly too).  The chain therefore samples the
-profile likelihood of the non-linear parameters: intervals are conditional on the best coefficients at each
+:func:`clothlab.fit.nnls.nnls_small`; Irawan & Marschner 2012, sec. 8 fit them linearly too).  The chain
+therefore samples the profile likelihood of the non-linear parameters: intervals are conditional on the best coefficients at each
 point, which neglects the (small, with thousands of values per coefficient) extra width that marginalising the
 coefficients would add, and a coefficient pinned at 0 by the non-negativity constraint contributes no width.
 
