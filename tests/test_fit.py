@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MEASUREMENTS = ROOT / "measurements"
 FABRICS = ("cotton-denim", "silk-shantung", "silk-charmeuse", "cotton-twill", "wool-gabardine", "polyester-lining")
 
-# Tolerances of the recovery test (issue: umax within 1 deg, psi within 2 deg, beta within 5 %).
+# Tolerances of the recovery test (umax within 1 deg, psi within 2 deg, beta within 5 %).
 TOLERANCE = {"umax": 1.0, "psi": 2.0, "kappa": 0.1, "alpha": 0.1, "beta": 0.05}
 # The cotton-twill weft violates the segment constraint of sec. 5.3 (2 sin 36 deg > 1): its spine is the
 # degenerate R = 0 limit and its specular is weak (ks 0.02 under a 0.05 warp); its umax is determined only to
@@ -65,7 +65,7 @@ def test_recovery_fast(fabric):
 @pytest.mark.slow
 @pytest.mark.parametrize("fabric", FABRICS)
 def test_recovery_all_six(fabric):
-    """The full study of the issue: each noise-free set, its shipped fabric-clean.yaml, default start."""
+    """The full recovery study: each noise-free set, its shipped fabric-clean.yaml, default start."""
     result = run_fit(_config(fabric))
     truth = result.problem.measurement.provenance["parameters"]
     colours = result.problem.measurement.provenance["coefficients"]
@@ -156,3 +156,54 @@ def test_polish_restarts_a_stopped_local_search_and_never_ends_worse():
     again = polish(problem, polished, replace(cfg.fit.optimizer, polish=300))
     assert again.fun <= polished.fun
     assert polish(problem, stopped, replace(cfg.fit.optimizer, polish=0)) is stopped
+
+
+def test_no_free_parameters_fits_the_linear_coefficients_only(tmp_path):
+    """``fit.free: []``: one NNLS solve of the coefficients (no optimiser), cross-validation re-solves them per
+    fold, a requested posterior is skipped with a note, and the fit directory is written and read back."""
+    from scipy.optimize import nnls
+
+    from clothlab.config import PosteriorConfig
+    from clothlab.fit.store import load_fit
+
+    base = _config("silk-charmeuse", "noisy")
+    cfg = replace(base, fit=replace(base.fit, free=(), bounds={}, cv_folds=2),
+                  output=replace(base.output, fits=tmp_path))
+    result = run_fit(cfg, posterior=PosteriorConfig(walkers=8, steps=10, max_steps=10))
+    problem = result.problem
+    assert problem.free == () and result.params == problem.start
+    assert result.optimum.nevals == 1 and [row.stage for row in result.optimum.trace] == ["nnls"]
+    assert result.optimum.algorithms == {"global": None, "local": None, "mlsl_local": None}
+    # the coefficients are the relative-error NNLS solution (weights 1 / measured), channel by channel (scipy)
+    design, y = problem.design(problem.start, normalised=True), problem.y
+    for c, channel in enumerate(problem.measurement.channels):
+        expected, _ = nnls(design / y[:, [c]], np.ones(len(y)))
+        for i, name in enumerate(("kd", "ks_warp", "ks_weft")):
+            assert result.coefficients[name][c] == pytest.approx(expected[i], rel=1e-8, abs=1e-12), channel
+    prediction = design @ np.stack([result.coefficients[n] for n in ("kd", "ks_warp", "ks_weft")])
+    assert result.errors == error_percentiles(y, prediction, cfg.report.percentiles, problem.measurement.channels)
+    assert result.posterior is None and any("nothing to sample" in w for w in result.warnings)
+    assert result.uncertainty["stderr"] == {} and result.uncertainty["names"] == []
+    cv = result.cross_validation
+    assert [f["evaluations"] for f in cv["folds"]] == [1, 1] and "no free parameter" in cv["refit"]
+    out = save_fit(result)
+    fit = json.loads((out / "fit.json").read_text())
+    assert not any(entry["free"] for entry in fit["parameters"].values())
+    assert (out / "trace.csv").read_text().splitlines()[1].endswith(",nnls")
+    assert not (out / "posterior.json").exists()
+    report = load_fit(out).fit_report()
+    assert report == result.fit_report()
+    assert "free parameters   0, and 9 linear coefficients" in report and "nothing to sample" in report
+
+
+def test_config_accepts_an_empty_free_list(tmp_path):
+    """fabric.yaml may name no free parameter (the coefficients-only fit above)."""
+    from clothlab.config import load_config as load
+
+    text = (MEASUREMENTS / "polyester-lining" / "fabric.yaml").read_text()
+    lines = [line for line in text.splitlines() if not line.strip().startswith("posterior:")]
+    lines = [("  free: []" if line.strip().startswith("free:") else line) for line in lines]
+    path = tmp_path / "fabric.yaml"
+    path.write_text("\n".join(lines).replace("path: noisy.csv",
+                                             f"path: {MEASUREMENTS / 'polyester-lining' / 'noisy.csv'}") + "\n")
+    assert load(path).fit.free == ()

@@ -247,3 +247,18 @@ def test_budget_split_and_max_time():
 
     result = minimize(slow, [0.5, 0.5], [-1, -1], [1, 1], max_evals=10**6, max_time=0.3)
     assert result.wall_time < 1.5 and result.success
+
+
+def test_an_empty_box_is_evaluated_once_without_nlopt(monkeypatch):
+    """Zero coordinates (a fit of the linear coefficients only): one evaluation, reported as converged, and
+    nlopt is never asked (it rejects n = 0)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "nlopt", None)  # importing nlopt now raises ImportError
+    calls, rows = [], []
+    result = minimize(lambda x: calls.append(x.shape) or 0.25, [], [], [], max_evals=500, seed=3,
+                      callback=rows.append)
+    assert calls == [(0,)] and result.nevals == 1 and result.fun == 0.25
+    assert result.x.shape == (0,) and result.at_lower.shape == result.at_upper.shape == (0,)
+    assert result.success and result.converged and result.seed == 3
+    assert rows == result.trace and [r.stage for r in rows] == ["nnls"] and rows[0].best == 0.25

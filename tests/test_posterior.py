@@ -5,6 +5,7 @@ identifiability flags, the log-normal noise scale, predictive bands and the JSON
 from __future__ import annotations
 
 import json
+import logging
 import os
 import signal
 from dataclasses import replace
@@ -167,7 +168,16 @@ def test_checkpoint_from_other_settings_is_refused(tmp_path):
         run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
 
 
-def test_checkpoint_of_another_quadrature_rule_starts_afresh(tmp_path, capsys):
+@pytest.fixture
+def warnings_logged(caplog, monkeypatch):
+    """Log records of clothlab at WARNING and above, even after ``clothlab.progress.configure`` (which stops
+    propagation to the root logger that caplog listens to)."""
+    monkeypatch.setattr(logging.getLogger("clothlab"), "propagate", True)
+    caplog.set_level(logging.WARNING, logger="clothlab")
+    return caplog
+
+
+def test_checkpoint_of_another_quadrature_rule_starts_afresh(tmp_path, warnings_logged):
     """The fingerprint covers the model's quadrature: a rerun with another rule (another likelihood) must not
     continue the old chain; it starts a new one, says so, and that new chain is resumable in turn."""
     from clothlab.models.irawan.model import IrawanModel, Quadrature
@@ -179,24 +189,24 @@ def test_checkpoint_of_another_quadrature_rule_starts_afresh(tmp_path, capsys):
                        problem.free, problem.start, dict(zip(problem.free, zip(problem.lower, problem.upper,
                                                                                 strict=True), strict=True)),
                        problem.metric)
-    capsys.readouterr()
+    warnings_logged.clear()
     fresh = run_posterior(other, truth, seed=7, checkpoint_path=checkpoint, **FAST)
     assert fresh.resumed_from == 0
-    message = capsys.readouterr().err
+    message = warnings_logged.text
     assert "belongs to another fit" in message and "model" in message
     assert any("belongs to another fit" in w and "model" in w for w in fresh.warnings)
     np.testing.assert_array_equal(fresh.chain, run_posterior(other, truth, seed=7, **FAST).chain)
     assert run_posterior(other, truth, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 60
 
 
-def test_checkpoint_from_another_optimum_starts_afresh(tmp_path, capsys):
+def test_checkpoint_from_another_optimum_starts_afresh(tmp_path, warnings_logged):
     problem, truth = _problem()
     checkpoint = tmp_path / "posterior.npz"
     run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
     moved = {**truth, "beta": truth["beta"] * 1.01}
     post = run_posterior(problem, moved, seed=7, checkpoint_path=checkpoint, **FAST)
     assert post.resumed_from == 0
-    assert "optimum" in capsys.readouterr().err
+    assert "optimum" in warnings_logged.text
     # the same optimum again: resumed (the rounding of the recorded optimum does not break an exact rerun)
     assert run_posterior(problem, moved, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 60
 

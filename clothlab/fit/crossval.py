@@ -25,7 +25,9 @@ import time
 import numpy as np
 
 from clothlab.fit.metrics import error_percentiles
-from clothlab.fit.problem import FitProblem
+from clothlab.fit.optimize import minimize
+from clothlab.fit.problem import FitProblem, build_problem
+from clothlab.progress import Progress
 
 DEFAULT_LOCAL = "LN_BOBYQA"
 
@@ -53,8 +55,6 @@ def _problem_of(source):
         return source
     if callable(source) and not hasattr(source, "fit"):
         return source()
-    from clothlab.fit.runner import build_problem
-
     return build_problem(source)
 
 
@@ -72,9 +72,10 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
 
     Returns ``{"k", "seed", "split", "refit", "held_out": {"p50", "p80", "mean", "n"}, "in_sample": {...},
     "train_folds": {...}, "folds": [...], "wall_time_s", "notes"}``.
-    """
-    from clothlab.fit.optimize import minimize
 
+    With no free parameter only the coefficients are re-solved per fold.  Progress: "cross-validation fold
+    3/5" (:class:`clothlab.progress.Progress`).
+    """
     started = time.perf_counter()
     problem = _problem_of(source)
     m = problem.measurement
@@ -83,13 +84,15 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
     k_free = len(problem.free)
     notes = []
 
-    def refit(prob, start):
-        result = minimize(prob, prob.to_unit(start), np.zeros(k_free), np.ones(k_free), global_algorithm=None,
-                          local_algorithm=DEFAULT_LOCAL, max_evals=max_evals, seed=seed)
+    def refit(prob, start, desc):
+        with Progress(max_evals if k_free else 1, desc, unit="eval") as bar:
+            result = minimize(prob, prob.to_unit(start), np.zeros(k_free), np.ones(k_free), global_algorithm=None,
+                              local_algorithm=DEFAULT_LOCAL, max_evals=max_evals, seed=seed,
+                              callback=lambda row: bar.update(1))
         return prob.from_unit(result.x), result
 
     if optimum_params is None:
-        optimum_params, _ = refit(problem, problem.start)
+        optimum_params, _ = refit(problem, problem.start, "cross-validation, polish of the start")
         notes.append(f"no optimum given: the start values were polished on all rows ({DEFAULT_LOCAL}, "
                      f"{max_evals} evaluations) first")
     optimum_params = {name: optimum_params[name] for name in problem.start}
@@ -100,7 +103,7 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
     for fold in range(k):
         test = labels == fold
         sub = FitProblem(problem.model, m.subset(~test), problem.free, optimum_params, bounds, problem.metric)
-        params, result = refit(sub, optimum_params)
+        params, result = refit(sub, optimum_params, f"cross-validation fold {fold + 1}/{k}")
         sol = sub.solve(params)
         design = problem.design(params)[test]
         held_out[test] = design @ sol.coefficients
@@ -117,7 +120,8 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
         "split": ("by incident direction within each exitant direction: each exitant direction's rows are "
                   "shuffled and dealt to the folds in turn; every row is held out once"),
         "refit": (f"each fold: local optimiser only ({DEFAULT_LOCAL}, {max_evals} evaluations) from the full "
-                  "fit's optimum on the training rows; linear coefficients re-solved on the training rows"),
+                  "fit's optimum on the training rows; linear coefficients re-solved on the training rows"
+                  if k_free else "each fold: linear coefficients re-solved on the training rows (no free parameter)"),
         "held_out": error_percentiles(problem.y, held_out, percentiles)["overall"],
         "in_sample": error_percentiles(problem.y, full.prediction, percentiles)["overall"],
         "train_folds": error_percentiles(np.concatenate(train_measured), np.concatenate(train_model),

@@ -7,7 +7,7 @@ Two uses share this module:
   (0.21 means 21 %).
 * **Fitting** - :func:`metric_residuals` / :func:`objective_value` define what a fit minimises, and
   :func:`linear_weights` gives the row weights under which the linear coefficients (kd, ks) are solved
-  by weighted least squares inside the objective (DESIGN.md principle 3, numerics.md item 12).
+  by weighted least squares inside the objective (the paper fits kd and ks linearly too, sec. 8).
 
 Arrays are ``(N,)`` or ``(N, C)`` (N directions, C colour channels); BRDF values are in 1/sr.
 

@@ -1,7 +1,7 @@
 """Exact non-negative least squares for a few columns, vectorised over colour channels.
 
-A fit eliminates the linear coefficients (kd, ks per channel and yarn type; DESIGN.md principle 3,
-numerics.md item 12) at every objective evaluation by solving, independently for each channel c,
+A fit eliminates the linear coefficients (kd, ks per channel and yarn type; the model's components enter
+linearly) at every objective evaluation by solving, independently for each channel c,
 
     min_{x >= 0} || w_c * (A_c x - y_c) ||_2 ,   A_c (N, k), k <= 6 columns, N >> k rows.
 

@@ -1,8 +1,13 @@
 """A robust driver around nlopt: a seeded global search, then a local polish from the best point.
 
-The caller hands over an objective in the optimiser's coordinates (already scaled / log-transformed,
-numerics.md item 12) and finite bounds.  The driver guards against nlopt's pitfalls
-(shared/reference/libraries.md):
+:func:`minimize` runs one global + local search; :func:`multistart_minimize` runs a fit's seeded starts and
+hands the best to :func:`polish` (restarted local searches).  Progress is shown through
+:class:`clothlab.progress.Progress` ("start 2/4, global: 512/1500 eval", then "polish").
+
+The caller hands over an objective in the optimiser's coordinates (already scaled / log-transformed: the
+parameters' scales differ by orders of magnitude) and finite bounds.  With no coordinate at all (a fit of the
+linear coefficients only) the objective is evaluated once and nlopt is not used.  The driver guards against
+nlopt's pitfalls:
 
 * a NaN objective makes BOBYQA / COBYLA report XTOL success at x0 -> every non-finite value is replaced
   by ``penalty`` before nlopt sees it;
@@ -13,7 +18,7 @@ numerics.md item 12) and finite bounds.  The driver guards against nlopt's pitfa
   returned;
 * global algorithms stop on ``maxeval`` / ``maxtime`` only (DIRECT_L stops far too early with ftol).
 
-nlopt is imported inside the functions (DESIGN.md principle 5).
+nlopt is imported inside the functions (a heavy library, not needed at package import).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -29,6 +34,7 @@ import numpy as np
 from clothlab.config.choices import GLOBAL_ALGORITHMS as SUPPORTED_GLOBAL
 from clothlab.config.choices import LOCAL_ALGORITHMS as SUPPORTED_LOCAL
 from clothlab.config.choices import MLSL_LOCAL
+from clothlab.progress import Progress
 
 BOUND_TOLERANCE = 1e-6
 """A coordinate within this fraction of (upper - lower) of a bound is flagged at_lower / at_upper."""
@@ -143,6 +149,21 @@ def _check_bounds(x0, lower, upper) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return x0, lower, upper
 
 
+def _evaluate_once(fun, x0: np.ndarray, seed: int, callback) -> OptimizeResult:
+    """The "optimisation" of an empty box: one evaluation, nothing to search (e.g. coefficients-only fits)."""
+    start = time.perf_counter()
+    value = float(fun(x0.copy()))
+    row = TraceRow(1, time.perf_counter() - start, value, value if math.isfinite(value) else math.inf, "nnls")
+    if callback is not None:
+        callback(row)
+    found = math.isfinite(value)
+    status = {"nnls": "no free parameters: linear coefficients only, no optimiser run"}
+    return OptimizeResult(x=x0.copy(), fun=value if found else math.nan, nevals=1, wall_time=row.time, trace=[row],
+                          status=status, success=found, converged=found, message=status["nnls"],
+                          at_lower=np.zeros(0, dtype=bool), at_upper=np.zeros(0, dtype=bool), seed=int(seed),
+                          algorithms={"global": None, "local": None, "mlsl_local": None})
+
+
 def _run_stage(nlopt, opt, objective: _Objective, x_start: np.ndarray) -> str:
     """Run one nlopt optimiser; return its status string.  Never loses the wrapper's best point."""
     objective.opt = opt
@@ -170,7 +191,7 @@ def minimize(fun: Callable[[np.ndarray], float], x0, lower, upper, *,
              max_evals: int = 4000, global_fraction: float = 0.6, seed: int = 1, xtol_rel: float = 1e-6,
              ftol_rel: float = 1e-9, max_time: float | None = None,
              callback: Callable[[TraceRow], None] | None = None, penalty: float = 1e30) -> OptimizeResult:
-    """Minimise ``fun`` over the box [lower, upper]: global stage, then local polish (DESIGN.md "Fit").
+    """Minimise ``fun`` over the box [lower, upper]: global stage, then local polish.
 
     Parameters
     ----------
@@ -187,11 +208,14 @@ def minimize(fun: Callable[[np.ndarray], float], x0, lower, upper, *,
         the run like one from ``fun``.
     penalty : value nlopt sees for a non-finite objective.
 
-    An exception raised by ``fun`` (or ``callback``) stops nlopt and is re-raised unchanged.
+    An exception raised by ``fun`` (or ``callback``) stops nlopt and is re-raised unchanged.  With zero
+    coordinates ``fun`` is evaluated once (stage "nnls") and the algorithms are not run.
     """
+    x0, lower, upper = _check_bounds(x0, lower, upper)
+    if x0.size == 0:
+        return _evaluate_once(fun, x0, seed, callback)
     import nlopt
 
-    x0, lower, upper = _check_bounds(x0, lower, upper)
     global_alg = _algorithm(nlopt, global_algorithm, SUPPORTED_GLOBAL, "global")
     local_alg = _algorithm(nlopt, local_algorithm, SUPPORTED_LOCAL, "local")
     if global_alg is None and local_alg is None:
@@ -267,3 +291,94 @@ def minimize(fun: Callable[[np.ndarray], float], x0, lower, upper, *,
         algorithms={"global": global_algorithm, "local": local_algorithm,
                     "mlsl_local": MLSL_LOCAL if global_algorithm == "G_MLSL_LDS" else None},
     )
+
+
+# ---------------------------------------------------------------------------------------------- a fit's stages
+#: A polish round that improves the objective by less than this (relative) ends the polish.
+POLISH_RTOL = 1e-6
+#: Evaluations of one local search inside the polish.
+POLISH_ROUND_EVALS = 600
+
+
+class _StageCallback:
+    """The per-evaluation callback of one start: advances its progress bar, renames it when the stage changes
+    ("start 2/4, global" -> "start 2/4, local") and forwards each row to the caller's callback."""
+
+    def __init__(self, bar: Progress, prefix: str, forward=None):
+        self.bar, self.prefix, self.forward, self.stage = bar, prefix, forward, None
+
+    def __call__(self, row: TraceRow) -> None:
+        if self.prefix and row.stage != self.stage:
+            self.stage = row.stage
+            self.bar.set_description(f"{self.prefix}, {row.stage}")
+        self.bar.update(1)
+        if self.forward is not None:
+            self.forward(row)
+
+
+def multistart_minimize(problem, x0, opt, callback=None) -> OptimizeResult:
+    """``opt.starts`` independent seeded global + local runs of ``problem`` on its unit box (the budget
+    ``opt.max_evals`` split evenly), the best kept and polished (:func:`polish`); the traces are concatenated
+    (stage names carry the start number when there are several).  ``opt`` is a fit's optimizer settings
+    (algorithms, max_evals, starts, seed, max_time, polish_evals); ``callback(row)`` is called after each
+    evaluation.  With no free parameter the coefficients are solved once (:func:`minimize`)."""
+    k = len(problem.free)
+    if k == 0:
+        return minimize(problem, x0, np.zeros(0), np.zeros(0), seed=opt.seed, callback=callback)
+    budget = max(opt.max_evals // opt.starts, 1)
+    best, trace, offset, time_offset = None, [], 0, 0.0
+    for start in range(opt.starts):
+        prefix = f"start {start + 1}/{opt.starts}"
+        with Progress(budget, f"{prefix}, global", unit="eval") as bar:
+            result = minimize(problem, x0, np.zeros(k), np.ones(k), global_algorithm=opt.global_algorithm,
+                              local_algorithm=opt.local_algorithm, max_evals=budget, seed=opt.seed + start,
+                              max_time=opt.max_time, callback=_StageCallback(bar, prefix, callback))
+        best_before = best.fun if best is not None else np.inf
+        for row in result.trace:
+            stage = row.stage if opt.starts == 1 else f"{row.stage}#{start + 1}"
+            trace.append(row._replace(index=row.index + offset, time=row.time + time_offset, stage=stage,
+                                      best=min(row.best, best_before)))
+        offset += result.nevals
+        time_offset += result.wall_time
+        if best is None or result.fun < best.fun:
+            best = result
+    best = replace(best, trace=trace, nevals=offset, wall_time=time_offset)
+    return polish(problem, best, opt, callback)
+
+
+def polish(problem, best: OptimizeResult, opt, callback=None) -> OptimizeResult:
+    """Restart local searches from ``best`` until a round of [opt's local algorithm, LN_SBPLX] improves the
+    objective by less than :data:`POLISH_RTOL` relative or ``opt.polish_evals`` is spent.  A restart gets a
+    fresh trust region / simplex: on this objective (piecewise smooth under a fixed-node rule) BOBYQA often
+    reports convergence early, and SBPLX copes with the roughness.  The result is never worse than ``best``;
+    its trace continues best's, stage 'polish'."""
+    budget = opt.polish_evals
+    k = len(problem.free)
+    if budget <= 0 or k == 0:
+        return best
+    algorithms = tuple(dict.fromkeys(a for a in (opt.local_algorithm, "LN_SBPLX") if a))
+    x, fun, trace, offset, time_offset = best.x, best.fun, list(best.trace), best.nevals, best.wall_time
+    used, improved = 0, True
+    with Progress(budget, "polish", unit="eval") as bar:
+        step = _StageCallback(bar, "", callback)
+        while improved and used < budget:
+            round_start = fun
+            for algorithm in algorithms:
+                evals = min(POLISH_ROUND_EVALS, budget - used)
+                if evals <= 0:
+                    break
+                result = minimize(problem, x, np.zeros(k), np.ones(k), global_algorithm=None,
+                                  local_algorithm=algorithm, max_evals=evals, seed=opt.seed, callback=step)
+                for row in result.trace:
+                    trace.append(row._replace(index=row.index + offset, time=row.time + time_offset,
+                                              stage="polish", best=min(row.best, fun)))
+                offset += result.nevals
+                time_offset += result.wall_time
+                used += result.nevals
+                if result.fun < fun:
+                    x, fun = result.x, result.fun
+                    best = replace(best, x=x, fun=fun, at_lower=result.at_lower, at_upper=result.at_upper)
+            improved = fun < round_start * (1.0 - POLISH_RTOL)
+    status = dict(best.status, polish=f"{used} evaluations, objective {best.fun:.6g}")
+    message = f"{best.message}; polish: {used} evaluations"
+    return replace(best, trace=trace, nevals=offset, wall_time=time_offset, status=status, message=message)

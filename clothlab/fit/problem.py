@@ -8,11 +8,16 @@ with r the chosen metric (:mod:`clothlab.fit.metrics`) and the coefficients c_k 
 every evaluation by non-negative least squares with the metric's linearised row weights
 (:func:`clothlab.fit.metrics.linear_weights`; the paper fits kd and ks linearly too, sec. 8).  Parameters are
 seen by the optimiser in [0, 1]: x = (T(theta) - T(lo)) / (T(hi) - T(lo)) with T = log for parameters
-declared with a log transform, identity otherwise (numerics.md item 12: scales differ by orders of magnitude).
+declared with a log transform, identity otherwise (the parameters' scales differ by orders of magnitude).
+With no free parameter (k = 0) the box is empty and the objective is a single NNLS solve of the coefficients.
+
+:func:`build_problem` makes the problem of a configuration (measurement, weave, model);
+:func:`collinearity_notes` and :func:`evaluation_speed` describe a problem's design at a parameter point.
 """
 
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -21,6 +26,10 @@ import numpy as np
 from clothlab.errors import ConfigError, GeometryWarning
 from clothlab.fit.metrics import linear_weights, metric_residuals, objective_value
 from clothlab.fit.nnls import nnls_small
+from clothlab.io.loader import load_measurement
+from clothlab.models.components import coefficient_name
+from clothlab.models.registry import build_model
+from clothlab.weave.presets import resolve_weave
 
 
 @dataclass(frozen=True)
@@ -42,8 +51,6 @@ class FitProblem:
         self.measurement = measurement
         self.metric = metric
         self.free = tuple(free)
-        if not self.free:
-            raise ConfigError("no free parameters: list at least one under fit.free", field="fit.free")
         self.start = model.resolve(start or {})
         self.specs = [model.params[name] for name in self.free]
         bounds = bounds or {}
@@ -101,3 +108,47 @@ class FitProblem:
     def __call__(self, x) -> float:
         self.evaluations += 1
         return self.solve(self.from_unit(x)).objective
+
+
+def build_problem(config, measurement=None) -> FitProblem:
+    """Measurement, weave and model of a configuration -> FitProblem (``measurement`` replaces the configured
+    file when given)."""
+    if measurement is None:
+        measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
+                                       else config.measurement.format, **config.measurement.options)
+    weave = resolve_weave(config.model.weave, config.base_dir)
+    q = config.model.quadrature
+    model = build_model(config.model.kind, weave, (q.rule, q.nodes), **config.model.options)
+    return FitProblem(model, measurement, config.fit.free, config.model.params, config.fit.bounds, config.fit.metric)
+
+
+def collinearity_notes(design: np.ndarray, names, threshold: float = 0.999) -> list[str]:
+    """Warnings for pairs of components whose columns are nearly proportional over the measured directions:
+    their linear coefficients (colours) are then not separately determined by the data."""
+    out = []
+    norms = np.linalg.norm(design, axis=0)
+    for i in range(design.shape[1]):
+        for j in range(i + 1, design.shape[1]):
+            if norms[i] == 0.0 or norms[j] == 0.0:
+                continue
+            cosine = float(design[:, i] @ design[:, j] / (norms[i] * norms[j]))
+            if cosine > threshold:
+                out.append(f"components {names[i]} and {names[j]} are nearly proportional over these directions "
+                           f"(cosine {cosine:.5f}): {coefficient_name(names[i])} and {coefficient_name(names[j])} "
+                           "are not separately determined, only their combination is")
+    return out
+
+
+def evaluation_speed(problem: FitProblem, params: dict, repeats: int = 5) -> dict:
+    """Direction pairs per second of one full model evaluation (all components) on the measured directions,
+    best of ``repeats`` (memoised yarn integrals cleared, so this is the cost of a new parameter point)."""
+    best = float("inf")
+    for _ in range(repeats):
+        memo = getattr(problem.model, "_memo", None)
+        if memo is not None:
+            memo.clear()
+        t = time.perf_counter()
+        problem.design(params)
+        best = min(best, time.perf_counter() - t)
+    return {"pairs_per_second": problem.measurement.n / best, "seconds_per_evaluation": best,
+            "directions": problem.measurement.n}

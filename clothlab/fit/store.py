@@ -1,11 +1,12 @@
-"""fits/<name>/: the saved result of a fit, written atomically (DESIGN.md principle 6).
+"""fits/<name>/: the saved result of a fit, written atomically (an existing one is kept unless forced).
 
-Layout (read by :mod:`clothlab.report` and :func:`load_fit`):
+:func:`save_fit` writes a :class:`clothlab.fit.runner.FitResult`; :func:`load_fit` reads one back as a
+:class:`SavedFit` with the same :meth:`~SavedFit.fit_report`; :func:`load_fitted` gives the model, parameters
+and coefficients ready to evaluate.  Layout (read by :mod:`clothlab.report` too):
 
-- ``fit.json``        parameters (value, unit, free, bounds, start, at_bound, truth), coefficients,
-                      error percentiles, objective, evaluations, wall time, seed, versions, config + hash
-CSV numbers carry 10 significant digits (figures, not a data archive: the measurement file is the data).
-
+- ``fit.json``        parameters (value, unit, free, bounds, start, at_bound, truth), Gauss-Newton standard
+                      errors and correlations, coefficients, error percentiles (in-sample and cross-validated),
+                      objective, evaluations, time by stage, seed, versions, config + hash, notes
 - ``predictions.csv`` theta_i, phi_i, theta_o, phi_o [deg], measured_<c>, model_<c>, sigma_<c>,
                       diffuse_<c>, specular_warp_<c>, specular_weft_<c> (1/sr)
 - ``slices.csv``      dense model curves in each exitant direction's incidence plane
@@ -13,6 +14,8 @@ CSV numbers carry 10 significant digits (figures, not a data archive: the measur
 - ``fabric.yaml``     the configuration as given
 - ``weave.wv``        the weave with the fitted parameters (the fit directory is self-contained for eval)
 - ``posterior.json``, ``posterior_samples.csv``  when a posterior was sampled (:mod:`clothlab.fit.posterior`)
+
+CSV numbers carry 10 significant digits (figures, not a data archive: the measurement file is the data).
 """
 
 from __future__ import annotations
@@ -21,12 +24,42 @@ import csv
 import io
 import json
 import math
+import platform
+import warnings
+from datetime import UTC, datetime
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
+from clothlab import __version__
 from clothlab.atomic import atomic_directory
-from clothlab.errors import InputError
+from clothlab.errors import GeometryWarning, InputError
+from clothlab.fit.fitreport import Reportable
+from clothlab.frames import spherical_to_vector
+from clothlab.models.components import combine
+from clothlab.models.registry import build_model
+from clothlab.weave.wvformat import format_wv, parse_wv
+
+VERSIONED = ("numpy", "scipy", "numba", "nlopt", "matplotlib", "PyYAML", "emcee")
+
+
+def package_versions() -> dict:
+    """Versions of Python, clothlab and the libraries a fit's numbers depend on (None if not installed)."""
+    out = {"python": platform.python_version(), "clothlab": __version__}
+    for name in VERSIONED:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def checkpoint_path(config, fits_dir=None) -> Path:
+    """Where an interrupted posterior run keeps its chain: a hidden file next to fits/<name>/ (the fit
+    directory itself is only written, atomically, when everything is done)."""
+    root = fits_dir if fits_dir is not None else config.output.fits
+    return root / f".{config.name}.posterior-checkpoint.npz"
 
 
 def _csv_text(header, columns) -> str:
@@ -88,9 +121,6 @@ def read_fit_json(fit_dir) -> dict:
 
 def load_fitted(fit_dir):
     """(model, params, coefficients {name: (C,)}, channels) of a saved fit, ready to evaluate."""
-    from clothlab.models.registry import build_model
-    from clothlab.weave.wvformat import parse_wv
-
     fit_dir = Path(fit_dir)
     fit = read_fit_json(fit_dir)
     weave_path = fit_dir / "weave.wv"
@@ -108,3 +138,212 @@ def load_fitted(fit_dir):
         raise InputError(f"fit.json lacks or mangles a required entry ({exc})", path=fit_dir / "fit.json") from None
     model = build_model(kind, parse_wv(weave_path), (q.get("rule", "trapezoid"), int(q.get("nodes", 11))), **options)
     return model, params, coefficients, channels
+
+
+# ---------------------------------------------------------------------------------------------- writing
+def _parameter_entries(result) -> dict:
+    problem = result.problem
+    truth = (problem.measurement.provenance or {}).get("parameters", {}) if _is_simulated(problem) else {}
+    free_bounds = {n: (lo, hi) for n, lo, hi in zip(problem.free, problem.lower, problem.upper, strict=True)}
+    flags = {n: ("lower" if lo else "upper" if hi else None)
+             for n, lo, hi in zip(problem.free, result.optimum.at_lower, result.optimum.at_upper, strict=True)}
+    out = {}
+    for spec in problem.model.params:
+        name = spec.name
+        if name not in result.params:
+            continue
+        lo, hi = free_bounds.get(name, spec.bounds)
+        entry = {"value": result.params[name], "unit": spec.unit, "free": name in problem.free,
+                 "lower": lo, "upper": hi, "start": problem.start[name], "at_bound": flags.get(name),
+                 "doc": spec.doc}
+        if name in truth:
+            entry["truth"] = truth[name]
+        out[name] = entry
+    return out
+
+
+def _is_simulated(problem) -> bool:
+    return bool((problem.measurement.provenance or {}).get("simulated"))
+
+
+def fit_summary(result) -> dict:
+    """The content of fit.json."""
+    cfg = result.config
+    problem = result.problem
+    m = problem.measurement
+    channels = list(m.channels)
+    opt = result.optimum
+    return {
+        "name": cfg.name,
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        "clothlab_version": __version__,
+        "versions": package_versions(),
+        "config_hash": cfg.hash,
+        "config": cfg.canonical(),
+        "model": {"kind": cfg.model.kind, "weave": cfg.canonical()["model"]["weave"],
+                  **problem.model.settings()},  # the quadrature of integrating models, else the options
+        "measurement": {"path": cfg.canonical()["measurement"]["path"], "n": m.n, "channels": channels,
+                        "provenance": {k: v for k, v in (m.provenance or {}).items()}},
+        "parameters": _parameter_entries(result),
+        "coefficients": {name: dict(zip(channels, map(float, coef), strict=True))
+                         for name, coef in result.coefficients.items()},
+        "coefficient_meaning": problem.model.coefficient_meaning,
+        "metric": problem.metric,
+        "errors": result.errors,
+        "objective": {"start": result.start_objective, "final": float(opt.fun),
+                      "final_normalised": result.solution.objective},
+        "evaluations": int(opt.nevals),
+        "wall_time_s": result.wall_time,
+        "timings": {"total_s": result.wall_time, **result.timings,
+                    "note": "optimisation_s: global + local stages of all starts (the fit proper); "
+                            "standard_errors_s (Gauss-Newton), cross_validation_s and posterior_s follow it; "
+                            "posterior_s sums resumed sessions"},
+        "seed": cfg.fit.optimizer.seed,
+        "optimizer": {"global": cfg.fit.optimizer.global_algorithm, "local": cfg.fit.optimizer.local_algorithm,
+                      "max_evals": cfg.fit.optimizer.max_evals, "status": getattr(opt, "message", "")},
+        "warnings": list(result.warnings),
+        "uncertainty": result.uncertainty,
+        "cross_validation": result.cross_validation,
+        "evaluation_speed": result.evaluation_speed,
+        "posterior": None if result.posterior is None else {
+            "file": "posterior.json", "not_determined": result.posterior.to_json()["not_determined"],
+            "converged": bool(result.posterior.converged)},
+    }
+
+
+def prediction_table(result) -> dict:
+    """predictions.csv columns: angles, measured, model, sigma and per-component contributions."""
+    problem = result.problem
+    m = problem.measurement
+    table = {"theta_i": m.theta_i, "phi_i": m.phi_i, "theta_o": m.theta_o, "phi_o": m.phi_o}
+    design = problem.design(result.params, normalised=True)
+    for c, ch in enumerate(m.channels):
+        table[f"measured_{ch}"] = m.values[:, c]
+        table[f"model_{ch}"] = result.solution.prediction[:, c]
+        if m.sigma is not None:
+            table[f"sigma_{ch}"] = m.sigma[:, c]
+        for k, name in enumerate(problem.component_names):
+            table[f"{name}_{ch}"] = design[:, k] * result.solution.coefficients[k, c]
+    return table
+
+
+def slice_table(result, step: float = 1.0) -> dict:
+    """slices.csv: the model in each exitant direction's incidence plane, signed theta_i in [-89, 89] deg
+    (positive on the mirror side, phi_i = phi_o + 180)."""
+    problem = result.problem
+    m = problem.measurement
+    exitant = np.unique(np.stack([m.theta_o, m.phi_o], axis=1), axis=0)
+    signed = np.arange(-89.0, 89.0 + 0.5 * step, step)
+    rows_to, rows_po, rows_s, wi, wo = [], [], [], [], []
+    for to, po in exitant:
+        phi_i = np.where(signed >= 0, po + 180.0, po) % 360.0
+        wi.append(spherical_to_vector(np.abs(signed), phi_i))
+        wo.append(np.repeat(spherical_to_vector(to, po)[None, :], len(signed), axis=0))
+        rows_to.append(np.full(len(signed), to))
+        rows_po.append(np.full(len(signed), po))
+        rows_s.append(signed)
+    wi, wo = np.concatenate(wi), np.concatenate(wo)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        comps = problem.model.components(wi, wo, result.params, normalised=True, warn=False)
+    values = combine(comps, result.coefficients)
+    table = {"theta_o": np.concatenate(rows_to), "phi_o": np.concatenate(rows_po),
+             "signed_theta_i": np.concatenate(rows_s)}
+    for c, ch in enumerate(m.channels):
+        table[f"model_{ch}"] = values[:, c]
+    return table
+
+
+def trace_table(result, every: int = 10) -> dict:
+    """trace.csv columns from the optimiser's TraceRow records: every row where the best value improved, every
+    ``every``-th row and the last one (enough for the trace plot, a tenth of the size)."""
+    rows = result.optimum.trace
+    trace = [r for i, r in enumerate(rows) if i % every == 0 or i == len(rows) - 1 or i == 0
+             or r.best < rows[i - 1].best or r.stage != rows[i - 1].stage]
+    return {"evaluation": [r.index for r in trace], "time_s": [r.time for r in trace],
+            "value": [r.value for r in trace], "best": [r.best for r in trace], "stage": [r.stage for r in trace]}
+
+
+def posterior_files(result) -> dict:
+    """posterior.json (summary, with posterior-predictive 5/50/95 % bands on the incidence-plane slices) and
+    posterior_samples.csv (thinned samples in declared units, at most 4,000 rows)."""
+    post = result.posterior
+    if post is None:
+        return {}
+    summary = post.to_json()
+    slices = slice_table(result)
+    wi, wo = _slice_directions(slices)
+    bands = post.predictive_bands(wi, wo)
+    summary["predictive_slices"] = {"theta_o": slices["theta_o"], "phi_o": slices["phi_o"],
+                                    "signed_theta_i": slices["signed_theta_i"], "bands": bands}
+    samples = post.samples[np.linspace(0, len(post.samples) - 1, min(len(post.samples), 4000)).astype(int)]
+    return {"posterior.json": summary,
+            "posterior_samples.csv": {name: samples[:, j] for j, name in enumerate(post.names)}}
+
+
+def _slice_directions(slices: dict):
+    signed = np.asarray(slices["signed_theta_i"])
+    phi_i = np.where(signed >= 0, np.asarray(slices["phi_o"]) + 180.0, slices["phi_o"]) % 360.0
+    return (spherical_to_vector(np.abs(signed), phi_i),
+            spherical_to_vector(np.asarray(slices["theta_o"]), np.asarray(slices["phi_o"])))
+
+
+def save_fit(result, *, force: bool = False, fits_dir=None) -> Path:
+    """Write fits/<name>/ for ``result`` (a FitResult) under ``fits_dir`` (default: the configuration's
+    ``output.fits``); returns the directory.  Removes the posterior checkpoint the run kept."""
+    cfg = result.config
+    dest = (fits_dir if fits_dir is not None else cfg.output.fits) / cfg.name
+    config_text = cfg.path.read_text() if cfg.path is not None else None
+    extra = posterior_files(result)
+    weave = result.problem.model.fitted_weave(result.params)
+    out = write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
+                               slices=slice_table(result), trace=trace_table(result), config_text=config_text,
+                               weave_text=format_wv(weave), extra=extra, force=force)
+    if result.posterior is not None:  # the fit directory now holds the result: the checkpoint has served
+        checkpoint_path(cfg, fits_dir).unlink(missing_ok=True)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- reading back
+class SavedFit(Reportable):
+    """A fit read back from its directory: ``fit`` (fit.json), ``posterior`` (posterior.json or None) and
+    ``path``; reports like the FitResult that was saved (:meth:`fit_report`, ``_repr_html_``)."""
+
+    def __init__(self, path: Path, fit: dict, posterior: dict | None = None):
+        self.path, self.fit, self.posterior = Path(path), fit, posterior
+
+    @property
+    def name(self) -> str:
+        return self.fit["name"]
+
+    @property
+    def params(self) -> dict:
+        """Every parameter's fitted (or fixed) value, in its declared unit."""
+        return {name: entry["value"] for name, entry in self.fit["parameters"].items()}
+
+    @property
+    def coefficients(self) -> dict:
+        """Coefficient name -> (C,) array in the order of the measurement's channels."""
+        channels = self.fit["measurement"]["channels"]
+        return {name: np.array([v[c] for c in channels], dtype=np.float64)
+                for name, v in self.fit["coefficients"].items()}
+
+    def _report_sources(self) -> tuple[dict, dict | None]:
+        return self.fit, self.posterior
+
+
+def load_fit(fit_dir) -> SavedFit:
+    """The fit saved in ``fit_dir`` (fit.json, and posterior.json when a posterior was sampled)."""
+    fit_dir = Path(fit_dir)
+    fit = read_fit_json(fit_dir)
+    for key in ("name", "parameters", "coefficients", "measurement"):
+        if key not in fit:
+            raise InputError(f"fit.json lacks the entry {key!r}", path=fit_dir / "fit.json")
+    posterior = None
+    path = fit_dir / "posterior.json"
+    if path.is_file():
+        try:
+            posterior = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise InputError(f"posterior.json is not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    return SavedFit(fit_dir, fit, posterior)

@@ -1,0 +1,297 @@
+"""Sampling the posterior with emcee: the walkers' start, chunks of steps, the convergence rule, resume.
+
+Convergence (emcee docs, "Autocorrelation analysis"): sample in chunks of ``check_every`` steps; after each,
+the integrated autocorrelation time tau of every coordinate (``emcee.autocorr.integrated_time``, tol=0); stop
+when ``tol_factor * max(tau) < steps`` and every tau changed by < :data:`TAU_CHANGE` since the previous check
+(and at least ``steps`` were run), or at ``max_steps``.  Burn-in 2 max(tau) is discarded and the rest thinned
+by max(1, min(tau) / 2).
+
+Reproducible and resumable: the walkers start in a ball of radius :data:`BALL_RADIUS` (unit coordinates,
+reflected into the box) drawn from ``numpy.random.RandomState(seed)``, whose following state seeds the sampler
+(emcee has no seed argument); :mod:`clothlab.fit.posterior.checkpoint` keeps the state between sessions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import ParameterError
+from clothlab.fit.metrics import LOG_FLOOR
+from clothlab.fit.posterior.checkpoint import (
+    _ChainState,
+    _fingerprint,
+    _load_checkpoint,
+    _save_checkpoint,
+    _StaleCheckpoint,
+)
+from clothlab.fit.posterior.likelihood import NOISE_RANGE, _Likelihood
+from clothlab.fit.posterior.result import PosteriorResult
+from clothlab.progress import Progress, get_logger
+
+log = get_logger(__name__)
+
+BALL_RADIUS = 1e-3
+"""Standard deviation of the initial walker ball around the optimum, in unit-box coordinates."""
+
+TAU_CHANGE = 0.01
+"""Convergence needs every tau to change by less than this fraction between successive checks."""
+
+
+def _initial_state(like: _Likelihood, x_opt: np.ndarray, walkers: int, seed: int) -> _ChainState:
+    """Walkers in a ball around the optimum (unit coordinates, reflected into the box), checked finite."""
+    rng = np.random.RandomState(seed)
+    p0 = x_opt[None, :] + BALL_RADIUS * rng.standard_normal((walkers, like.ndim))
+    p0 = np.abs(p0)  # reflect at 0 ...
+    p0 = 1.0 - np.abs(1.0 - p0)  # ... and at 1: distinct walkers even for an optimum on a bound
+    lp = like(p0)
+    if not np.isfinite(lp).all():
+        bad = np.flatnonzero(~np.isfinite(lp))
+        raise ParameterError(f"log-probability is not finite for {bad.size} of {walkers} initial walkers around "
+                             f"the optimum (first: {dict(zip(like.names, p0[bad[0]].tolist(), strict=True))} in "
+                             "unit coordinates); the model cannot be evaluated near the optimum")
+    D = like.ndim
+    return _ChainState(p0, np.empty((0, walkers, D)), np.empty((0, walkers)), p0, lp, rng.get_state(legacy=True))
+
+
+def _acceptance(chain: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """(W,) fraction of steps at which each walker moved (a proposal was accepted)."""
+    if len(chain) == 0:
+        return np.zeros(initial.shape[0])
+    previous = np.concatenate([initial[None], chain[:-1]])
+    return np.mean(np.any(chain != previous, axis=2), axis=0)
+
+
+def _tau(chain: np.ndarray) -> np.ndarray:
+    import emcee
+
+    return np.asarray(emcee.autocorr.integrated_time(chain, c=5, tol=0), dtype=np.float64)
+
+
+@contextlib.contextmanager
+def _deferred_sigint():
+    """Turn a first SIGINT into a flag checked between MCMC steps (so no step is cut in half and emcee does not
+    print a traceback); a second SIGINT interrupts at once.  Only in the main thread under Python's default
+    handler; otherwise nothing changes."""
+    flag = {"hit": False}
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield flag
+        return
+
+    def handler(signum, frame):
+        if flag["hit"]:
+            raise KeyboardInterrupt
+        flag["hit"] = True
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+class _StepProgress:
+    """The sampler's progress: one :class:`clothlab.progress.Progress` of steps, its description naming the
+    minimum and the cap and, after each convergence check, the tau estimate."""
+
+    def __init__(self, enabled: bool, min_steps: int, max_steps: int, resumed: int = 0):
+        self.head = f"posterior (min {min_steps}, max {max_steps})"
+        self.bar = Progress(max_steps, self.head, unit="step", enabled=None if enabled else False)
+        self.bar.update(resumed)
+
+    def note(self, text: str) -> None:
+        self.bar.set_description(f"{self.head}, {text}")
+
+    def step(self) -> None:
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, max_steps: int, seed: int,
+                  checkpoint_path=None, progress: bool = True, tol_factor: float = 50.0, check_every: int = 100,
+                  max_seconds: float | None = None, moves=None,
+                  on_step: Callable[[int], None] | None = None) -> PosteriorResult:
+    """Sample the posterior of ``problem``'s free parameters with emcee (see the module docstring).
+
+    Parameters
+    ----------
+    problem : FitProblem (its measurement, model, free parameters and fit bounds define the target).
+    optimum_params : parameter dict at the optimum (e.g. ``FitResult.params``); walkers start around it.
+    walkers : ensemble size (raised to 2 x dimensions, made even, if smaller; noted in the warnings).
+    steps, max_steps : minimum number of steps before convergence may be declared, and the cap.
+    seed : seeds the initial ball and the sampler; the same seed and settings give the same chain.
+    checkpoint_path : ``.npz`` file; resumed from when it exists (same settings required), rewritten after each
+        chunk of ``check_every`` steps and on KeyboardInterrupt (then the interrupt is re-raised).  A checkpoint
+        of another target (other data, model, quadrature rule / nodes, bounds or optimum; :data:`TARGET_KEYS`)
+        is replaced by a new chain, with a logged warning and a note in the warnings; one of the same target
+        with other walkers or seed is refused (InputError).
+    progress : show progress ("posterior (min 1000, max 12000): 1200/12000 step") through
+        :class:`clothlab.progress.Progress` when it is enabled; False: never.
+    tol_factor : convergence needs ``tol_factor * max(tau) < steps`` (and tau settled to 1 %).
+    max_seconds : optional wall-time cap (the run then stops unconverged after the current step).
+    moves : emcee moves (default: emcee's stretch move).
+    on_step : called with the number of completed steps after each step (tests raise KeyboardInterrupt here).
+    """
+    import emcee
+
+    started = time.perf_counter()
+    like = _Likelihood(problem)
+    if like.ndim == 0:
+        raise ValueError("nothing to sample: the problem has no free parameter (its coefficients are solved exactly)")
+    notes: list[str] = []
+    need = 2 * like.ndim
+    if walkers < need or walkers % 2:
+        fixed = max(walkers, need) + (max(walkers, need) % 2)
+        notes.append(f"walkers raised from {walkers} to {fixed} (emcee needs an even number >= 2 x {like.ndim} "
+                     "sampled dimensions)")
+        walkers = fixed
+    if not 1 <= steps <= max_steps:
+        raise ValueError(f"need 1 <= steps <= max_steps, got steps = {steps}, max_steps = {max_steps}")
+    if check_every < 1:
+        raise ValueError(f"check_every must be >= 1, got {check_every}")
+    x_opt = problem.to_unit(optimum_params)
+    if like.noise != "gaussian-sigma":
+        sol = problem.solve(optimum_params)
+        r = np.log(np.maximum(sol.prediction, LOG_FLOOR * like.y) / like.y)
+        x_opt = np.append(x_opt, like.noise_unit(max(float(np.sqrt(np.mean(r**2))), NOISE_RANGE[0])))
+    fingerprint = _fingerprint(problem, like, walkers, seed, x_opt)
+    path = Path(checkpoint_path) if checkpoint_path is not None else None
+    resumed_from = 0
+    st = None
+    if path is not None and path.exists():
+        try:
+            st = _load_checkpoint(path, fingerprint)
+            resumed_from = st.steps
+        except _StaleCheckpoint as stale:
+            message = (f"posterior checkpoint {path} belongs to another fit (differs in: {stale}); starting a new "
+                       "chain (the old checkpoint is replaced)")
+            notes.append(message)
+            log.warning(message)
+    if st is None:
+        st = _initial_state(like, x_opt, walkers, seed)
+    st.started = started
+
+    sampler = emcee.EnsembleSampler(walkers, like.ndim, like, vectorize=True, moves=moves)
+    bar = _StepProgress(progress, steps, max_steps, resumed=st.steps)
+    chain_chunks, lp_chunks = [st.chain], [st.log_prob]
+    n = st.steps
+    stop_reason = None
+
+    def snapshot() -> _ChainState:
+        """Fold the recorded steps into ``st`` (the recorded list is the single source of truth)."""
+        nonlocal chain_chunks, lp_chunks
+        chain_chunks = [np.concatenate(chain_chunks)]
+        lp_chunks = [np.concatenate(lp_chunks)]
+        st.chain, st.log_prob = chain_chunks[0], lp_chunks[0]
+        return st
+
+    def tau_at(m: int) -> np.ndarray:
+        if m not in st.tau_history:
+            st.tau_history[m] = _tau(np.concatenate(chain_chunks)[:m])
+        return st.tau_history[m]
+
+    with _deferred_sigint() as sigint:
+        try:
+            while True:
+                if n > 0 and (n % check_every == 0 or n >= max_steps):
+                    tau = tau_at(n)
+                    prev = n - check_every
+                    settled = prev > 0 and np.all(np.abs(tau_at(prev) - tau) < TAU_CHANGE * tau)
+                    bar.note(f"tau_max {np.max(tau):.1f}, needs {tol_factor * np.max(tau):.0f} steps, acceptance "
+                             f"{np.mean(_acceptance(np.concatenate(chain_chunks), st.initial)):.2f}")
+                    if path is not None:
+                        _save_checkpoint(path, fingerprint, snapshot())
+                    if n >= steps and tol_factor * np.max(tau) < n and settled:
+                        stop_reason = "converged"
+                        break
+                    if n >= max_steps:
+                        stop_reason = "max_steps"
+                        break
+                if max_seconds is not None and time.perf_counter() - started > max_seconds:
+                    stop_reason = "max_seconds"
+                    break
+                todo = min(check_every - n % check_every, max_steps - n)
+                # One list.append per completed step (atomic with respect to SIGINT): coordinates, log-probability
+                # and the random state after that step always travel together.
+                record: list = []
+                try:
+                    for state in sampler.sample(emcee.State(st.coords, log_prob=st.last_log_prob,
+                                                            random_state=st.random_state),
+                                                iterations=todo, store=False, skip_initial_state_check=True):
+                        record.append((state.coords.copy(), state.log_prob.copy(), state.random_state))
+                        n = sum(len(c) for c in chain_chunks) + len(record)
+                        bar.step()
+                        if on_step is not None:
+                            on_step(n)
+                    if sigint["hit"]:
+                        raise KeyboardInterrupt
+                finally:
+                    if record:
+                        chain_chunks.append(np.array([r[0] for r in record]))
+                        lp_chunks.append(np.array([r[1] for r in record]))
+                        st.coords, st.last_log_prob, st.random_state = record[-1]
+                    n = sum(len(c) for c in chain_chunks)
+        except KeyboardInterrupt:
+            if path is not None:
+                _save_checkpoint(path, fingerprint, snapshot())
+            bar.close()
+            raise
+    snapshot()
+    if path is not None:
+        _save_checkpoint(path, fingerprint, st)
+    bar.close()
+    return _summarise(problem, like, optimum_params, x_opt, st, seed=seed, walkers=walkers, min_steps=steps,
+                      max_steps=max_steps, tol_factor=tol_factor, check_every=check_every, stop_reason=stop_reason,
+                      wall_time=st.elapsed + st.session(), resumed_from=resumed_from, notes=notes,
+                      moves_text="emcee default (stretch move, a = 2)" if moves is None else repr(moves))
+
+
+def _summarise(problem, like, optimum_params, x_opt, st, *, seed, walkers, min_steps, max_steps, tol_factor,
+               check_every, stop_reason, wall_time, resumed_from, notes, moves_text) -> PosteriorResult:
+    n = st.steps
+    if n < 2:
+        raise ValueError("the posterior run stopped before two steps were sampled (max_seconds too small?)")
+    tau = st.tau_history.get(n)
+    if tau is None:
+        tau = _tau(st.chain)
+    converged = stop_reason == "converged"
+    burn = min(int(2 * np.max(tau)), n // 2)
+    thin = max(1, int(0.5 * np.min(tau)))
+    kept = st.chain[burn::thin]
+    unit = kept.reshape(-1, like.ndim)
+    samples = _to_declared(problem, like, unit)
+    if not converged:
+        notes.append(f"not converged ({stop_reason}): {n} steps, {tol_factor:g} x max tau = "
+                     f"{tol_factor * np.max(tau):.0f}; treat the intervals as indicative only")
+    return PosteriorResult(problem=problem, names=list(like.names), units=list(like.units), samples=samples,
+                           unit_samples=unit, chain=st.chain, log_prob=st.log_prob, tau=tau,
+                           acceptance=_acceptance(st.chain, st.initial), burn_in=burn, thin=thin, converged=converged,
+                           steps=n, walkers=walkers, wall_time=wall_time, seed=seed, noise=like.noise,
+                           likelihood=like.description, optimum=dict(optimum_params), optimum_unit=x_opt,
+                           min_steps=min_steps, max_steps=max_steps, tol_factor=tol_factor, check_every=check_every,
+                           stop_reason=stop_reason, resumed_from=resumed_from, warnings=notes, _like=like,
+                           moves=moves_text, convergence_rule=(
+                               f"{tol_factor:g} x max(tau) < steps and every tau changed < {100 * TAU_CHANGE:g} % "
+                               f"between checks every {check_every} steps, at least {min_steps} steps, "
+                               f"at most {max_steps}"))
+
+
+def _to_declared(problem, like, unit: np.ndarray) -> np.ndarray:
+    """(M, D) unit coordinates -> declared units (via FitProblem.from_unit; noise scale appended)."""
+    k = like.k
+    out = np.empty_like(unit)
+    for i, x in enumerate(unit):
+        p = problem.from_unit(x[:k])
+        out[i, :k] = [p[name] for name in problem.free]
+    if like.ndim > k:
+        out[:, k] = like.noise_scale(unit[:, k])
+    return out
