@@ -169,19 +169,22 @@ class IrawanModel(Model):
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
-        self._memo: dict = {}  # (kind, id(wi), id(wo), geometry) -> (wi, wo, I_j); see _integral
+        self._memo: dict = {}  # (kind, shape, geometry, quadrature) -> (wi copy, wo copy, I_j); see _integral
 
     def _integral(self, wi, wo, p, kind):
-        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta
-        reuses it.  The entry keeps references to wi and wo, so their ids cannot be reused meanwhile."""
-        key = (kind, id(wi), id(wo), wi.shape, yarn_geometry_key(p, kind), self.quadrature)
+        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta reuses it.
+
+        An entry is used only if the directions' *contents* equal the copies it keeps (not their identity),
+        so directions changed in place, or new arrays at a reused address, never return a stale integral."""
+        key = (kind, wi.shape, yarn_geometry_key(p, kind), self.quadrature)
         hit = self._memo.get(key)
-        if hit is not None:
+        if hit is not None and np.array_equal(hit[0], wi) and np.array_equal(hit[1], wo):
             return hit[2]
         value = yarn_integral_fabric(wi, wo, p, kind, self.quadrature)
+        self._memo.pop(key, None)
         if len(self._memo) >= 8:
             self._memo.pop(next(iter(self._memo)))
-        self._memo[key] = (wi, wo, value)
+        self._memo[key] = (wi.copy(), wo.copy(), value)
         return value
 
     def default_parameters(self) -> dict[str, float]:
