@@ -19,9 +19,24 @@ member              meaning
 ``from_config``     build from a weave, the configured quadrature and ``model.options``
 ``components``      the components at directions wi, wo (N, 3)
 ``settings``        what a fit directory records about this model (quadrature or options)
+``describe_settings`` those recorded settings in a few words, for reports (class method)
 ``fitted_weave``    the weave with fitted parameters applied (for the ``.wv`` export)
 ``geometry_warnings`` notes on parameter sets outside the model's valid geometry (empty by default)
+``with_quadrature`` a copy integrating with another quadrature rule / node count (itself if it integrates
+                    nothing)
+``has_texture``     True when :meth:`texture` gives a texture model (capability)
+``texture``         the texture model: components at texture points (u, v) whose tile average is
+                    :meth:`components`; ConfigError for models without one
+``texture_filters`` True when the texture model takes a pixel footprint and filters itself (capability)
 ==================  ==========================================================================================
+
+A texture model (what :meth:`Model.texture` returns) has ``weave``, ``component_names``, ``resolve(params)``
+and ``components(u, v, wi, wo, params, *, need=None, noise=True, normalised=True, warn=True, footprint=None,
+view_distance=None)`` returning arrays of the points' shape; models with ``texture_filters`` use
+``footprint`` (tiles) and ``view_distance``, the others ignore them.
+
+Helpers for implementations: :func:`as_directions` (the (N, 3) float64 arrays every model takes) and
+:func:`front_facing` (the pairs a reflection model lights).
 """
 
 from __future__ import annotations
@@ -31,8 +46,23 @@ from typing import ClassVar
 
 import numpy as np
 
+from clothlab.errors import ConfigError
 from clothlab.models.components import combine
 from clothlab.params import ParamTable
+
+
+def as_directions(wi, wo) -> tuple[np.ndarray, np.ndarray]:
+    """wi, wo as (N, 3) float64 arrays (a single (3,) direction becomes (1, 3)); ValueError on other shapes."""
+    wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
+    wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+    if wi.shape != wo.shape or wi.ndim != 2 or wi.shape[-1] != 3:
+        raise ValueError(f"wi, wo must both be (N, 3) arrays, got {wi.shape} and {wo.shape}")
+    return wi, wo
+
+
+def front_facing(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """(N,) True where both directions lie above the surface (wi_z > 0 and wo_z > 0): reflection only."""
+    return (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
 
 
 class Model(abc.ABC):
@@ -42,8 +72,10 @@ class Model(abc.ABC):
     component_names: ClassVar[tuple[str, ...]]
     coefficient_meaning: ClassVar[str] = "coefficients multiply the components linearly"
     default_free: ClassVar[tuple[str, ...]] = ()
-    #: True for models with a texture (spatially varying) evaluation, ``point_components``
+    #: True when :meth:`texture` gives a texture (spatially varying) model
     has_texture: ClassVar[bool] = False
+    #: True when the texture model takes a pixel footprint and filters itself (a renderer need not blend)
+    texture_filters: ClassVar[bool] = False
     params: ParamTable
 
     def __init__(self, weave, **options):
@@ -93,3 +125,21 @@ class Model(abc.ABC):
     def settings(self) -> dict:
         """What a fit directory records about this model besides kind and weave."""
         return {"options": dict(getattr(self, "options", {}))}
+
+    @classmethod
+    def describe_settings(cls, settings: dict) -> str:
+        """The recorded :meth:`settings` (a fit.json ``model`` entry) in a few words: the options as
+        ``name=value``, or ``defaults``."""
+        options = settings.get("options") or {}
+        return ", ".join(f"{k}={v}" for k, v in options.items()) or "defaults"
+
+    def with_quadrature(self, rule: str | None = None, nodes: int | None = None) -> Model:
+        """This model integrating with another quadrature (None keeps the current rule / node count); a
+        model that integrates nothing returns itself."""
+        return self
+
+    def texture(self, *, seed: int = 0):
+        """The texture model of this model's weave and settings (module docstring); ``seed`` selects its
+        noise realisation.  ConfigError for a model without one (:attr:`has_texture` False)."""
+        raise ConfigError(f"model kind {self.kind!r} has no texture model (no evaluation at texture points u, v)",
+                          field="model.kind")

@@ -166,6 +166,25 @@ class IrawanModel(Model):
     def settings(self) -> dict:
         return {"quadrature": {"rule": self.quadrature.rule, "nodes": self.quadrature.nodes}}
 
+    @classmethod
+    def describe_settings(cls, settings: dict) -> str:
+        """The quadrature as ``rule nodes`` (e.g. ``trapezoid 11``)."""
+        quadrature = settings.get("quadrature") or {}
+        return " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or "defaults"
+
+    def with_quadrature(self, rule: str | None = None, nodes: int | None = None) -> IrawanModel:
+        if rule is None and nodes is None:
+            return self
+        return IrawanModel(self.weave, Quadrature(rule or self.quadrature.rule,
+                                                  int(nodes) if nodes is not None else self.quadrature.nodes))
+
+    def texture(self, *, seed: int = 0):
+        """The texture model of sec. 7.2 (:class:`clothlab.models.irawan.texture.IrawanTexture`) with this
+        model's quadrature (so its tile average is :meth:`components`)."""
+        from clothlab.models.irawan.texture import IrawanTexture
+
+        return IrawanTexture(self.weave, self.quadrature, seed=seed)
+
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()

@@ -174,12 +174,15 @@ class IrawanTexture:
     # ------------------------------------------------------------------ the model
 
     def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
-                   normalised: bool = True, warn: bool = True) -> dict[str, np.ndarray]:
+                   normalised: bool = True, warn: bool = True, footprint=None,
+                   view_distance=None) -> dict[str, np.ndarray]:
         """Texture components (1/sr) at texture points u, v (tile units; arrays broadcast together) for
         fabric-frame directions wi, wo: (N, 3) with one row per point, or (3,) / (1, 3) shared by all.
 
         Returns arrays of the points' shape: ``diffuse`` (1/pi), ``specular_warp``, ``specular_weft``
-        (see the module docstring).  Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0.
+        (see the module docstring).  Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0.  ``footprint`` and
+        ``view_distance`` belong to the texture interface (:mod:`clothlab.models.base`) and are ignored:
+        this model does not filter itself (a renderer blends it with the reflectance model).
         """
         p = self.resolve(params)
         need = COMPONENTS if need is None else tuple(need)

@@ -30,7 +30,7 @@ import numpy as np
 
 from clothlab.errors import ConfigError
 from clothlab.frames import to_yarn_frame
-from clothlab.models.base import Model
+from clothlab.models.base import Model, as_directions
 from clothlab.models.kang import lod, microfacet, yarn
 from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters, resolve_parameters
 from clothlab.weave.lookup import locate_segments
@@ -55,6 +55,7 @@ class KangModel(Model):
     kind = "kang"
     params = KANG_PARAMS  # the class-level declarations (all options); an instance narrows them
     has_texture = True
+    texture_filters = True  # the point shader takes the pixel footprint (eq. 5, Algorithm 1)
     #: tile-averaged components (components(), what a fit solves coefficients for)
     component_names = ("diffuse", "specular_warp", "specular_weft")
     #: point components (point_components(), for textures and renders)
@@ -129,6 +130,14 @@ class KangModel(Model):
 
     # --- the interface ---------------------------------------------------------------------------------
 
+    def texture(self, *, seed: int = 0):
+        """The point shader as a texture model (:class:`clothlab.models.kang.texture.KangTexture`); the
+        per-yarn noise is a hash of the yarn, so ``seed`` (the interface's) selects nothing here: Algorithm 1's
+        jitter uses the model option ``seed``."""
+        from clothlab.models.kang.texture import KangTexture
+
+        return KangTexture(self)
+
     def default_parameters(self) -> dict[str, float]:
         return default_parameters(self.params)
 
@@ -145,7 +154,7 @@ class KangModel(Model):
         limits the components computed; ``normalised`` and ``warn`` exist for interface parity with the IM
         model (Kang's components are already in albedo units and raise no geometry warnings)."""
         p = self.resolve(params)
-        wi, wo = _directions(wi, wo)
+        wi, wo = as_directions(wi, wo)
         visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         out = {name: np.zeros(len(wi)) for name in self.component_names}
         need = self.component_names if need is None else tuple(need)
@@ -172,7 +181,7 @@ class KangModel(Model):
         the running mean changes by less than 1 / view_distance.
         """
         p = self.resolve(params)
-        wi, wo = _directions(wi, wo)
+        wi, wo = as_directions(wi, wo)
         u, v = (np.broadcast_to(np.asarray(c, dtype=np.float64), (len(wi),)).copy() for c in (u, v))
         if footprint is not None:
             footprint = np.broadcast_to(np.asarray(footprint, dtype=np.float64), (len(wi),))
@@ -247,10 +256,3 @@ def _gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
     nodes, weights = np.polynomial.legendre.leggauss(n)
     return nodes, weights / 2.0
 
-
-def _directions(wi, wo):
-    wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
-    wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
-    if wi.shape != wo.shape or wi.shape[-1] != 3 or wi.ndim != 2:
-        raise ValueError(f"wi, wo must both be (N, 3) arrays, got {wi.shape} and {wo.shape}")
-    return wi, wo
