@@ -149,10 +149,9 @@ class _Problem:
 
     def __init__(self, stack, src: TextureSource, repeats, free, refine):
         from clothlab.btf.write import texture_coordinates
-        from clothlab.models.irawan.texture import IrawanTexture
 
         self.src, self.free, self.refine = src, tuple(free), tuple(refine)
-        self.texture = IrawanTexture(src.weave, src.quadrature)
+        self.texture = src.model.texture()
         self.repeats = repeats
         size = (stack.width, stack.height)
         need = len(stack) * stack.width * stack.height * stack.channels * 4
@@ -333,10 +332,9 @@ def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), crop=None, tile_
         if name == "v0":
             return (values["v0"] - grid_step / h, values["v0"] + grid_step / h)
         return {"rotation": ROTATION_BOUNDS, "ratio": RATIO_BOUNDS, "hwidth": HWIDTH_BOUNDS}.get(name) or \
-            IRAWAN_PARAMS[name].bounds
+            src.model.params[name].bounds
 
     from clothlab.fit.optimize import minimize
-    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
