@@ -93,8 +93,11 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
     # a segment violating sec. 5.3 raises a GeometryWarning naming it (the CLI prints it once)
     if "u" in angles:
         if not model.has_texture:
-            raise InputError(f"u, v columns need a model with a texture model; model kind {model.kind!r} has none",
-                             path=directions, field="u")
+            from clothlab.models.registry import MODEL_KINDS, model_class
+
+            with_texture = [kind for kind in MODEL_KINDS if model_class(kind).has_texture]
+            raise InputError(f"u, v columns need a model with a texture model ({', '.join(with_texture)}); model "
+                             f"kind {model.kind!r} has none", path=directions, field="u")
         comps = model.texture().components(angles["u"], angles["v"], wi, wo, params)
     else:
         comps = model.components(wi, wo, params)
