@@ -169,3 +169,104 @@ def test_lambert_fit_solves_kd_alone(tmp_path):
 
     result = run_fit(simulated_config(tmp_path, "lambert", [], {"sigma": 0.0}))
     np.testing.assert_allclose(result.coefficients["kd"], [0.3, 0.2, 0.1], rtol=0.02)
+
+
+# ------------------------------------------------------------- the interface every registered model implements
+
+def _rst_rows(doc: str, header_first: str) -> list[list[str]]:
+    """Data rows (cells split on 2+ spaces) of the simple RST table whose header starts with ``header_first``."""
+    import re
+
+    lines = doc.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.split() and line.split()[0] == header_first
+                 and i > 0 and lines[i - 1].startswith("=="))
+    rows = []
+    for line in lines[start + 2:]:
+        if line.startswith("=="):
+            break
+        if line[:1].strip():  # a line starting with spaces continues the row above
+            rows.append(re.split(r"\s{2,}", line.strip()))
+    return rows
+
+
+def _declared_range(spec) -> str:
+    lo, hi = spec.valid
+    return f"{'(' if spec.open_lower else '['}{lo:g}, {hi:g}{')' if spec.open_upper else ']'}"
+
+
+@pytest.mark.parametrize("kind", ["irawan", "kang", "lambert", "oren-nayar"])
+def test_each_model_file_opens_with_a_true_parameter_table(kind):
+    """The docstring table of a model's module lists exactly its declared parameters with their declared
+    unit, physical range and default (the declarations are the truth; the table must follow them)."""
+    import sys
+
+    cls = model_class(kind)
+    assert kind in __import__("clothlab.models.registry", fromlist=["MODEL_KINDS"]).MODEL_KINDS
+    rows = _rst_rows(sys.modules[cls.__module__].__doc__, "parameter")
+    specs = list(cls.params)
+    if not specs:
+        assert rows == [["(none)"]]
+        return
+    assert [r[0] for r in rows] == [s.name for s in specs]
+    for row, spec in zip(rows, specs, strict=True):
+        assert row[1:4] == [spec.unit, _declared_range(spec), f"{spec.default:g}"], spec.name
+
+
+def test_the_base_table_names_real_members():
+    from clothlab.models.base import Model
+
+    names = [row[0].strip("`") for row in _rst_rows(sys_doc("clothlab.models.base"), "member")]
+    assert len(names) >= 10 and len(set(names)) == len(names)
+    for name in names:
+        assert hasattr(Model, name) or name in Model.__annotations__, name
+    public = {n for n in vars(Model) if not n.startswith("_")} | set(Model.__annotations__)
+    assert public <= set(names)  # and every public member is in the table
+
+
+def sys_doc(module: str) -> str:
+    import importlib
+
+    return importlib.import_module(module).__doc__
+
+
+@pytest.mark.parametrize("kind", ["irawan", "kang", "lambert", "oren-nayar"])
+def test_registered_models_answer_the_interface(kind):
+    """What the fitter, report, texture fit and renderer ask of every model, asked of each kind."""
+    from clothlab.models.base import Model
+
+    cls = model_class(kind)
+    model = build_model(kind, WEAVE, ("trapezoid", 11))
+    assert issubclass(cls, Model) and model.kind == kind
+    p = model.default_parameters()
+    assert set(p) == set(model.params.names())
+    assert set(model.default_free) <= set(p)
+    wi, wo = random_pairs(20, max_theta=80.0)
+    comps = model.components(wi, wo, p)
+    assert tuple(comps) == tuple(model.component_names) and all(c.shape == (20,) for c in comps.values())
+    assert set(model.components(wi, wo, p, need=("diffuse",))) == {"diffuse"}
+    assert isinstance(cls.describe_settings({"kind": kind, **model.settings()}), str)
+    assert model.with_quadrature("gauss", 5).components(wi, wo, p).keys() == comps.keys()
+    assert isinstance(model.geometry_warnings(p), list)
+    assert model.fitted_weave(p).tile_width == WEAVE.tile_width
+    if model.has_texture:
+        texture = model.texture()
+        out = texture.components(np.full(20, 0.3), np.full(20, 0.6), wi, wo, p)
+        assert set(model.component_names) <= set(out) <= set(texture.component_names)
+    else:
+        with pytest.raises(ConfigError, match="no texture model"):
+            model.texture()
+
+
+def test_baselines_without_texture_are_refused_by_texture_consumers(tmp_path):
+    """BTF simulation / texture fit and the renderer ask has_texture and say what is missing."""
+    from pathlib import Path
+
+    from clothlab.errors import InputError
+    from clothlab.simulate.btf import load_source
+
+    fit_dir = Path(__file__).resolve().parents[1] / "fits" / "polyester-lining-oren-nayar"
+    with pytest.raises(InputError, match="'oren-nayar' has no texture model"):
+        load_source(fit_dir)
+    kang_fit = fit_dir.parent / "polyester-lining-kang"
+    with pytest.raises(InputError, match="declares no warp.w"):
+        load_source(kang_fit)

@@ -9,26 +9,30 @@ Everything the fitter, the report, the texture fit and the renderer need to know
 this interface; only :mod:`clothlab.models.registry` knows which kinds exist.  A new model is one package
 that subclasses :class:`Model` plus one registry line.
 
-==================  ==========================================================================================
-member              meaning
-==================  ==========================================================================================
-``kind``            the registry name (``model.kind`` in fabric.yaml)
-``params``          the parameter declarations (:class:`clothlab.params.ParamTable`) of this instance
-``component_names`` the components :meth:`components` returns, in design-matrix order
-``default_free``    the parameters a fit frees when fabric.yaml names none
-``from_config``     build from a weave, the configured quadrature and ``model.options``
-``components``      the components at directions wi, wo (N, 3)
-``settings``        what a fit directory records about this model (quadrature or options)
-``describe_settings`` those recorded settings in a few words, for reports (class method)
-``fitted_weave``    the weave with fitted parameters applied (for the ``.wv`` export)
-``geometry_warnings`` notes on parameter sets outside the model's valid geometry (empty by default)
-``with_quadrature`` a copy integrating with another quadrature rule / node count (itself if it integrates
-                    nothing)
-``has_texture``     True when :meth:`texture` gives a texture model (capability)
-``texture``         the texture model: components at texture points (u, v) whose tile average is
-                    :meth:`components`; ConfigError for models without one
-``texture_filters`` True when the texture model takes a pixel footprint and filters itself (capability)
-==================  ==========================================================================================
+=======================  =====================================================================================
+member                   meaning
+=======================  =====================================================================================
+``kind``                 the registry name (``model.kind`` in fabric.yaml)
+``params``               the parameter declarations (:class:`clothlab.params.ParamTable`) of this instance
+``declared_parameters``  the declarations for given ``model.options`` (class method; config validation)
+``component_names``      the components :meth:`components` returns, in design-matrix order
+``coefficient_meaning``  what the linear coefficients (kd, ks_...) of the components mean, for fit.json
+``default_free``         the parameters a fit frees when fabric.yaml names none
+``from_config``          build from a weave, the configured quadrature and ``model.options`` (class method)
+``default_parameters``   every declared parameter's value for this weave (a fit's start)
+``resolve``              the defaults overridden by given values, validated against the declarations
+``components``           the components (1/sr, each (N,)) at fabric-frame directions wi, wo (N, 3)
+``evaluate``             f_r (N, C): the components times their coefficients
+``settings``             what a fit directory records about this model (quadrature or options)
+``describe_settings``    those recorded settings in a few words, for reports (class method)
+``fitted_weave``         the weave with fitted parameters applied (for the ``.wv`` export)
+``geometry_warnings``    notes on parameter sets outside the model's valid geometry (empty by default)
+``with_quadrature``      a copy integrating with another rule / node count (itself if it integrates nothing)
+``has_texture``          True when :meth:`texture` gives a texture model (capability)
+``texture``              the texture model: components at texture points (u, v) whose tile average is
+                         :meth:`components`; ConfigError for models without one
+``texture_filters``      True when the texture model takes a pixel footprint and filters itself (capability)
+=======================  =====================================================================================
 
 A texture model (what :meth:`Model.texture` returns) has ``weave``, ``component_names``, ``resolve(params)``
 and ``components(u, v, wi, wo, params, *, need=None, noise=True, normalised=True, warn=True, footprint=None,

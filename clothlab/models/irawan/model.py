@@ -1,5 +1,28 @@
 """The Irawan-Marschner reflectance model of woven cloth (Irawan & Marschner 2012, sec. 7.1 and 7.3).
 
+Parameters (paper Table I; :data:`clothlab.models.irawan.parameters.IRAWAN_PARAMS`; "1" = dimensionless,
+``cell`` = weave-tile cells; the default is the declared one, a weave brings its own values, which are the
+model's defaults and a fit's start):
+
+==========  ====  ===========  =======  ==============================================================
+parameter   unit  range        default  meaning
+==========  ====  ===========  =======  ==============================================================
+alpha       1     [0, 100]     0.05     uniform scattering of the phase function f_c, eq. 7
+beta        1     (0, 100000]  4        forward scattering of the phase function f_c, eq. 7
+delta       1     [0, 1)       0.3      filament smoothing: the faded fraction of the arc, eq. 9
+hwidth      1     (0, 1]       0.5      highlight band width / segment size, eq. 12 (texture model only)
+warp.psi    deg   (-90, 90)    0        fibre twist angle, sec. 5.2 (0: filament yarn)
+warp.umax   deg   (0, 90)      30       maximum inclination angle, sec. 5.2
+warp.kappa  1     (-1, 1000]   0        spine curvature, sec. 5.4
+warp.w      cell  (0, 1000]    1        segment rectangle width, sec. 5.3
+warp.l      cell  (0, 1000]    1        segment rectangle length, sec. 5.3
+weft.psi    deg   (-90, 90)    0        as warp.psi, for the weft segments
+weft.umax   deg   (0, 90)      30       as warp.umax, for the weft segments
+weft.kappa  1     (-1, 1000]   0        as warp.kappa, for the weft segments
+weft.w      cell  (0, 1000]    1        as warp.w, for the weft segments
+weft.l      cell  (0, 1000]    1        as warp.l, for the weft segments
+==========  ====  ===========  =======  ==============================================================
+
     f_r(wi, wo) = kd / pi + sum_j ks_j S_j(wi, wo),     S_j = f_c(wi, wo) I_j(wi, wo) / a_j
 
 for the segment types j = warp, weft.  I_j is the yarn integral of eq. 10 (:mod:`.yarn`), f_c the phase

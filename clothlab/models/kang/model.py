@@ -2,6 +2,24 @@
 extending Kang 2010): Ashikhmin-Shirley BRDF per yarn type with alternating anisotropy, yarn normal
 perturbation with ambient occlusion, per-yarn noise, the eq. 5 LoD blend and Algorithm 1.
 
+Parameters (:mod:`clothlab.models.kang.parameters`; "1" = dimensionless; ``weft.nx`` / ``weft.ny`` only with
+the option ``alternating: false``, otherwise they are the warp's, sec. 3.3):
+
+===============  ======  ==========  =======  ===========================================================
+parameter        unit    range       default  meaning
+===============  ======  ==========  =======  ===========================================================
+warp.nx          1       [0, 10000]  1        microfacet exponent across the yarn (eq. 2, x)
+warp.ny          1       [0, 10000]  30       microfacet exponent along the yarn (eq. 2, y)
+weft.nx          1       [0, 10000]  1        weft exponent across the yarn (eq. 2, x; not alternating)
+weft.ny          1       [0, 10000]  30       weft exponent along the yarn (eq. 2, y; not alternating)
+n_strands        1/cell  [1, 1000]   6        fibre strands N_xi: fibre ridges per cell along the yarn
+fibre_curvature  1       [0, 0.7]    0.3      c_f: amplitude of the along-yarn normal tilt (eqs. 3-4)
+yarn_curvature   1       [0, 0.7]    0.5      c_y: across-yarn normal tilt at the yarn edge (eqs. 3-4)
+fibre_slope      1       [-10, 10]   0.5      s_f: shear of the fibre ridges (eqs. 3-4)
+fresnel_f0       1       [0, 1]      0.04     Schlick Fresnel reflectance at normal incidence (eq. 1)
+noise            1       [0, 1]      0.1      per-yarn intensity noise amplitude (sec. 5.2), mean 1
+===============  ======  ==========  =======  ===========================================================
+
 Point components (1/sr, :meth:`KangModel.point_components`, for textures and renders), per yarn type k in
 (warp, weft): ``diffuse_k`` = Lambert 1/pi on the points of type k, ``specular_k`` = eq. 1 with the eq. 2
 distribution about the perturbed normal, times the ambient occlusion (sec. 4.2.2 applies the AO to the
@@ -30,7 +48,7 @@ import numpy as np
 
 from clothlab.errors import ConfigError
 from clothlab.frames import to_yarn_frame
-from clothlab.models.base import Model, as_directions
+from clothlab.models.base import Model, as_directions, front_facing
 from clothlab.models.kang import lod, microfacet, yarn
 from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters, resolve_parameters
 from clothlab.weave.lookup import locate_segments
@@ -155,9 +173,9 @@ class KangModel(Model):
         model (Kang's components are already in albedo units and raise no geometry warnings)."""
         p = self.resolve(params)
         wi, wo = as_directions(wi, wo)
-        visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
-        out = {name: np.zeros(len(wi)) for name in self.component_names}
+        visible = front_facing(wi, wo)
         need = self.component_names if need is None else tuple(need)
+        out = {name: np.zeros(len(wi)) for name in self.component_names if name in need}
         if "diffuse" in need:
             out["diffuse"] = np.where(visible, 1.0 / np.pi, 0.0)
         for kind in YARN_KINDS:
