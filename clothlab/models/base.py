@@ -1,4 +1,4 @@
-"""The model interface every clothlab model implements (DESIGN.md principles 2-5).
+"""The model interface every clothlab model implements.
 
 A model is a pure function of fabric-frame directions and parameters: no file I/O, no plotting, no global
 state.  It returns named *components* (diffuse and specular parts per yarn type, 1/sr, each (N,)); the linear

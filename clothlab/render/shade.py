@@ -12,7 +12,7 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      a C^1 blend in log footprint: continuous in the distance, with no jump at f0 or f1.
                      This is the paper's "seamless switching" (sec. 3.2, 7): the tile average of the texture
                      model equals the reflectance model, so the far limit of a supersampled texture and
-                     the reflectance model agree (tests/test_render.py).  Where b = 1 the texture model
+                     the reflectance model agree (checked by the test suite).  Where b = 1 the texture model
                      is never called (counted); the reflectance part is evaluated once per pixel (at its
                      first sample with b > 0).  Blend pixels do not run the texture model at all their
                      samples: with m samples and texture weight W = sum (1 - b) the texture runs at
@@ -26,8 +26,8 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
                      = camera distance / fabric.kang.view_distance_mm.
 
-Skipping (DESIGN.md principle 5): an IM component whose coefficient is zero in every channel, or whose yarn
-type covers no cell of the weave, is not computed (``need=``).
+Skipping (nothing runs that the scene does not need): a component whose coefficient is zero in every
+channel, or whose yarn type covers no cell of the weave, is not computed (``need=``).
 
 Choice of f0 = 0.1 and f1 = 0.5 tile (scene.lod).  Measured on the receding plane of render_benchmark
 (cotton denim, 1 x 2 mm tile, camera at 45 deg elevation, distances 5..640 mm): relative L1 error per pixel

@@ -4,7 +4,7 @@
 ``build_comparison([...])``    -> ``reports/comparison/``: one table row per fit (the paper's sec. 8 list:
 median / 80th / 95th percentile relative error) next to the paper's published figures, and a bar chart.
 
-Writes are atomic (DESIGN.md principle 6): everything goes into a hidden temporary directory next to the
+Writes are atomic: everything goes into a hidden temporary directory next to the
 target, renamed into place at the end (:func:`clothlab.atomic.atomic_directory`); an existing report is
 replaced only with ``force=True``.
 """

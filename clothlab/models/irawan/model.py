@@ -26,7 +26,7 @@ weft.l      cell  (0, 1000]    1        as warp.l, for the weft segments
     f_r(wi, wo) = kd / pi + sum_j ks_j S_j(wi, wo),     S_j = f_c(wi, wo) I_j(wi, wo) / a_j
 
 for the segment types j = warp, weft.  I_j is the yarn integral of eq. 10 (:mod:`.yarn`), f_c the phase
-function of eq. 7 (:mod:`.phase`).  Components, not totals (DESIGN.md principle 3): the model returns
+function of eq. 7 (:mod:`.phase`).  Components, not totals: the model returns
 ``diffuse`` (= 1/pi, a Lambertian of unit albedo), ``specular_warp`` and ``specular_weft``; the per-channel
 coefficients kd, ks_warp, ks_weft are linear and solved outside.
 
@@ -38,7 +38,7 @@ albedo that segment type j adds to the fabric (its area share is part of it, so 
 warpArea/weftArea balancing is absorbed into ks_j).  ``normalised=False`` gives the raw f_c I_j, used inside
 fits (the scale only rescales ks) and converted once at the end.
 
-Decisions on what the paper leaves open (irawan-presets.md):
+Decisions on what the paper leaves open:
 - staple path for |psi| >= PSI_FILAMENT_THRESHOLD (1e-3 rad = 0.057 deg), filament path below; the staple
   integral tends to the filament one as psi -> 0, and the test suite measures the jump at the threshold.
 - eq. 3: the +arccos(D) root only (the one with n.h >= 0), visible when |v| < pi/2.
@@ -239,7 +239,7 @@ class IrawanModel(Model):
                    warn: bool = True) -> dict[str, np.ndarray]:
         """BRDF components (1/sr) at fabric-frame directions wi, wo (N, 3).
 
-        ``need``: the component names wanted (others are not computed; DESIGN.md principle 5).
+        ``need``: the component names wanted (others are not computed).
         Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0 (reflection only).
         """
         p = self.resolve(params)

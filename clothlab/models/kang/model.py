@@ -37,7 +37,7 @@ delta_along uniform in [-c_f, c_f] (exact when a yarn's visible part spans its w
 fibre ridges).  The specular average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the
 pattern's cell share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle
 (``tile_nodes`` per axis).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
-measured in tests/test_kang.py against a fine grid over the tile (see docs/kang.md).
+measured by the test suite against a fine grid over the tile.
 """
 
 from __future__ import annotations
@@ -181,7 +181,7 @@ class KangModel(Model):
         for kind in YARN_KINDS:
             share = self.shares[kind]
             if share == 0.0 or f"specular_{kind}" not in need:
-                continue  # a yarn type with no visible area is skipped (DESIGN principle 5)
+                continue  # a yarn type with no visible area is skipped (nothing runs that the fit does not need)
             out[f"specular_{kind}"] = share * self._yarn_average(kind, to_yarn_frame(wi, kind),
                                                                  to_yarn_frame(wo, kind), p)
         return out
