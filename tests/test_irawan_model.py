@@ -171,9 +171,17 @@ def test_specular_albedo_is_one_after_normalisation():
 
 
 def test_albedo_is_deterministic():
+    """The fixed Sobol point set makes a_j reproducible bit for bit: recomputed after emptying every cache
+    (albedo and direction sets) it is the same number, while another point count gives another estimate."""
+    import clothlab.models.irawan.model as im
+
     model, p = preset_params("polyester-lining")
     a = specular_albedo(p, "warp", model.quadrature)
+    im._specular_albedo_cached.cache_clear()
+    im._albedo_directions.cache_clear()
     assert specular_albedo(dict(p), "warp", model.quadrature) == a
+    other = specular_albedo(p, "warp", model.quadrature, samples=2**12)
+    assert other != a and other == pytest.approx(a, rel=0.05)
 
 
 def test_twill_weft_constraint_warns_and_stays_non_negative():
@@ -211,3 +219,45 @@ def test_zero_albedo_yarn_warns_instead_of_a_silent_zero():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         model.components(wi, wo, {"warp.umax": 1e-9}, warn=False)
+
+
+# ---------------------------------------------------------------- the yarn-integral memo
+
+def test_directions_changed_in_place_give_fresh_values():
+    """The memo of I_j is keyed on the directions' contents: overwriting wi in place (as in a notebook)
+    and evaluating again equals a fresh model at the new directions, not the remembered integral."""
+    model, p = preset_params("cotton-denim")
+    wi = spherical_to_vector(np.array([30.0, 40.0]), np.array([0.0, 20.0]))
+    wo = spherical_to_vector(np.array([30.0, 35.0]), np.array([180.0, 200.0]))
+    before = model.components(wi, wo, p, warn=False)["specular_warp"].copy()
+    wi[:] = spherical_to_vector(np.array([50.0, 10.0]), np.array([90.0, 300.0]))
+    after = model.components(wi, wo, p, warn=False)["specular_warp"]
+    fresh = IrawanModel(get_preset("cotton-denim")).components(wi.copy(), wo.copy(), p, warn=False)
+    np.testing.assert_array_equal(after, fresh["specular_warp"])
+    assert not np.allclose(before, after)  # the directions changed the value (the test can fail)
+
+
+def test_memo_reuses_the_integral_when_only_the_phase_changes(monkeypatch):
+    """A fit that varies only alpha / beta (f_c factors out of eq. 10) computes I_j once per segment type,
+    even for equal directions in new arrays; a warp geometry change recomputes the warp integral only."""
+    import clothlab.models.irawan.model as im
+
+    calls = []
+    original = im.yarn_integral_fabric
+
+    def counting(*args, **kwargs):
+        calls.append(args[3])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(im, "yarn_integral_fabric", counting)
+    model, p = preset_params("cotton-denim")
+    wi, wo = random_pairs(50, rng=np.random.default_rng(7))
+    first = model.components(wi, wo, p, normalised=False, warn=False)
+    for alpha, beta in ((0.1, 2.0), (0.3, 8.0)):
+        out = model.components(wi.copy(), wo.copy(), {**p, "alpha": alpha, "beta": beta}, normalised=False,
+                               warn=False)
+        lit = first["specular_warp"] > 0.0
+        assert lit.any() and not np.allclose(out["specular_warp"][lit], first["specular_warp"][lit])
+    assert sorted(calls) == ["warp", "weft"]
+    model.components(wi, wo, {**p, "warp.umax": p["warp.umax"] + 5.0}, normalised=False, warn=False)
+    assert sorted(calls) == ["warp", "warp", "weft"]

@@ -596,3 +596,48 @@ def test_fabric_yaml_doc_says_kang_parameters_are_checked():
     row = next(line for line in (ROOT / "docs" / "fabric-yaml.md").read_text().splitlines()
                if line.startswith("| `model.params`"))
     assert "unchecked" not in row and "kang" in row
+
+
+# --- the texture-model interface ------------------------------------------------------------------------
+
+def test_texture_interface_is_the_point_shader():
+    """KangModel.texture() evaluates point_components (with the footprint, and noise switchable)."""
+    model = KangModel(plain_weave())
+    texture = model.texture()
+    assert model.has_texture and model.texture_filters
+    assert texture.component_names == model.point_component_names
+    wi, wo = random_directions(40, 31), random_directions(40, 32)
+    u, v = np.linspace(-0.3, 1.7, 40), np.linspace(0.2, 2.2, 40)
+    params = {"warp.ny": 50.0, "noise": 0.4}
+    for footprint in (None, 0.3):
+        direct = model.point_components(u, v, wi, wo, params, footprint)
+        got = texture.components(u, v, wi, wo, params, footprint=footprint)
+        assert set(got) == set(direct)
+        for name in direct:
+            np.testing.assert_array_equal(got[name], direct[name])
+    quiet = texture.components(u, v, wi, wo, params, noise=False, need=("specular_warp",))
+    assert set(quiet) == {"specular_warp"}
+    np.testing.assert_array_equal(quiet["specular_warp"],
+                                  model.point_components(u, v, wi, wo, {**params, "noise": 0.0})["specular_warp"])
+
+
+def test_eval_at_texture_points_of_a_kang_fit(tmp_path):
+    """``clothlab eval`` with u, v columns on a Kang fit: the fitted point shader, the fit's coefficients."""
+    from clothlab.fit.evaluate import evaluate_directions_file
+    from clothlab.fit.store import load_fitted
+    from clothlab.models.components import combine
+
+    fit_dir = ROOT / "fits" / "polyester-lining-kang"
+    rows = [[30.0, 0.0, 30.0, 180.0, 0.25, 0.5], [45.0, 90.0, 10.0, 200.0, 0.7, 0.1]]
+    csv_path = tmp_path / "points.csv"
+    csv_path.write_text("theta_i,phi_i,theta_o,phi_o,u,v\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
+    text = evaluate_directions_file(fit_dir, csv_path)
+    lines = [line.split(",") for line in text.strip().splitlines()]
+    model, params, coefficients, channels = load_fitted(fit_dir)
+    r = np.array(rows)
+    expected = combine(model.point_components(r[:, 4], r[:, 5], spherical_to_vector(r[:, 0], r[:, 1]),
+                                              spherical_to_vector(r[:, 2], r[:, 3]), params), coefficients)
+    header = lines[0]
+    got = np.array([[float(row[header.index(c)]) for c in channels] for row in lines[1:]])
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    assert np.all(got > 0)

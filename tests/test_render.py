@@ -344,3 +344,22 @@ def test_receding_plane_error_bound_and_monotone_cost_at_a_tiny_resolution(tmp_p
                              shaders=("im-lod", "im-texture"), verbose=False)
     assert [r["im_lod_model_evaluations"] for r in again["rows"]] == cost[:4]
     assert (tmp_path / "render_lod.png").read_bytes()[:4] == b"\x89PNG" and result["figure"].endswith("render_lod.png")
+
+
+def test_fabric_fits_are_checked_by_texture_capability():
+    """fabric.fit needs a model whose texture the im-* shaders blend with its reflectance; fabric.kang.fit one
+    whose texture takes the pixel footprint.  Each refusal names the field and the fit's kind."""
+    from clothlab.render.scene import Fabric, KangSpec
+
+    fits = REPO / "fits"
+    for fit, field, kind in ((fits / "polyester-lining-oren-nayar", "fabric.fit", "oren-nayar"),
+                             (fits / "polyester-lining-kang", "fabric.fit", "kang")):
+        with pytest.raises(ConfigError, match=f"of kind '{kind}'") as info:
+            FabricModels.build(Fabric(fit=fit))
+        assert info.value.field == field
+    fabric = FabricModels.build(Fabric(fit=fits / "polyester-lining"))
+    assert fabric.reflectance.kind == "irawan" and fabric.need
+    fabric.spec = Fabric(fit=fits / "polyester-lining", kang=KangSpec(fit=fits / "polyester-lining"))
+    with pytest.raises(ConfigError, match="of kind 'irawan'") as info:
+        fabric.kang()
+    assert info.value.field == "fabric.kang.fit"

@@ -526,16 +526,16 @@ def test_eval_with_u_v_is_the_texture_model_at_those_points(tmp_path, capsys):
     capsys.readouterr()
 
 
-def test_eval_with_u_v_and_a_kang_source_is_a_clear_error(tmp_path, capsys):
+def test_eval_with_u_v_and_a_source_without_texture_is_a_clear_error(tmp_path, capsys):
     from pathlib import Path
 
     from clothlab.cli import main
 
     root = Path(__file__).resolve().parents[1]
     csv_path = _eval_csv(tmp_path / "points.csv", [[30, 0, 30, 180, 0.25, 0.5]])
-    assert main(["eval", str(root / "fits" / "polyester-lining-kang"), str(csv_path)]) == 2
+    assert main(["eval", str(root / "fits" / "polyester-lining-oren-nayar"), str(csv_path)]) == 2
     err = capsys.readouterr().err
-    assert "field 'u'" in err and "irawan" in err and "kang" in err and str(csv_path) in err
+    assert "field 'u'" in err and "irawan" in err and "oren-nayar" in err and str(csv_path) in err
     assert err.count("\n") == 1  # one line, no traceback
     # u without v is named too
     half = _eval_csv(tmp_path / "half.csv", [[30, 0, 30, 180, 0.25]], header="theta_i,phi_i,theta_o,phi_o,u")

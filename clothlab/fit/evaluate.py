@@ -2,8 +2,9 @@
 
 Input CSV: columns theta_i, phi_i, theta_o, phi_o in degrees, clothlab convention (phi counter-clockwise from
 the weft, :mod:`clothlab.frames`), and optionally u, v (texture coordinates in weave tiles: u along the weft,
-v along the warp): then the IM *texture* model (paper sec. 7.2, :mod:`clothlab.models.irawan.texture`) is
-evaluated at those points instead of the reflectance model.  Other columns are ignored.
+v along the warp): then the model's *texture* model (:meth:`clothlab.models.base.Model.texture`; for IM the
+texture model of Irawan & Marschner 2012, sec. 7.2) is evaluated at those points instead of the reflectance
+model.  Other columns are ignored.
 Output CSV: the four angles (and u, v), then the BRDF
 (1/sr) per channel for a fit directory, and with ``components`` one column ``<component>_<channel>`` per
 component and channel (the component times its fitted coefficient).  A fabric.yaml has no fitted
@@ -76,11 +77,8 @@ def _model_source(source, rule, nodes):
         model = build_model(cfg.model.kind, resolve_weave(cfg.model.weave, cfg.base_dir), (q.rule, q.nodes),
                             **cfg.model.options)
         params, coefficients, channels = dict(cfg.model.params), None, ()
-    if rule is not None or nodes is not None:
-        from clothlab.models.irawan.model import Quadrature
-
-        if hasattr(model, "quadrature"):
-            model.quadrature = Quadrature(rule or model.quadrature.rule, nodes or model.quadrature.nodes)
+    if rule is not None or nodes is not None:  # a model that integrates nothing ignores them
+        model = model.with_quadrature(rule, nodes)
     return model, params, coefficients, channels
 
 
@@ -94,13 +92,13 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
     wo = spherical_to_vector(angles["theta_o"], angles["phi_o"])
     # a segment violating sec. 5.3 raises a GeometryWarning naming it (the CLI prints it once)
     if "u" in angles:
-        if getattr(model, "kind", "") != "irawan":
-            raise InputError(f"u, v columns need the irawan texture model; this model is {model.kind!r}",
-                             path=directions, field="u")
-        from clothlab.models.irawan.texture import IrawanTexture
+        if not model.has_texture:
+            from clothlab.models.registry import MODEL_KINDS, model_class
 
-        texture = IrawanTexture(model.weave, model.quadrature)
-        comps = texture.components(angles["u"], angles["v"], wi, wo, params)
+            with_texture = [kind for kind in MODEL_KINDS if model_class(kind).has_texture]
+            raise InputError(f"u, v columns need a model with a texture model ({', '.join(with_texture)}); model "
+                             f"kind {model.kind!r} has none", path=directions, field="u")
+        comps = model.texture().components(angles["u"], angles["v"], wi, wo, params)
     else:
         comps = model.components(wi, wo, params)
     columns = dict(angles)

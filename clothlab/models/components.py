@@ -1,4 +1,4 @@
-"""Combining model components with their linear coefficients (DESIGN.md principle 3).
+"""Combining model components with their linear coefficients.
 
 A model returns named components (N,), e.g. ``diffuse``, ``specular_warp``, ``specular_weft``; the fabric's
 value in channel c is  sum_k coef_k[c] * component_k.  Each component has a coefficient name (kd, ks_warp,

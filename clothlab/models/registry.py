@@ -14,6 +14,8 @@ from clothlab.errors import ConfigError
 MODEL_KINDS = {
     "irawan": ("clothlab.models.irawan.model", "IrawanModel"),
     "kang": ("clothlab.models.kang.model", "KangModel"),
+    "lambert": ("clothlab.models.baselines.lambert", "LambertModel"),
+    "oren-nayar": ("clothlab.models.baselines.oren_nayar", "OrenNayarModel"),
 }
 DEFAULT_KIND = "irawan"
 

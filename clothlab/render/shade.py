@@ -12,7 +12,7 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      a C^1 blend in log footprint: continuous in the distance, with no jump at f0 or f1.
                      This is the paper's "seamless switching" (sec. 3.2, 7): the tile average of the texture
                      model equals the reflectance model, so the far limit of a supersampled texture and
-                     the reflectance model agree (tests/test_render.py).  Where b = 1 the texture model
+                     the reflectance model agree (checked by the test suite).  Where b = 1 the texture model
                      is never called (counted); the reflectance part is evaluated once per pixel (at its
                      first sample with b > 0).  Blend pixels do not run the texture model at all their
                      samples: with m samples and texture weight W = sum (1 - b) the texture runs at
@@ -26,8 +26,8 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
                      = camera distance / fabric.kang.view_distance_mm.
 
-Skipping (DESIGN.md principle 5): an IM component whose coefficient is zero in every channel, or whose yarn
-type covers no cell of the weave, is not computed (``need=``).
+Skipping (nothing runs that the scene does not need): a component whose coefficient is zero in every
+channel, or whose yarn type covers no cell of the weave, is not computed (``need=``).
 
 Choice of f0 = 0.1 and f1 = 0.5 tile (scene.lod).  Measured on the receding plane of render_benchmark
 (cotton denim, 1 x 2 mm tile, camera at 45 deg elevation, distances 5..640 mm): relative L1 error per pixel
@@ -87,8 +87,9 @@ class Samples:
 
 @dataclass
 class FabricModels:
-    """The fabric of a scene as evaluable models: weave, IM reflectance and texture models with parameters and
-    coefficients (C,) per component name, channels; the Kang model is built on first use."""
+    """The fabric of a scene as evaluable models: weave, reflectance and texture models (IM unless the fit is
+    of another kind with a texture model) with parameters and coefficients (C,) per component name, channels;
+    the Kang shader is built on first use."""
 
     spec: Fabric
     weave: object
@@ -102,51 +103,58 @@ class FabricModels:
 
     @classmethod
     def build(cls, spec: Fabric) -> FabricModels:
-        from clothlab.models.irawan.model import COMPONENTS, IrawanModel
-        from clothlab.models.irawan.texture import IrawanTexture
+        """The models of ``spec``: the fit's (``fabric.fit``: a model with a texture model), else the
+        registry's default kind for the weave with ``fabric.params``."""
+        from clothlab.models.registry import DEFAULT_KIND, build_model
         from clothlab.weave.presets import resolve_weave
 
         if spec.fit is not None:
             from clothlab.fit.store import load_fitted
 
             model, params, coefficients, channels = load_fitted(spec.fit)
-            if not isinstance(model, IrawanModel):
-                raise ConfigError(f"the fit in {spec.fit} is of kind {model.kind!r}; fabric.fit needs an irawan "
-                                  "fit (a kang fit goes under fabric.kang.fit)", field="fabric.fit")
-            weave, quadrature = model.weave, model.quadrature
+            if not model.has_texture or model.texture_filters:
+                raise ConfigError(f"the fit in {spec.fit} is of kind {model.kind!r}, "
+                                  + ("whose texture model filters itself (it goes under fabric.kang.fit)"
+                                     if model.has_texture else "which has no texture model")
+                                  + "; fabric.fit needs a model whose texture model the im-* shaders blend with its "
+                                  "reflectance", field="fabric.fit")
         else:
-            weave = resolve_weave(spec.weave, spec.base_dir)
-            model, quadrature = IrawanModel(weave), None
+            model = build_model(DEFAULT_KIND, resolve_weave(spec.weave, spec.base_dir))
             params, coefficients, channels = spec.params, spec.coefficients, spec.channels
+        weave = model.weave
         params = model.resolve(params)  # validates (ParameterError names the parameter)
         coefficients = _broadcast(coefficients, len(channels), "fabric.coefficients")
-        need = tuple(name for name in COMPONENTS if _needed(name, coefficients, weave))
-        texture = IrawanTexture(weave, quadrature, seed=spec.seed)
+        texture = model.texture(seed=spec.seed)
+        need = tuple(name for name in texture.component_names if _needed(name, coefficients, weave))
         return cls(spec, weave, model, texture, params, coefficients, tuple(channels), need)
 
     def kang(self):
-        """(KangModel, params, coefficients) of the scene's Kang shader."""
+        """(texture model, params, coefficients) of the scene's self-filtering shader (``fabric.kang``): the
+        fit's (``fabric.kang.fit``: a model whose texture model takes the pixel footprint), else the
+        registry's ``kang`` kind, which that section configures."""
         if self._kang is None:
-            from clothlab.models.kang.model import KangModel
+            from clothlab.models.registry import build_model
 
             k = self.spec.kang
             if k.fit is not None:
                 from clothlab.fit.store import load_fitted
 
                 model, params, coefficients, channels = load_fitted(k.fit)
-                if not isinstance(model, KangModel):
-                    raise ConfigError(f"the fit in {k.fit} is of kind {model.kind!r}, not kang",
+                if not model.texture_filters:
+                    raise ConfigError(f"the fit in {k.fit} is of kind {model.kind!r}, whose model has no texture "
+                                      "model taking a pixel footprint; fabric.kang.fit needs one (kind kang)",
                                       field="fabric.kang.fit")
                 if tuple(channels) != self.channels:
                     raise ConfigError(f"the Kang fit's channels {list(channels)} differ from the fabric's "
                                       f"{list(self.channels)}", field="fabric.kang.fit")
             else:
-                model, params = KangModel(self.weave), k.params
+                model, params = build_model("kang", self.weave), k.params
                 coefficients = k.coefficients or {
                     "kd_warp": self.coefficients.get("kd", 0.0), "kd_weft": self.coefficients.get("kd", 0.0),
                     "ks_warp": self.coefficients.get("ks_warp", 0.0), "ks_weft": self.coefficients.get("ks_weft", 0.0)}
             params = model.resolve(params)
-            self._kang = (model, params, _broadcast(coefficients, len(self.channels), "fabric.kang.coefficients"))
+            self._kang = (model.texture(), params,
+                          _broadcast(coefficients, len(self.channels), "fabric.kang.coefficients"))
         return self._kang
 
 
@@ -281,14 +289,14 @@ def im_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) 
 
 def kang_values(fabric: FabricModels, s: Samples, counter: Counter, *, lod: bool) -> np.ndarray:
     """Kang's point shader f_r (M, C); ``lod``: with the pixel footprint (eq. 5, optionally Algorithm 1)."""
-    model, params, coefficients = fabric.kang()
+    texture, params, coefficients = fabric.kang()
     if len(s.u) == 0:
         return _zeros(fabric, 0)
     footprint = np.minimum(s.footprint, MAX_FOOTPRINT) if lod else None
     view = None
     if lod and fabric.spec.kang.prefilter:
         view = s.distance / fabric.spec.kang.view_distance_mm
-    comps = counter.run("kang", len(s.u), model.point_components, s.u, s.v, s.wi, s.wo, params,
+    comps = counter.run("kang", len(s.u), texture.components, s.u, s.v, s.wi, s.wo, params,
                         footprint=footprint, view_distance=view)
     return combine(comps, coefficients)
 

@@ -4,7 +4,7 @@
 ``build_comparison([...])``    -> ``reports/comparison/``: one table row per fit (the paper's sec. 8 list:
 median / 80th / 95th percentile relative error) next to the paper's published figures, and a bar chart.
 
-Writes are atomic (DESIGN.md principle 6): everything goes into a hidden temporary directory next to the
+Writes are atomic: everything goes into a hidden temporary directory next to the
 target, renamed into place at the end (:func:`clothlab.atomic.atomic_directory`); an existing report is
 replaced only with ``force=True``.
 """
@@ -27,6 +27,7 @@ from clothlab.report.data import (
     FitRecord,
     error_percentiles,
     fabric_name,
+    free_parameters,
     is_simulated,
     is_usable_dir_name,
     load_fit_dir,
@@ -157,7 +158,8 @@ def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
         "name": record.name,
         "fabric": fabric_name(fit),
         "model": (fit.get("model") or {}).get("kind"),
-        "quadrature": model_setting(fit),
+        "setting": model_setting(fit),
+        "parameters": free_parameters(fit),
         "p50": overall["p50"], "p80": overall["p80"], "p95": overall["p95"], "n": overall["n"],
         "free": sum(1 for e in (fit.get("parameters") or {}).values() if e.get("free", True)),
         "evaluations": fit.get("evaluations"),
@@ -174,8 +176,9 @@ def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
 def build_comparison(fit_dirs, reports_dir="reports", name: str = "comparison", force: bool = False) -> Path:
     """Write ``<reports_dir>/<name>/`` (index.html, comparison.png, summary.json) comparing several fits.
 
-    One row per fit: fabric, model kind, quadrature, median / 80th / 95th percentile relative error,
-    free parameter count, evaluations, wall time, and the paper's published median / 80th figures on
+    One row per fit: fabric, model kind, the model's setting (:func:`model_setting`), the fitted free
+    parameters with their declared units, median / 80th / 95th percentile relative error, free parameter
+    count, evaluations, wall time, and the paper's published median / 80th figures on
     real measurements where the fabric matches (Irawan & Marschner 2012, sec. 8).  Returns the directory.
     """
     fit_dirs = list(fit_dirs)

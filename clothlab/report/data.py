@@ -280,17 +280,28 @@ def optimisation_seconds(fit: dict) -> float | None:
     return fit.get("wall_time_s")
 
 
-def model_setting(fit: dict) -> str | None:
-    """The evaluation setting of a fit's model in a few words: the quadrature of an IM model, the options of
-    other kinds."""
-    model = fit.get("model") or {}
-    if model.get("kind", "irawan") == "irawan":
-        quadrature = model.get("quadrature") or {}
-        return " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or None
-    options = model.get("options")
-    if options is None:
-        options = ((fit.get("config") or {}).get("model") or {}).get("options") or {}
-    return ", ".join(f"{k}={v}" for k, v in options.items()) or "defaults"
+def model_setting(fit: dict) -> str:
+    """The evaluation setting of a fit's model in a few words, as its model class describes the settings
+    recorded in fit.json (:meth:`clothlab.models.base.Model.describe_settings`: e.g. the quadrature of an
+    integrating model, the options of others)."""
+    from clothlab.errors import ConfigError
+    from clothlab.models.base import Model
+    from clothlab.models.registry import DEFAULT_KIND, model_class
+
+    model = dict(fit.get("model") or {})
+    if model.get("options") is None:  # fits saved before the model recorded its options
+        model["options"] = ((fit.get("config") or {}).get("model") or {}).get("options") or {}
+    try:
+        cls = model_class(model.get("kind", DEFAULT_KIND))
+    except ConfigError:  # a kind this version does not know: its options as recorded
+        cls = Model
+    return cls.describe_settings(model)
+
+
+def free_parameters(fit: dict) -> dict[str, dict]:
+    """The fitted free parameters of a fit.json: {name: {"value", "unit"}} in the model's declared order."""
+    return {name: {"value": entry.get("value"), "unit": entry.get("unit")}
+            for name, entry in (fit.get("parameters") or {}).items() if entry.get("free", True)}
 
 
 def paper_fabric(fit: dict) -> str | None:

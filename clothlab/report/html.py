@@ -16,6 +16,7 @@ from clothlab.report.data import (
     PAPER_SOURCE,
     fabric_name,
     is_simulated,
+    model_setting,
     paper_fabric,
     percentile_key,
 )
@@ -110,8 +111,6 @@ def _header_section(fit: dict) -> list[str]:
     model = fit.get("model") or {}
     measurement = fit.get("measurement") or {}
     provenance = measurement.get("provenance") or {}
-    quadrature = model.get("quadrature") or {}
-    quad = " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or None
     out = [f"<h1>clothlab fit report: {esc(fit.get('name'))}</h1>"]
     if is_simulated(provenance):
         out.append('<div class="banner">SIMULATED data: this fit is to a simulated measurement, '
@@ -121,7 +120,7 @@ def _header_section(fit: dict) -> list[str]:
         ("fabric", esc(fabric_name(fit))),
         ("model", esc(model.get("kind"))),
         ("weave", esc(model.get("weave"))),
-        ("quadrature", esc(quad)),
+        ("setting", esc(model_setting(fit))),
         ("measurement", esc(measurement.get("path"))),
         ("samples", fmt_number(measurement.get("n"))),
         ("channels", esc(", ".join(map(str, channels)) if channels else None)),
@@ -309,15 +308,29 @@ def render_report_html(fit: dict, figures: dict, tables: dict) -> str:
     return _page(f"clothlab report: {fit.get('name')}", body)
 
 
+def _fitted_parameters(parameters) -> str:
+    """``name = value unit`` per fitted free parameter (one per line; a dash for none)."""
+    if not parameters:
+        return "\u2014"
+    lines = []
+    for name, entry in parameters.items():
+        unit = entry.get("unit")
+        unit = "" if unit in (None, "1") else f" {unit}"
+        lines.append(f"{esc(name)} = {fmt_number(entry.get('value'))}{esc(unit)}")
+    return "<br>".join(lines)
+
+
 def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "comparison") -> str:
     """A table with one row per fit (like the paper's sec. 8 list) and the comparison figure(s).
 
-    rows : dicts with name, fabric, model, quadrature, p50, p80, p95 (fractions), free (count),
+    rows : dicts with name, fabric, model, setting, parameters ({name: {value, unit}} of the free ones),
+    p50, p80, p95 (fractions), free (count),
     evaluations, wall_time_s, simulated (bool), link (relative URL of the fit's report or None) and
     paper = (median %, 80th %) or None.
     """
-    header = ["fit", "fabric", "model", "quadrature", "median", "80th pct.", "95th pct.", "free params",
-              "evaluations", "optimisation time (s)", "model speed (pairs/s)", "paper median*", "paper 80th*"]
+    header = ["fit", "fabric", "model", "setting", "fitted parameters", "median", "80th pct.", "95th pct.",
+              "free params", "evaluations", "optimisation time (s)", "model speed (pairs/s)", "paper median*",
+              "paper 80th*"]
     table_rows = []
     for row in rows:
         name = esc(row["name"])
@@ -327,7 +340,8 @@ def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "com
             name += ' <span class="warn">(SIMULATED)</span>'
         paper = row.get("paper")
         table_rows.append([
-            name, esc(row.get("fabric")), esc(row.get("model")), esc(row.get("quadrature")),
+            name, esc(row.get("fabric")), esc(row.get("model")), esc(row.get("setting")),
+            _fitted_parameters(row.get("parameters")),
             ("num", fmt_percent(row.get("p50"))), ("num", fmt_percent(row.get("p80"))),
             ("num", fmt_percent(row.get("p95"))), ("num", fmt_number(row.get("free"))),
             ("num", fmt_number(row.get("evaluations"))), ("num", fmt_number(row.get("wall_time_s"))),

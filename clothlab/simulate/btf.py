@@ -1,4 +1,7 @@
-"""Simulated BTF stacks of the Irawan-Marschner texture model (issue 4 item 3; paper sec. 4.2, Fig. 4, sec. 7.2).
+"""Simulated BTF stacks of a texture model (Irawan & Marschner 2012, sec. 4.2, Fig. 4, sec. 7.2).
+
+The source's model must have a texture model (:meth:`clothlab.models.base.Model.texture`) and declare the
+parameters the layout acts on (:data:`LAYOUT_PARAMETERS`: the Irawan-Marschner model does).
 
 Directions (:func:`fig4_directions`): the light on four half circles of illumination *elevation* 30, 45, 60
 and 75 deg (the arrangement of the paper's Fig. 4), i.e. theta_i = 90 deg - elevation, at azimuths evenly
@@ -15,7 +18,7 @@ Texture layout (the parameters the BRDF cannot see, :class:`TextureLayout`):
 - ``ratio``: scale s of the segment length/width ratio: l' = l sqrt(s), w' = w / sqrt(s) for both yarn types
   (segment area kept; s = 1 keeps the weave's w, l);
 - ``hwidth``: eq. 12 band width (None: the weave's / fit's value);
-- ``noise`` and ``seed``: the sec. 7.2.1 noise of :class:`IrawanTexture` and its realisation.
+- ``noise`` and ``seed``: the texture model's noise (IM: sec. 7.2.1) and its realisation.
 
 Pixels are square: the image height covers ``tile_repeats * W_cells / H_cells * height / width`` tiles.
 """
@@ -28,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import ConfigError, InputError
+from clothlab.progress import get_logger
 
 ELEVATIONS = (30.0, 45.0, 60.0, 75.0)  # deg, paper Fig. 4
 
@@ -49,23 +53,43 @@ class TextureLayout:
         return d
 
 
+#: the parameters a :class:`TextureLayout` acts on (``ratio`` scales w and l, ``hwidth`` replaces eq. 12's)
+LAYOUT_PARAMETERS = ("warp.w", "warp.l", "weft.w", "weft.l", "hwidth")
+
+
 @dataclass
 class TextureSource:
-    """A texture model's origin: weave, quadrature, parameters (declared units), coefficients {name: (C,)}
-    or None, channel names or None, and a description for provenance."""
+    """A texture model's origin: the model (one with a texture model, :meth:`clothlab.models.base.Model.texture`),
+    parameters (declared units), coefficients {name: (C,)} or None, channel names or None, and a description
+    for provenance."""
 
-    weave: object
-    quadrature: object
+    model: object
     params: dict
     coefficients: dict | None
     channels: tuple | None
     origin: str
 
+    @property
+    def weave(self):
+        return self.model.weave
+
+
+def _texture_source(model, params, coefficients, channels, origin, *, path=None, field="source") -> TextureSource:
+    """A TextureSource, after checking that the model has a texture model and the layout's parameters."""
+    if not model.has_texture:
+        raise InputError(f"{origin}: model kind {model.kind!r} has no texture model", path=path, field=field)
+    missing = [name for name in LAYOUT_PARAMETERS if name not in model.params]
+    if missing:
+        raise InputError(f"{origin}: the texture layout (segment ratio, hwidth of eq. 12) needs the parameters "
+                         f"{', '.join(LAYOUT_PARAMETERS)}; model kind {model.kind!r} declares no "
+                         f"{', '.join(missing)}", path=path, field=field)
+    return TextureSource(model, params, coefficients, channels, origin)
+
 
 def load_source(source) -> TextureSource:
-    """A fit directory (fit.json + weave.wv, Irawan model), a fabric.yaml, or ``preset:<name>`` / a preset name."""
-    from clothlab.models.irawan.model import IrawanModel, Quadrature
-    from clothlab.models.irawan.parameters import weave_parameters
+    """A fit directory (fit.json + weave.wv), a fabric.yaml, or ``preset:<name>`` / a preset name (the registry's
+    default model kind); its model must have a texture model with the layout's parameters."""
+    from clothlab.models.registry import DEFAULT_KIND, build_model
     from clothlab.weave.presets import PRESET_NAMES, get_preset
 
     text = str(source)
@@ -74,33 +98,29 @@ def load_source(source) -> TextureSource:
         from clothlab.fit.store import load_fitted
 
         model, params, coefficients, channels = load_fitted(path)
-        if not isinstance(model, IrawanModel):
-            raise InputError(f"the fit uses model '{getattr(model, 'kind', type(model).__name__)}'; the texture "
-                             "model needs an Irawan-Marschner (kind: irawan) fit", path=path / "fit.json")
-        return TextureSource(model.weave, model.quadrature, params, coefficients, channels, f"fit:{path}")
+        return _texture_source(model, params, coefficients, channels, f"fit:{path}", path=path / "fit.json",
+                               field="model.kind")
     if path.suffix.lower() in (".yaml", ".yml") and path.is_file():
         from clothlab.config import load_config
         from clothlab.weave.presets import resolve_weave
 
         config = load_config(path)
-        if config.model.kind != "irawan":
-            raise InputError(f"model.kind is '{config.model.kind}'; the texture model needs 'irawan'", path=path,
-                             field="model.kind")
-        weave = resolve_weave(config.model.weave, path.parent)
-        params = {**weave_parameters(weave), **{k: float(v) for k, v in config.model.params.items()}}
-        q = Quadrature(config.model.quadrature.rule, config.model.quadrature.nodes)
-        return TextureSource(weave, q, params, None, None, f"config:{path}")
+        q = config.model.quadrature
+        model = build_model(config.model.kind, resolve_weave(config.model.weave, path.parent), (q.rule, q.nodes),
+                            **config.model.options)
+        return _texture_source(model, model.resolve(config.model.params), None, None, f"config:{path}", path=path,
+                               field="model.kind")
     name = text[len("preset:"):] if text.lower().startswith("preset:") else text
     if name.strip().lower().replace("_", "-") not in PRESET_NAMES:
         raise InputError(f"texture source '{text}' is neither a fit directory, a fabric.yaml nor a preset "
                          f"({', '.join(PRESET_NAMES)})", field="source")
     from clothlab.simulate.examples import YARN_COLOURS
 
-    weave = get_preset(name)
-    colours = YARN_COLOURS.get(weave.name)
+    model = build_model(DEFAULT_KIND, get_preset(name))
+    colours = YARN_COLOURS.get(model.weave.name)
     coefficients = None if colours is None else {k: np.asarray(v, dtype=np.float64) for k, v in colours.items()}
-    return TextureSource(weave, Quadrature(), weave_parameters(weave), coefficients,
-                         ("R", "G", "B") if colours else None, f"preset:{weave.name}")
+    return _texture_source(model, model.default_parameters(), coefficients, ("R", "G", "B") if colours else None,
+                           f"preset:{model.weave.name}")
 
 
 def fig4_directions(n_directions: int = 16, *, elevations=ELEVATIONS, views=((0.0, 0.0),)) -> np.ndarray:
@@ -191,14 +211,13 @@ def simulate_btf(source, out_dir, *, directions=None, n_directions: int = 16, si
 
     from clothlab.btf.write import write_btf_stack
     from clothlab.errors import GeometryWarning
-    from clothlab.models.irawan.texture import IrawanTexture
 
     layout = layout or TextureLayout()
     src = source if isinstance(source, TextureSource) else load_source(source)
     if src.coefficients is None:
         raise InputError(f"{src.origin} carries no coefficients (kd, ks_warp, ks_weft); give them "
                          "(with_coefficients; clothlab simulate --btf: --kd, --ks-warp, --ks-weft)", field="source")
-    texture = IrawanTexture(src.weave, src.quadrature, seed=int(layout.seed))
+    texture = src.model.texture(seed=int(layout.seed))
     size = (int(size), int(size)) if np.ndim(size) == 0 else tuple(int(s) for s in size)
     repeats = square_pixel_repeats(src.weave, size, tile_repeats)
     table = fig4_directions(n_directions, views=views) if directions is None else np.asarray(directions, float)
@@ -207,7 +226,7 @@ def simulate_btf(source, out_dir, *, directions=None, n_directions: int = 16, si
     provenance = {"texture": {
         "source": src.origin, "weave": src.weave.name, **layout.to_dict(), "hwidth": p["hwidth"],
         "rotation_centre_tiles": list(centre), "fineness": float(src.weave.fineness),
-        "quadrature": {"rule": src.quadrature.rule, "nodes": int(src.quadrature.nodes)},
+        "model": src.model.kind, **src.model.settings(),
         "params": src.params, "coefficients": {k: np.asarray(v).tolist() for k, v in src.coefficients.items()},
         "channels": list(src.channels or []),
         "directions": "light on half circles of elevation 30/45/60/75 deg (theta_i = 90 - elevation), "
@@ -280,24 +299,22 @@ def with_coefficients(src: TextureSource, *, kd=None, ks_warp=None, ks_weft=None
 def simulate_btf_command(source, out_dir, *, n_directions: int = 16, size: int = 64, tile_repeats: float = 4.0,
                          offset=(0.25, 0.4), seed: int = 0, kd=None, ks_warp=None, ks_weft=None, channels=None,
                          rule: str | None = None, nodes: int | None = None, force: bool = False) -> int:
-    """CLI body of ``clothlab simulate --btf``: write the stack, print one line; 0 on success.
+    """CLI body of ``clothlab simulate --btf``: write the stack, log one line (logger ``clothlab.simulate.btf``,
+    level INFO) saying what was written; 0 on success.
 
     ``kd``, ``ks_warp``, ``ks_weft``, ``channels``: see :func:`with_coefficients`; ``rule`` / ``nodes``
     override the source's quadrature of the texture model."""
     from dataclasses import replace
 
-    from clothlab.models.irawan.model import Quadrature
-
     offset = tuple(float(x) for x in (np.repeat(offset, 2) if np.ndim(offset) == 0 else offset))
     src = load_source(source)
     if rule is not None or nodes is not None:
-        src = replace(src, quadrature=Quadrature(rule or src.quadrature.rule,
-                                                 int(nodes) if nodes is not None else src.quadrature.nodes))
+        src = replace(src, model=src.model.with_quadrature(rule, None if nodes is None else int(nodes)))
     src, origin = with_coefficients(src, kd=kd, ks_warp=ks_warp, ks_weft=ks_weft, channels=channels)
     path = simulate_btf(src, out_dir, n_directions=n_directions, size=size, tile_repeats=tile_repeats,
                         layout=TextureLayout(offset=offset, seed=int(seed)), force=force)
     coefs = "; ".join(f"{k} = {', '.join(f'{c:g}' for c in v)} ({origin[k]})" for k, v in src.coefficients.items())
-    print(f"wrote simulated BTF stack {path} ({n_directions} images, {size} px, {tile_repeats:g} tiles across, "
-          f"offset {offset[0]:g}, {offset[1]:g} tiles, noise seed {seed}; channels {', '.join(src.channels)}: "
-          f"{coefs})")
+    get_logger(__name__).info(
+        f"wrote simulated BTF stack {path} ({n_directions} images, {size} px, {tile_repeats:g} tiles across, "
+        f"offset {offset[0]:g}, {offset[1]:g} tiles, noise seed {seed}; channels {', '.join(src.channels)}: {coefs})")
     return 0

@@ -1,4 +1,4 @@
-"""Fit the texture parameters the BRDF cannot see to a BTF stack (issue 4 item 4; paper sec. 4.2, 7.2).
+"""Fit the texture parameters the BRDF cannot see to a BTF stack (Irawan & Marschner 2012, sec. 4.2, 7.2).
 
 Free (any subset of :data:`TEXTURE_FREE`): the tile offset (u0, v0) in tiles, a small rotation rho (deg),
 the segment length/width ratio scale s and hWidth (eq. 12), with the layout conventions of
@@ -6,8 +6,7 @@ the segment length/width ratio scale s and hWidth (eq. 12), with the layout conv
 are **held fixed**; ``refine`` names BRDF parameters (e.g. ``warp.umax``) that are refined as well, within
 their declared fit bounds, in a second stage that starts from the held optimum and keeps the better of the
 two (so refining never ends worse than holding).  At every objective evaluation the linear coefficients
-(kd, ks_warp, ks_weft) are solved by exact NNLS per channel (:func:`clothlab.fit.nnls.nnls_small`, DESIGN.md
-principle 3).
+(kd, ks_warp, ks_weft) are solved by exact NNLS per channel (:func:`clothlab.fit.nnls.nnls_small`).
 
 Data: the **raw images**, not the unit-tile averages.  Reasons: (1) a rotated weave is smeared by averaging
 tiles along the image axes, so the rotation is only observable in the raw images; (2) the intensity noise
@@ -149,10 +148,9 @@ class _Problem:
 
     def __init__(self, stack, src: TextureSource, repeats, free, refine):
         from clothlab.btf.write import texture_coordinates
-        from clothlab.models.irawan.texture import IrawanTexture
 
         self.src, self.free, self.refine = src, tuple(free), tuple(refine)
-        self.texture = IrawanTexture(src.weave, src.quadrature)
+        self.texture = src.model.texture()
         self.repeats = repeats
         size = (stack.width, stack.height)
         need = len(stack) * stack.width * stack.height * stack.channels * 4
@@ -333,10 +331,9 @@ def fit_texture(stack, source, *, free=TEXTURE_FREE, refine=(), crop=None, tile_
         if name == "v0":
             return (values["v0"] - grid_step / h, values["v0"] + grid_step / h)
         return {"rotation": ROTATION_BOUNDS, "ratio": RATIO_BOUNDS, "hwidth": HWIDTH_BOUNDS}.get(name) or \
-            IRAWAN_PARAMS[name].bounds
+            src.model.params[name].bounds
 
     from clothlab.fit.optimize import minimize
-    from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)

@@ -1,9 +1,32 @@
 """The Irawan-Marschner reflectance model of woven cloth (Irawan & Marschner 2012, sec. 7.1 and 7.3).
 
+Parameters (paper Table I; :data:`clothlab.models.irawan.parameters.IRAWAN_PARAMS`; "1" = dimensionless,
+``cell`` = weave-tile cells; the default is the declared one, a weave brings its own values, which are the
+model's defaults and a fit's start):
+
+==========  ====  ===========  =======  ==============================================================
+parameter   unit  range        default  meaning
+==========  ====  ===========  =======  ==============================================================
+alpha       1     [0, 100]     0.05     uniform scattering of the phase function f_c, eq. 7
+beta        1     (0, 100000]  4        forward scattering of the phase function f_c, eq. 7
+delta       1     [0, 1)       0.3      filament smoothing: the faded fraction of the arc, eq. 9
+hwidth      1     (0, 1]       0.5      highlight band width / segment size, eq. 12 (texture model only)
+warp.psi    deg   (-90, 90)    0        fibre twist angle, sec. 5.2 (0: filament yarn)
+warp.umax   deg   (0, 90)      30       maximum inclination angle, sec. 5.2
+warp.kappa  1     (-1, 1000]   0        spine curvature, sec. 5.4
+warp.w      cell  (0, 1000]    1        segment rectangle width, sec. 5.3
+warp.l      cell  (0, 1000]    1        segment rectangle length, sec. 5.3
+weft.psi    deg   (-90, 90)    0        as warp.psi, for the weft segments
+weft.umax   deg   (0, 90)      30       as warp.umax, for the weft segments
+weft.kappa  1     (-1, 1000]   0        as warp.kappa, for the weft segments
+weft.w      cell  (0, 1000]    1        as warp.w, for the weft segments
+weft.l      cell  (0, 1000]    1        as warp.l, for the weft segments
+==========  ====  ===========  =======  ==============================================================
+
     f_r(wi, wo) = kd / pi + sum_j ks_j S_j(wi, wo),     S_j = f_c(wi, wo) I_j(wi, wo) / a_j
 
 for the segment types j = warp, weft.  I_j is the yarn integral of eq. 10 (:mod:`.yarn`), f_c the phase
-function of eq. 7 (:mod:`.phase`).  Components, not totals (DESIGN.md principle 3): the model returns
+function of eq. 7 (:mod:`.phase`).  Components, not totals: the model returns
 ``diffuse`` (= 1/pi, a Lambertian of unit albedo), ``specular_warp`` and ``specular_weft``; the per-channel
 coefficients kd, ks_warp, ks_weft are linear and solved outside.
 
@@ -15,7 +38,7 @@ albedo that segment type j adds to the fabric (its area share is part of it, so 
 warpArea/weftArea balancing is absorbed into ks_j).  ``normalised=False`` gives the raw f_c I_j, used inside
 fits (the scale only rescales ks) and converted once at the end.
 
-Decisions on what the paper leaves open (irawan-presets.md):
+Decisions on what the paper leaves open:
 - staple path for |psi| >= PSI_FILAMENT_THRESHOLD (1e-3 rad = 0.057 deg), filament path below; the staple
   integral tends to the filament one as psi -> 0, and the test suite measures the jump at the threshold.
 - eq. 3: the +arccos(D) root only (the one with n.h >= 0), visible when |v| < pi/2.
@@ -166,22 +189,44 @@ class IrawanModel(Model):
     def settings(self) -> dict:
         return {"quadrature": {"rule": self.quadrature.rule, "nodes": self.quadrature.nodes}}
 
+    @classmethod
+    def describe_settings(cls, settings: dict) -> str:
+        """The quadrature as ``rule nodes`` (e.g. ``trapezoid 11``)."""
+        quadrature = settings.get("quadrature") or {}
+        return " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or "defaults"
+
+    def with_quadrature(self, rule: str | None = None, nodes: int | None = None) -> IrawanModel:
+        if rule is None and nodes is None:
+            return self
+        return IrawanModel(self.weave, Quadrature(rule or self.quadrature.rule,
+                                                  int(nodes) if nodes is not None else self.quadrature.nodes))
+
+    def texture(self, *, seed: int = 0):
+        """The texture model of sec. 7.2 (:class:`clothlab.models.irawan.texture.IrawanTexture`) with this
+        model's quadrature (so its tile average is :meth:`components`)."""
+        from clothlab.models.irawan.texture import IrawanTexture
+
+        return IrawanTexture(self.weave, self.quadrature, seed=seed)
+
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
-        self._memo: dict = {}  # (kind, id(wi), id(wo), geometry) -> (wi, wo, I_j); see _integral
+        self._memo: dict = {}  # (kind, shape, geometry, quadrature) -> (wi copy, wo copy, I_j); see _integral
 
     def _integral(self, wi, wo, p, kind):
-        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta
-        reuses it.  The entry keeps references to wi and wo, so their ids cannot be reused meanwhile."""
-        key = (kind, id(wi), id(wo), wi.shape, yarn_geometry_key(p, kind), self.quadrature)
+        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta reuses it.
+
+        An entry is used only if the directions' *contents* equal the copies it keeps (not their identity),
+        so directions changed in place, or new arrays at a reused address, never return a stale integral."""
+        key = (kind, wi.shape, yarn_geometry_key(p, kind), self.quadrature)
         hit = self._memo.get(key)
-        if hit is not None:
+        if hit is not None and np.array_equal(hit[0], wi) and np.array_equal(hit[1], wo):
             return hit[2]
         value = yarn_integral_fabric(wi, wo, p, kind, self.quadrature)
+        self._memo.pop(key, None)
         if len(self._memo) >= 8:
             self._memo.pop(next(iter(self._memo)))
-        self._memo[key] = (wi, wo, value)
+        self._memo[key] = (wi.copy(), wo.copy(), value)
         return value
 
     def default_parameters(self) -> dict[str, float]:
@@ -194,7 +239,7 @@ class IrawanModel(Model):
                    warn: bool = True) -> dict[str, np.ndarray]:
         """BRDF components (1/sr) at fabric-frame directions wi, wo (N, 3).
 
-        ``need``: the component names wanted (others are not computed; DESIGN.md principle 5).
+        ``need``: the component names wanted (others are not computed).
         Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0 (reflection only).
         """
         p = self.resolve(params)

@@ -29,8 +29,8 @@ which the published renderer divides by) equal the cell shares; where a weave fi
 with its pattern, the cell share is what makes the tile average equal the reflectance model, so it is used.
 A point on a warp segment has specular_weft = 0 and vice versa.
 
-Identity (irawan-presets.md, "A check you can run on yourself"): the tile average of each specular
-component over a dense grid equals the reflectance model's component (tests/test_texture.py).  It holds
+Identity: the tile average of each specular
+component over a dense grid equals the reflectance model's component (checked by the test suite).  It holds
 when each segment's pattern cells form its w x l rectangle centred on the segment centre (true for all
 presets).  Reciprocity: T depends on wi, wo only through h, |wi + wo|, ci cr / (ci + cr) and wi.wo, so
 swapping wi and wo leaves every point's value unchanged (noise does not depend on directions).
@@ -49,7 +49,7 @@ Noise (sec. 7.2.1; :mod:`clothlab.models.irawan.texture_noise`), only when ``noi
   through V, U / period) (for a warp segment the first is its own yarn, for a weft segment the second):
       warp segment: umax + dumax[0] P_warp + dumax[1] P_weft   (warp<-warp, warp<-weft)
       weft segment: umax + dumax[2] P_warp + dumax[3] P_weft   (weft<-warp, weft<-weft)
-  in degrees, clamped to [UMAX_MIN, UMAX_MAX] (numerics.md item 3: noise must not push umax <= 0).
+  in degrees, clamped to [UMAX_MIN, UMAX_MAX] (noise must not push umax <= 0, where the yarn has no highlight).
   The modulated umax enters eq. 11, R(u) and eq. 13; the albedo a_j stays that of the unmodulated yarn.
 """
 
@@ -174,12 +174,15 @@ class IrawanTexture:
     # ------------------------------------------------------------------ the model
 
     def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
-                   normalised: bool = True, warn: bool = True) -> dict[str, np.ndarray]:
+                   normalised: bool = True, warn: bool = True, footprint=None,
+                   view_distance=None) -> dict[str, np.ndarray]:
         """Texture components (1/sr) at texture points u, v (tile units; arrays broadcast together) for
         fabric-frame directions wi, wo: (N, 3) with one row per point, or (3,) / (1, 3) shared by all.
 
         Returns arrays of the points' shape: ``diffuse`` (1/pi), ``specular_warp``, ``specular_weft``
-        (see the module docstring).  Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0.
+        (see the module docstring).  Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0.  ``footprint`` and
+        ``view_distance`` belong to the texture interface (:mod:`clothlab.models.base`) and are ignored:
+        this model does not filter itself (a renderer blends it with the reflectance model).
         """
         p = self.resolve(params)
         need = COMPONENTS if need is None else tuple(need)

@@ -1,4 +1,4 @@
-"""Reproducible noise for the texture model (Irawan & Marschner 2012, sec. 7.2.1; numerics.md items 9-10).
+"""Reproducible noise for the texture model (Irawan & Marschner 2012, sec. 7.2.1).
 
 Everything here starts from *integers*: callers quantise their float64 coordinates with ``floor`` (or take
 integer segment / tile indices) and :func:`hash_uniform` mixes them with 64-bit integer arithmetic
@@ -24,7 +24,7 @@ _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = (np.uint64(s) for s in (30, 27, 31, 11))
 
-#: Cap of the intensity noise (sec. 7.2.1 leaves it unbounded; numerics.md item 10).  P(E > 10) = e^-10.
+#: Cap of the intensity noise (sec. 7.2.1 leaves it unbounded).  P(E > 10) = e^-10.
 INTENSITY_CAP = 10.0
 #: Mean of min(E, cap) for E ~ Exp(1): integral_0^cap e^-t dt = 1 - e^-cap; the noise is divided by it.
 CAPPED_MEAN = 1.0 - math.exp(-INTENSITY_CAP)

@@ -2,6 +2,24 @@
 extending Kang 2010): Ashikhmin-Shirley BRDF per yarn type with alternating anisotropy, yarn normal
 perturbation with ambient occlusion, per-yarn noise, the eq. 5 LoD blend and Algorithm 1.
 
+Parameters (:mod:`clothlab.models.kang.parameters`; "1" = dimensionless; ``weft.nx`` / ``weft.ny`` only with
+the option ``alternating: false``, otherwise they are the warp's, sec. 3.3):
+
+===============  ======  ==========  =======  ===========================================================
+parameter        unit    range       default  meaning
+===============  ======  ==========  =======  ===========================================================
+warp.nx          1       [0, 10000]  1        microfacet exponent across the yarn (eq. 2, x)
+warp.ny          1       [0, 10000]  30       microfacet exponent along the yarn (eq. 2, y)
+weft.nx          1       [0, 10000]  1        weft exponent across the yarn (eq. 2, x; not alternating)
+weft.ny          1       [0, 10000]  30       weft exponent along the yarn (eq. 2, y; not alternating)
+n_strands        1/cell  [1, 1000]   6        fibre strands N_xi: fibre ridges per cell along the yarn
+fibre_curvature  1       [0, 0.7]    0.3      c_f: amplitude of the along-yarn normal tilt (eqs. 3-4)
+yarn_curvature   1       [0, 0.7]    0.5      c_y: across-yarn normal tilt at the yarn edge (eqs. 3-4)
+fibre_slope      1       [-10, 10]   0.5      s_f: shear of the fibre ridges (eqs. 3-4)
+fresnel_f0       1       [0, 1]      0.04     Schlick Fresnel reflectance at normal incidence (eq. 1)
+noise            1       [0, 1]      0.1      per-yarn intensity noise amplitude (sec. 5.2), mean 1
+===============  ======  ==========  =======  ===========================================================
+
 Point components (1/sr, :meth:`KangModel.point_components`, for textures and renders), per yarn type k in
 (warp, weft): ``diffuse_k`` = Lambert 1/pi on the points of type k, ``specular_k`` = eq. 1 with the eq. 2
 distribution about the perturbed normal, times the ambient occlusion (sec. 4.2.2 applies the AO to the
@@ -19,7 +37,7 @@ delta_along uniform in [-c_f, c_f] (exact when a yarn's visible part spans its w
 fibre ridges).  The specular average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the
 pattern's cell share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle
 (``tile_nodes`` per axis).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
-measured in tests/test_kang.py against a fine grid over the tile (see docs/kang.md).
+measured by the test suite against a fine grid over the tile.
 """
 
 from __future__ import annotations
@@ -30,7 +48,7 @@ import numpy as np
 
 from clothlab.errors import ConfigError
 from clothlab.frames import to_yarn_frame
-from clothlab.models.base import Model
+from clothlab.models.base import Model, as_directions, front_facing
 from clothlab.models.kang import lod, microfacet, yarn
 from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters, resolve_parameters
 from clothlab.weave.lookup import locate_segments
@@ -55,6 +73,7 @@ class KangModel(Model):
     kind = "kang"
     params = KANG_PARAMS  # the class-level declarations (all options); an instance narrows them
     has_texture = True
+    texture_filters = True  # the point shader takes the pixel footprint (eq. 5, Algorithm 1)
     #: tile-averaged components (components(), what a fit solves coefficients for)
     component_names = ("diffuse", "specular_warp", "specular_weft")
     #: point components (point_components(), for textures and renders)
@@ -129,6 +148,14 @@ class KangModel(Model):
 
     # --- the interface ---------------------------------------------------------------------------------
 
+    def texture(self, *, seed: int = 0):
+        """The point shader as a texture model (:class:`clothlab.models.kang.texture.KangTexture`); the
+        per-yarn noise is a hash of the yarn, so ``seed`` (the interface's) selects nothing here: Algorithm 1's
+        jitter uses the model option ``seed``."""
+        from clothlab.models.kang.texture import KangTexture
+
+        return KangTexture(self)
+
     def default_parameters(self) -> dict[str, float]:
         return default_parameters(self.params)
 
@@ -145,16 +172,16 @@ class KangModel(Model):
         limits the components computed; ``normalised`` and ``warn`` exist for interface parity with the IM
         model (Kang's components are already in albedo units and raise no geometry warnings)."""
         p = self.resolve(params)
-        wi, wo = _directions(wi, wo)
-        visible = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
-        out = {name: np.zeros(len(wi)) for name in self.component_names}
+        wi, wo = as_directions(wi, wo)
+        visible = front_facing(wi, wo)
         need = self.component_names if need is None else tuple(need)
+        out = {name: np.zeros(len(wi)) for name in self.component_names if name in need}
         if "diffuse" in need:
             out["diffuse"] = np.where(visible, 1.0 / np.pi, 0.0)
         for kind in YARN_KINDS:
             share = self.shares[kind]
             if share == 0.0 or f"specular_{kind}" not in need:
-                continue  # a yarn type with no visible area is skipped (DESIGN principle 5)
+                continue  # a yarn type with no visible area is skipped (nothing runs that the fit does not need)
             out[f"specular_{kind}"] = share * self._yarn_average(kind, to_yarn_frame(wi, kind),
                                                                  to_yarn_frame(wo, kind), p)
         return out
@@ -172,7 +199,7 @@ class KangModel(Model):
         the running mean changes by less than 1 / view_distance.
         """
         p = self.resolve(params)
-        wi, wo = _directions(wi, wo)
+        wi, wo = as_directions(wi, wo)
         u, v = (np.broadcast_to(np.asarray(c, dtype=np.float64), (len(wi),)).copy() for c in (u, v))
         if footprint is not None:
             footprint = np.broadcast_to(np.asarray(footprint, dtype=np.float64), (len(wi),))
@@ -247,10 +274,3 @@ def _gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
     nodes, weights = np.polynomial.legendre.leggauss(n)
     return nodes, weights / 2.0
 
-
-def _directions(wi, wo):
-    wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
-    wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
-    if wi.shape != wo.shape or wi.shape[-1] != 3 or wi.ndim != 2:
-        raise ValueError(f"wi, wo must both be (N, 3) arrays, got {wi.shape} and {wo.shape}")
-    return wi, wo

@@ -67,7 +67,7 @@ def _splitmix(z):
 def yarn_random(tile_u, tile_v, segment):
     """A uniform number in [0, 1) per (tile column, tile row, segment), from integer hashing only.
 
-    Independent of float width and platform (numerics.md item 9); negative tile indices are fine.
+    Independent of float width and platform (integer hashing, no floating-point state); negative tile indices are fine.
     """
     shape = np.broadcast(tile_u, tile_v, segment).shape
     key = np.zeros(max(1, int(np.prod(shape))), dtype=np.uint64)  # 1-D: array ops wrap silently
