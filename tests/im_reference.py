@@ -2,8 +2,11 @@
 
 Written straight from Irawan & Marschner, "Specular reflection from woven cloth" (ACM TOG 31(1), 2012),
 sections 5-7.1, eqs. (1)-(10) and Algorithms 1-2, in their literal form, one direction pair at a time, with
-the spine-curvature formulas of /work/shared/reference/irawan-presets.md ("Formulas the paper's text leaves
-incomplete"). It deliberately shares no code with clothlab.models.irawan: the tests compare the two.
+the spine-curvature branches of sec. 5.4 completed where the paper's text leaves them incomplete (the
+parameter of each conic, t(u), and the relation of a_hat, b_hat to L = l/2 - a sin umax).  It deliberately
+shares no code with clothlab.models.irawan: the tests compare the two, equation by equation
+(tests/test_irawan_kernels.py), integral by integral (tests/test_irawan_model.py) and under the same discrete
+quadrature sums (tests/test_stability.py).
 
 Conventions: yarn frame with z along the cloth normal, y along the yarn, x completing a right-handed basis;
 wi, wo are unit 3-vectors with z > 0; all angles in radians; w, l in any common length unit (a = w/2).
@@ -108,7 +111,7 @@ def _angles_in(candidates, lo, hi):
 
 
 def spine_radius(u, umax, kappa, w, l):
-    """Radius of curvature R(u) of the yarn spine (sec. 5.3-5.4; forms from irawan-presets.md).
+    """Radius of curvature R(u) of the yarn spine (sec. 5.3-5.4, the branches written out per conic).
 
     a = w/2, L = l/2 - a sin(umax), r_hat = 1 + kappa (1 + cot umax); branches on r_hat literally:
     r_hat == 1 circle, r_hat > 0 ellipse, r_hat == 0 parabola, r_hat < 0 hyperbola. Same length unit as w, l.
