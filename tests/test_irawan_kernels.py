@@ -298,6 +298,8 @@ def test_compare_kernels_reports_both_speeds(monkeypatch):
         assert math.isfinite(row["old_pairs_per_s"]) and row["old_pairs_per_s"] > 0
         assert math.isfinite(row["new_pairs_per_s"]) and row["new_pairs_per_s"] > 0
     assert out["ratio"] > 0
+    text = "\n".join(kernels_speed.comparison_lines(out))
+    assert all(name in text for name in PRESET_NAMES) and f"{out['ratio']:.3f}" in text
 
 
 # ------------------------------------------------------------------ texture point kernels (Algorithms 3-4)

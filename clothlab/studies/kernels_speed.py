@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-QUICK_REPEATS = 5
-FULL_REPEATS = 15
-MIN_SAMPLE_S = 0.01  # each timed sample repeats the evaluation until it lasts at least this long
+QUICK_REPEATS = 11
+FULL_REPEATS = 31
+MIN_SAMPLE_S = 0.005  # each timed sample repeats the evaluation until it lasts at least this long
 
 
 def _yarn_arguments(params: dict, kind: str, rule: str, nodes: int) -> dict:
@@ -89,3 +89,14 @@ def compare_kernels(quick: bool, rule: str = "trapezoid", nodes: int = 11) -> di
     return {"rule": f"{rule}-{nodes}", "pairs": len(wi), "repeats": repeats, "presets": rows,
             "old_pairs_per_s": n_pairs / old_total, "new_pairs_per_s": n_pairs / new_total,
             "ratio": old_total / new_total}
+
+
+def comparison_lines(result: dict) -> list[str]:
+    """Text lines of a :func:`compare_kernels` result, for the benchmark report (one line per preset)."""
+    lines = [f"IM yarn integrals ({result['rule']}, {result['pairs']} pairs x warp + weft, best of "
+             f"{result['repeats']}, alternated): previous {result['old_pairs_per_s']:,.0f} pairs/s, current "
+             f"{result['new_pairs_per_s']:,.0f} pairs/s, speed ratio current / previous {result['ratio']:.3f}"]
+    for row in result["presets"]:
+        lines.append(f"  {row['preset']:<18} {row['old_pairs_per_s']:>12,.0f} -> {row['new_pairs_per_s']:>12,.0f} "
+                     f"pairs/s  ratio {row['ratio']:.3f}  max |difference| {row['max_rel_diff']:.1e} (relative)")
+    return lines
