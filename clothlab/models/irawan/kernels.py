@@ -32,13 +32,13 @@ from numba import njit
 @njit(cache=True, inline="always")
 def axis_ratio(kappa, umax):
     """r_hat = 1 + kappa (1 + cot umax) (sec. 5.4); umax in radians."""
-    return 1.0 + kappa * (1.0 + 1.0 / np.tan(umax))
+    return 1.0 + kappa * (1.0 + 1.0 / np.tan(umax))  # sec. 5.4: r_hat
 
 
 @njit(cache=True, inline="always")
 def half_length(w, l, umax):
     """L = l/2 - a sin umax, the spine's horizontal half extent (sec. 5.3); < 0 if w sin umax > l."""
-    return 0.5 * l - 0.5 * w * np.sin(umax)
+    return 0.5 * l - 0.5 * w * np.sin(umax)  # sec. 5.3: L
 
 
 @njit(cache=True, inline="always")
@@ -56,7 +56,7 @@ def spine_radius(u, umax, kappa, w, l):
     u = np.minimum(np.maximum(u, -umax), umax)
     c = np.cos(u)
     s = np.sin(u)
-    return scale / (c * c + q * s * s) ** 1.5
+    return scale / (c * c + q * s * s) ** 1.5  # sec. 5.4: R(u)
 
 
 # ------------------------------------------------------------------- the specular condition (sec. 6.3)
@@ -69,7 +69,7 @@ def half_vector(wix, wiy, wiz, wox, woy, woz):
     length = math.sqrt(sx * sx + sy * sy + sz * sz)
     if length <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
-    return sx / length, sy / length, sz / length, length
+    return sx / length, sy / length, sz / length, length  # sec. 6.2: h
 
 
 @njit(cache=True, inline="always")
@@ -104,13 +104,13 @@ def specular_u(hy, hz):
 @njit(cache=True, inline="always")
 def spine_normal_cosine(wy, wz, sin_u, cos_u):
     """w . n(u, 0) = w_y sin u + w_z cos u: the cosine to the normal on the spine's plane (sec. 5.2)."""
-    return wy * sin_u + wz * cos_u
+    return wy * sin_u + wz * cos_u  # sec. 5.2: w . n(u, 0)
 
 
 @njit(cache=True, inline="always")
 def normal_cosine(wx, w_n0, sin_v, cos_v):
     """w . n(u, v) = w_x sin v + (w . n(u, 0)) cos v,  n(u, v) = (sin v, sin u cos v, cos u cos v) (sec. 5.2)."""
-    return wx * sin_v + w_n0 * cos_v
+    return wx * sin_v + w_n0 * cos_v  # sec. 5.2: w . n(u, v)
 
 
 @njit(cache=True, inline="always")
@@ -135,8 +135,8 @@ def staple_break_angles(hy, hz, psi, abs_sin_psi):
     """
     rho = math.sqrt(hy * hy + hz * hz)
     gamma = math.atan2(hz, hy)
-    c0 = math.acos(min(abs_sin_psi / rho, 1.0)) if rho > 0.0 else 0.0
-    return -gamma + c0, -gamma - c0, psi - gamma + 0.5 * math.pi, -psi - gamma + 0.5 * math.pi
+    c0 = math.acos(min(abs_sin_psi / rho, 1.0)) if rho > 0.0 else 0.0  # eq. 3: |D| = 1
+    return -gamma + c0, -gamma - c0, psi - gamma + 0.5 * math.pi, -psi - gamma + 0.5 * math.pi  # |v| = pi/2
 
 
 # ------------------------------------------------------- geometry factor and attenuation (sec. 6.4-6.6)
@@ -145,13 +145,13 @@ def staple_break_angles(hy, hz, psi, abs_sin_psi):
 @njit(cache=True, inline="always")
 def volume_element(radius, a, cos_v):
     """a (R(u) + a cos v): the volume element at the yarn surface r = a (sec. 6.2), numerator of eqs. 5, 6."""
-    return a * (radius + a * cos_v)
+    return a * (radius + a * cos_v)  # sec. 6.2: a (R + a cos v)
 
 
 @njit(cache=True, inline="always")
 def seeliger(ci, cr):
     """A = c_i c_r / (c_i + c_r), Seeliger's law (eq. 8) without the albedo, cosines already positive."""
-    return ci * cr / (ci + cr)
+    return ci * cr / (ci + cr)  # eq. 8: A
 
 
 @njit(cache=True, inline="always")
@@ -168,14 +168,14 @@ def staple_geometry_attenuation(volume, ci, cr, abs_sin_psi):
 @njit(cache=True, inline="always")
 def tangent_cross_h_x(hy, hz):
     """|(t x h)_x| of eq. 6 at eq. 4's u: t = (0, cos u, -sin u) gives h_z cos u + h_y sin u = sqrt(h_y^2 + h_z^2)."""
-    return math.sqrt(hy * hy + hz * hz)
+    return math.sqrt(hy * hy + hz * hz)  # eq. 6: |(t x h)_x|
 
 
 @njit(cache=True, inline="always")
 def smoothstep(x):
     """s(x) = 3 x^2 - 2 x^3 with x clamped to [0, 1]: the smooth step of eq. 9."""
     x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
+    return x * x * (3.0 - 2.0 * x)  # eq. 9: s(x)
 
 
 @njit(cache=True, inline="always")
@@ -283,7 +283,7 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
                 u = nodes[n, k]
                 s, c, r = math.sin(u), math.cos(u), spine_radius(u, umax, kappa, w, l)
             acc += wk * staple_integrand(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, s, c, r, cot_psi, abs_sin_psi,
-                                         a)[0]
+                                         a)[0]  # eq. 1
         out[n] = acc
     return out
 
@@ -335,7 +335,7 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc
                 else:
                     sv, cv = math.sin(nodes[n, k]), math.cos(nodes[n, k])
                 acc += wk * filament_integrand(wix, ci0, wox, cr0, sv, cv, a, radius)
-        out[n] = acc * scale
+        out[n] = acc * scale  # eq. 2
     return out
 
 
