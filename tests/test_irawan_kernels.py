@@ -184,29 +184,6 @@ def test_spine_radius_scalar_and_array_agree_with_reference():
 # ------------------------------------------------------------------ quadrature: the same discrete rule
 
 
-def _rule(name, n, lo, hi):
-    """Nodes and weights computed here (not by the code under test)."""
-    if name == "trapezoid":
-        nodes = np.linspace(lo, hi, n)
-        weights = np.full(n, (hi - lo) / (n - 1))
-        weights[[0, -1]] *= 0.5
-        return nodes, weights
-    x, wx = np.polynomial.legendre.leggauss(n)
-    return lo + (hi - lo) * 0.5 * (x + 1.0), 0.5 * (hi - lo) * wx
-
-
-def _reference_sum(a, b, args, delta, rule, n):
-    """sum_k w_k (integrand of eq. 1 or 2 at node k), with the reference's literal integrands."""
-    staple = staple_path(args["psi"], args["umax"], rule, n, PSI_FILAMENT_THRESHOLD)
-    if staple:
-        nodes, weights = _rule(rule, n, -args["umax"], args["umax"])
-        return sum(wk * ref._staple_integrand(float(x), tuple(a), tuple(b), args["psi"], args["umax"], args["kappa"],
-                                              args["w"], args["l"]) for x, wk in zip(nodes, weights, strict=True))
-    nodes, weights = _rule(rule, n, -0.5 * math.pi, 0.5 * math.pi)
-    return sum(wk * ref._filament_integrand(float(x), tuple(a), tuple(b), args["umax"], args["kappa"], args["w"],
-                                            args["l"], delta) for x, wk in zip(nodes, weights, strict=True))
-
-
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_quadrature_is_the_discrete_rule_of_the_reference_integrand(name):
     """trapezoid-11 (the paper's rule) and gauss-7: the compiled sum = the same nodes and weights applied to
@@ -222,7 +199,8 @@ def test_quadrature_is_the_discrete_rule_of_the_reference_integrand(name):
         for rule, n in (("trapezoid", 11), ("gauss", 7)):
             got = yarn_integral(a, b, **args, delta=params["delta"], rule=rule, n=n,
                                 psi_threshold=PSI_FILAMENT_THRESHOLD)
-            expected = np.array([_reference_sum(x, y, args, params["delta"], rule, n)
+            staple = staple_path(args["psi"], args["umax"], rule, n, PSI_FILAMENT_THRESHOLD)
+            expected = np.array([ref.discrete_sum(x, y, staple=staple, rule=rule, n=n, **args, delta=params["delta"])
                                  for x, y in zip(a, b, strict=True)])
             assert np.count_nonzero(expected) >= 10
             np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-13 * expected.max())

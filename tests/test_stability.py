@@ -87,34 +87,15 @@ def _quiet_specular(wi, wo, params, rule):
 
 
 def _reference_sum(wi, wo, params, rule="trapezoid", n=11):
-    """f_c times the n-node trapezoid or Gauss-Legendre sum of the reference's literal integrand (eq. 1 or 2),
-    per pair, the nodes and weights computed here.  ValueError where the reference does not define the
-    geometry."""
+    """f_c times the n-node trapezoid or Gauss-Legendre sum of the reference's literal integrand (eq. 1 or 2)
+    per pair; ValueError where the reference does not define the geometry."""
     psi, umax = math.radians(params["warp.psi"]), math.radians(params["warp.umax"])
-    kappa, w, l, delta = params["warp.kappa"], params["warp.w"], params["warp.l"], params["delta"]
     staple = staple_path(psi, umax, rule, n, PSI_FILAMENT_THRESHOLD)
-    lo, hi = (-umax, umax) if staple else (-0.5 * math.pi, 0.5 * math.pi)
-    if rule == "trapezoid":
-        nodes = np.linspace(lo, hi, n)
-        weights = np.full(n, (hi - lo) / (n - 1))
-        weights[[0, -1]] *= 0.5
-    else:
-        x, wx = np.polynomial.legendre.leggauss(n)
-        nodes, weights = lo + (hi - lo) * 0.5 * (x + 1.0), 0.5 * (hi - lo) * wx
-    out = []
-    for a, b in zip(wi, wo, strict=True):
-        a, b = tuple(float(x) for x in a), tuple(float(x) for x in b)
-        if a[2] <= 0.0 or b[2] <= 0.0:
-            out.append(0.0)
-            continue
-        if staple:
-            total = sum(wk * ref._staple_integrand(float(x), a, b, psi, umax, kappa, w, l)
-                        for x, wk in zip(nodes, weights, strict=True))
-        else:
-            total = sum(wk * ref._filament_integrand(float(x), a, b, umax, kappa, w, l, delta)
-                        for x, wk in zip(nodes, weights, strict=True))
-        out.append(ref.phase(a, b, params["alpha"], params["beta"]) * total)
-    return np.array(out)
+    geometry = dict(psi=psi, umax=umax, kappa=params["warp.kappa"], w=params["warp.w"], l=params["warp.l"],
+                    delta=params["delta"])
+    return np.array([ref.discrete_sum(a, b, staple=staple, rule=rule, n=n, **geometry)
+                     * (ref.phase(a, b, params["alpha"], params["beta"]) if a[2] > 0 and b[2] > 0 else 0.0)
+                     for a, b in zip(wi, wo, strict=True)])
 
 
 @pytest.mark.parametrize("rule", RULES, ids=lambda q: q.rule)
