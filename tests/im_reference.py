@@ -2,8 +2,11 @@
 
 Written straight from Irawan & Marschner, "Specular reflection from woven cloth" (ACM TOG 31(1), 2012),
 sections 5-7.1, eqs. (1)-(10) and Algorithms 1-2, in their literal form, one direction pair at a time, with
-the spine-curvature formulas of /work/shared/reference/irawan-presets.md ("Formulas the paper's text leaves
-incomplete"). It deliberately shares no code with clothlab.models.irawan: the tests compare the two.
+the spine-curvature branches of sec. 5.4 completed where the paper's text leaves them incomplete (the
+parameter of each conic, t(u), and the relation of a_hat, b_hat to L = l/2 - a sin umax).  It deliberately
+shares no code with clothlab.models.irawan: the tests compare the two, equation by equation
+(tests/test_irawan_kernels.py), integral by integral (tests/test_irawan_model.py) and under the same discrete
+quadrature sums (tests/test_stability.py).
 
 Conventions: yarn frame with z along the cloth normal, y along the yarn, x completing a right-handed basis;
 wi, wo are unit 3-vectors with z > 0; all angles in radians; w, l in any common length unit (a = w/2).
@@ -20,6 +23,7 @@ from scipy import integrate, special
 
 __all__ = [
     "ReferenceAccuracyWarning",
+    "discrete_sum",
     "filament_integrand",
     "phase",
     "specular_reference",
@@ -108,7 +112,7 @@ def _angles_in(candidates, lo, hi):
 
 
 def spine_radius(u, umax, kappa, w, l):
-    """Radius of curvature R(u) of the yarn spine (sec. 5.3-5.4; forms from irawan-presets.md).
+    """Radius of curvature R(u) of the yarn spine (sec. 5.3-5.4, the branches written out per conic).
 
     a = w/2, L = l/2 - a sin(umax), r_hat = 1 + kappa (1 + cot umax); branches on r_hat literally:
     r_hat == 1 circle, r_hat > 0 ellipse, r_hat == 0 parabola, r_hat < 0 hyperbola. Same length unit as w, l.
@@ -374,3 +378,34 @@ def specular_reference(wi, wo, *, psi, umax, kappa, w, l, alpha, beta, delta, ps
         half_pi = 0.5 * math.pi
         value, abserr = _integrate(integrand, -half_pi, half_pi, _filament_breakpoints(wi, wo))
     return f_c * value, f_c * abserr
+
+
+def rule_nodes(rule, n, lo, hi):
+    """Nodes and weights of the n-node ``trapezoid`` (both ends included) or ``gauss`` (Gauss-Legendre) rule
+    over [lo, hi], computed here independently of clothlab."""
+    if rule == "trapezoid":
+        nodes = np.linspace(lo, hi, n)
+        weights = np.full(n, (hi - lo) / (n - 1))
+        weights[[0, -1]] *= 0.5
+        return nodes, weights
+    if rule == "gauss":
+        x, wx = np.polynomial.legendre.leggauss(n)
+        return lo + (hi - lo) * 0.5 * (x + 1.0), 0.5 * (hi - lo) * wx
+    raise ValueError(f"unknown rule {rule!r}")
+
+
+def discrete_sum(wi, wo, *, staple, rule, n, psi, umax, kappa, w, l, delta):
+    """sum_k w_k (integrand at node k) of eq. 1 over u in [-umax, umax] (``staple``) or of eq. 2 over v in
+    [-pi/2, pi/2], with the literal integrands, without f_c: what a fixed-node quadrature of the model must
+    return exactly (to round-off).  Back-facing pairs give 0."""
+    wi = tuple(float(c) for c in wi)
+    wo = tuple(float(c) for c in wo)
+    if wi[2] <= 0.0 or wo[2] <= 0.0:
+        return 0.0
+    if staple:
+        nodes, weights = rule_nodes(rule, n, -umax, umax)
+        return sum(wk * _staple_integrand(float(x), wi, wo, psi, umax, kappa, w, l)
+                   for x, wk in zip(nodes, weights, strict=True))
+    nodes, weights = rule_nodes(rule, n, -0.5 * math.pi, 0.5 * math.pi)
+    return sum(wk * _filament_integrand(float(x), wi, wo, umax, kappa, w, l, delta)
+               for x, wk in zip(nodes, weights, strict=True))

@@ -103,7 +103,7 @@ def test_ellipse_and_hyperbola_approach_parabola():
 def test_spine_radius_rejects_impossible_geometry():
     with pytest.raises(ValueError, match="does not fit"):
         ref.spine_radius(0.0, 36 * DEG, 0.0, 2.0, 1.0)  # cotton-twill weft: w sin(umax) > l
-    for kappa in (-1.0, -1.5):  # kappa = -1: atanh(+-1) (numerics.md item 1)
+    for kappa in (-1.0, -1.5):  # kappa = -1: the hyperbola's atanh reaches +-1
         with pytest.raises(ValueError, match="kappa"):
             ref.spine_radius(0.0, 30 * DEG, kappa, 1.0, 4.0)
 

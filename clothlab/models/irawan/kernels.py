@@ -1,8 +1,18 @@
-"""Compiled (numba) kernels of the yarn integrals: one pass over directions x nodes, no temporaries.
+"""Compiled (numba) kernels of the yarn integrals, equation by equation (Irawan & Marschner 2012, sec. 5-7).
 
-The formulas are those of :mod:`clothlab.models.irawan.yarn` (see its docstring for the equations); this
-module holds their only implementation.  Imported lazily (numba costs ~0.5 s to import) by
-:func:`clothlab.models.irawan.yarn.yarn_integral`.  Compiled code is cached on disk (``cache=True``).
+The first half of this module holds one small helper per equation of the paper, named for what it
+computes, with the paper's symbols and the equation number next to the line that implements it; every
+helper is ``inline="always"``, so the loops of the second half compile to the same code as a hand-fused
+kernel.  These helpers are the only implementation of each formula: the quadrature loops below, the
+texture kernels (Algorithms 3-4), the breakpoints of the ``support`` rule (:mod:`.yarn`) and the
+experimental ``split`` rule all call them.  The table "paper -> code" is in :mod:`clothlab.models.irawan`.
+
+Conventions: yarn frame (z normal, y along the yarn, x across it), wi and wo unit vectors with z > 0,
+angles in radians, w and l in one length unit, a = w / 2.  Values omit f_c (eq. 7, applied by the caller:
+it depends on wi.wo only) and Seeliger's albedo and 1 / (4 pi) (absorbed into k_s).
+
+Imported lazily (numba costs ~0.5 s to import).  Compiled code is cached on disk (``cache=True``); numba
+does not see edits to another module's inlined helper, so the helpers live here with their callers.
 Serial on purpose: numba's ``parallel=True`` thread pool made a 1,575-direction evaluation 10-40x slower
 on a loaded 2-core machine (measured 0.7 ms serial vs 16-32 ms parallel); run fits in separate processes.
 """
@@ -14,47 +24,229 @@ import math
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True, inline="always")
-def spine_radius_scalar(u, umax, kappa, w, l):
-    """R(u) of :func:`clothlab.models.irawan.spine.spine_radius` for scalars (same formula)."""
-    r_hat = 1.0 + kappa * (1.0 + 1.0 / math.tan(umax))
-    q = r_hat * abs(r_hat)
-    cot = 1.0 / math.tan(umax)
-    half = max(0.5 * l - 0.5 * w * math.sin(umax), 0.0)
-    scale = half * math.sqrt(max(cot * cot + q, 0.0))
-    u = min(max(u, -umax), umax)
-    c = math.cos(u)
-    s = math.sin(u)
-    return scale / (c * c + q * s * s) ** 1.5
+# ------------------------------------------------------------------------ spine geometry (sec. 5.3-5.4)
+# Written with numpy ufuncs so that the same functions serve scalars inside the kernels and arrays from
+# Python (:mod:`clothlab.models.irawan.spine`).
 
 
 @njit(cache=True, inline="always")
-def staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, su, cu, radius, cot_psi, abs_sin_psi, a):
-    """G_v A at one node u given sin u, cos u and R(u) (eqs. 3, 5, 8; bounded form, yarn.py docstring)."""
-    b = hy * su + hz * cu
+def axis_ratio(kappa, umax):
+    """r_hat = 1 + kappa (1 + cot umax) (sec. 5.4); umax in radians."""
+    return 1.0 + kappa * (1.0 + 1.0 / np.tan(umax))  # sec. 5.4: r_hat
+
+
+@njit(cache=True, inline="always")
+def half_length(w, l, umax):
+    """L = l/2 - a sin umax, the spine's horizontal half extent (sec. 5.3); < 0 if w sin umax > l."""
+    return 0.5 * l - 0.5 * w * np.sin(umax)  # sec. 5.3: L
+
+
+@njit(cache=True, inline="always")
+def spine_radius(u, umax, kappa, w, l):
+    """R(u) = L sqrt(cot^2 umax + q) / (cos^2 u + q sin^2 u)^(3/2), q = r_hat |r_hat| (sec. 5.4).
+
+    The ellipse, parabola and hyperbola branches of the paper in one form (derivation in
+    :mod:`clothlab.models.irawan.spine`).  L < 0 (segment does not fit, sec. 5.3) is clamped to 0; u is
+    clamped to [-umax, umax].
+    """
+    r_hat = axis_ratio(kappa, umax)
+    q = r_hat * np.abs(r_hat)
+    cot = 1.0 / np.tan(umax)
+    scale = np.maximum(half_length(w, l, umax), 0.0) * np.sqrt(np.maximum(cot * cot + q, 0.0))
+    u = np.minimum(np.maximum(u, -umax), umax)
+    c = np.cos(u)
+    s = np.sin(u)
+    return scale / (c * c + q * s * s) ** 1.5  # sec. 5.4: R(u)
+
+
+# ------------------------------------------------------------------- the specular condition (sec. 6.3)
+
+
+@njit(cache=True, inline="always")
+def half_vector(wix, wiy, wiz, wox, woy, woz):
+    """(h_x, h_y, h_z, |wi + wo|): h = (wi + wo) / |wi + wo|, the bisector of sec. 6.2; zeros if wo = -wi."""
+    sx, sy, sz = wix + wox, wiy + woy, wiz + woz
+    length = math.sqrt(sx * sx + sy * sy + sz * sz)
+    if length <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return sx / length, sy / length, sz / length, length  # sec. 6.2: h
+
+
+@njit(cache=True, inline="always")
+def specular_v(hx, hy, hz, sin_u, cos_u, cot_psi):
+    """v(wi, u, wo) of eq. 3 for a staple yarn, as (found, cos v, sin v).
+
+    v = atan2(-B, h_x) + arccos(D),  B = h_y sin u + h_z cos u,  D = (h_y cos u - h_z sin u) cot psi / rho,
+    rho = sqrt(h_x^2 + B^2).  Only the +arccos root has n.h >= 0 (sec. 6.3).  Evaluated without
+    trigonometric calls: cos(atan2(-B, h_x)) = h_x / rho, sin(...) = -B / rho, sin(arccos D) = sqrt(1 - D^2).
+    found is False when |D| > 1: no fibre tangent reflects wi into wo (sec. 6.3).
+    """
+    b = hy * sin_u + hz * cos_u
     rho = math.sqrt(hx * hx + b * b)
     if rho <= 0.0:
-        return 0.0
-    d = (hy * cu - hz * su) * cot_psi / rho
+        return False, 0.0, 0.0
+    d = (hy * cos_u - hz * sin_u) * cot_psi / rho  # eq. 3: D
     if abs(d) > 1.0:
-        return 0.0
-    root = math.sqrt(max(1.0 - d * d, 0.0))
-    cos_v = (hx * d + b * root) / rho
-    if cos_v <= 0.0:
-        return 0.0
-    sin_v = (hx * root - b * d) / rho
-    ci = wix * sin_v + (wiy * su + wiz * cu) * cos_v
-    cr = wox * sin_v + (woy * su + woz * cu) * cos_v
+        return False, 0.0, 0.0
+    root = math.sqrt(max(1.0 - d * d, 0.0))  # sin(arccos D)
+    cos_v = (hx * d + b * root) / rho  # eq. 3: cos(atan2(-B, h_x) + arccos D)
+    sin_v = (hx * root - b * d) / rho  # eq. 3: sin(atan2(-B, h_x) + arccos D)
+    return True, cos_v, sin_v
+
+
+@njit(cache=True, inline="always")
+def specular_u(hy, hz):
+    """u(wi, v, wo) of eq. 4 for a filament yarn: atan2(-h_z, h_y) + pi/2 = atan(h_y / h_z) (h_z > 0), the
+    root on the front of the yarn, -pi/2 < u < pi/2 (sec. 6.3)."""
+    return math.atan(hy / hz)  # eq. 4
+
+
+@njit(cache=True, inline="always")
+def spine_normal_cosine(wy, wz, sin_u, cos_u):
+    """w . n(u, 0) = w_y sin u + w_z cos u: the cosine to the normal on the spine's plane (sec. 5.2)."""
+    return wy * sin_u + wz * cos_u  # sec. 5.2: w . n(u, 0)
+
+
+@njit(cache=True, inline="always")
+def normal_cosine(wx, w_n0, sin_v, cos_v):
+    """w . n(u, v) = w_x sin v + (w . n(u, 0)) cos v,  n(u, v) = (sin v, sin u cos v, cos u cos v) (sec. 5.2)."""
+    return wx * sin_v + w_n0 * cos_v  # sec. 5.2: w . n(u, v)
+
+
+@njit(cache=True, inline="always")
+def lit_arc(wx, w_n0):
+    """The interval (lo, hi) of v in (-pi/2, pi/2) where w . n(u, v) > 0 (a clamped cosine of eq. 8 is
+    non-zero); empty if lo >= hi.  Dividing by cos v > 0: w_x tan v + w . n(u, 0) > 0."""
+    if wx == 0.0:
+        return (-0.5 * math.pi, 0.5 * math.pi) if w_n0 > 0.0 else (0.0, 0.0)
+    v0 = math.atan(-w_n0 / wx)  # w . n(u, v0) = 0
+    if wx > 0.0:
+        return v0, 0.5 * math.pi
+    return -0.5 * math.pi, v0
+
+
+@njit(cache=True, inline="always")
+def staple_break_angles(hy, hz, psi, abs_sin_psi):
+    """Four angles (each repeating with period pi in u) where the staple integrand of eq. 1 jumps.
+
+    With rho = sqrt(h_y^2 + h_z^2) and gamma = atan2(h_z, h_y), eq. 3's support |D| <= 1 is exactly
+    |cos(u + gamma)| <= |sin psi| / rho: its ends are u = -gamma +- arccos(|sin psi| / rho).  The visibility
+    cut |v| = pi/2 (h . t = 0 with t = (0, cos(u -+ psi), -sin(u -+ psi))) is at u = +-psi - gamma + pi/2.
+    """
+    rho = math.sqrt(hy * hy + hz * hz)
+    gamma = math.atan2(hz, hy)
+    c0 = math.acos(min(abs_sin_psi / rho, 1.0)) if rho > 0.0 else 0.0  # eq. 3: |D| = 1
+    return -gamma + c0, -gamma - c0, psi - gamma + 0.5 * math.pi, -psi - gamma + 0.5 * math.pi  # |v| = pi/2
+
+
+# ------------------------------------------------------- geometry factor and attenuation (sec. 6.4-6.6)
+
+
+@njit(cache=True, inline="always")
+def volume_element(radius, a, cos_v):
+    """a (R(u) + a cos v): the volume element at the yarn surface r = a (sec. 6.2), numerator of eqs. 5, 6."""
+    return a * (radius + a * cos_v)  # sec. 6.2: a (R + a cos v)
+
+
+@njit(cache=True, inline="always")
+def seeliger(ci, cr):
+    """A = c_i c_r / (c_i + c_r), Seeliger's law (eq. 8) without the albedo, cosines already positive."""
+    return ci * cr / (ci + cr)  # eq. 8: A
+
+
+@njit(cache=True, inline="always")
+def staple_geometry_attenuation(volume, ci, cr, abs_sin_psi):
+    """G_v A, the product of eq. 5 and eq. 8 in bounded form.
+
+    Since c_i + c_r = |wi + wo| (n . h) on the specular curve, G_v A = a (R + a cos v) c_i c_r /
+    (|sin psi| (c_i + c_r)^2): finite where n . h -> 0, although eq. 5 alone is not.
+    """
+    total = ci + cr
+    return volume * ci * cr / (abs_sin_psi * total * total)  # eqs. 5 x 8
+
+
+@njit(cache=True, inline="always")
+def tangent_cross_h_x(hy, hz):
+    """|(t x h)_x| of eq. 6 at eq. 4's u: t = (0, cos u, -sin u) gives h_z cos u + h_y sin u = sqrt(h_y^2 + h_z^2)."""
+    return math.sqrt(hy * hy + hz * hz)  # eq. 6: |(t x h)_x|
+
+
+@njit(cache=True, inline="always")
+def smoothstep(x):
+    """s(x) = 3 x^2 - 2 x^3 with x clamped to [0, 1]: the smooth step of eq. 9."""
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)  # eq. 9: s(x)
+
+
+@njit(cache=True, inline="always")
+def filament_fade(u, umax, delta):
+    """1 - s((|u| - (1 - delta) umax) / (delta umax)), the factor A_s / A of eq. 9; 1 when delta = 0."""
+    if delta <= 0.0:
+        return 1.0
+    return 1.0 - smoothstep((abs(u) - (1.0 - delta) * umax) / (delta * umax))  # eq. 9
+
+
+# ------------------------------------------------------------------ integrands (Algorithms 1-2)
+
+
+@njit(cache=True, inline="always")
+def staple_integrand(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, sin_u, cos_u, radius, cot_psi, abs_sin_psi, a):
+    """(G_v A, cos v, sin v) at one u given sin u, cos u and R(u): Algorithm 1's integrand without f_c.
+
+    Zero unless |D| <= 1 (eq. 3), |v| < pi/2 (the front of the yarn) and both cosines of eq. 8 are > 0.
+    """
+    found, cos_v, sin_v = specular_v(hx, hy, hz, sin_u, cos_u, cot_psi)  # eq. 3
+    if not found or cos_v <= 0.0:
+        return 0.0, cos_v, sin_v
+    ci = normal_cosine(wix, spine_normal_cosine(wiy, wiz, sin_u, cos_u), sin_v, cos_v)  # wi . n, eq. 8
+    cr = normal_cosine(wox, spine_normal_cosine(woy, woz, sin_u, cos_u), sin_v, cos_v)  # wo . n, eq. 8
+    if ci <= 0.0 or cr <= 0.0:
+        return 0.0, cos_v, sin_v
+    return staple_geometry_attenuation(volume_element(radius, a, cos_v), ci, cr, abs_sin_psi), cos_v, sin_v
+
+
+@njit(cache=True, inline="always")
+def filament_direction(wix, wiy, wiz, wox, woy, woz, umax, delta):
+    """The part of Algorithm 2's integrand that does not depend on v, as (ok, u, scale, c_i0, c_r0).
+
+    u is eq. 4's specular inclination; scale = (1 - s(...)) / (|wi + wo| |(t x h)_x|), the fade of eq. 9
+    over the denominator of eq. 6; c_0 = w . n(u, 0).  ok is False where the integrand vanishes for every v
+    (back-facing, |u| >= umax: the highlight is off the segment, or fully faded).
+    """
+    hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
+    if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0
+    u = specular_u(hy, hz)  # eq. 4
+    if abs(u) >= umax:
+        return False, u, 0.0, 0.0, 0.0
+    fade = filament_fade(u, umax, delta)  # eq. 9
+    cross = tangent_cross_h_x(hy, hz)  # eq. 6
+    if fade <= 0.0 or cross <= 0.0:
+        return False, u, 0.0, 0.0, 0.0
+    su = math.sin(u)
+    cu = math.cos(u)
+    ci0 = spine_normal_cosine(wiy, wiz, su, cu)
+    cr0 = spine_normal_cosine(woy, woz, su, cu)
+    return True, u, fade / (length * cross), ci0, cr0
+
+
+@njit(cache=True, inline="always")
+def filament_integrand(wix, ci0, wox, cr0, sin_v, cos_v, a, radius):
+    """a (R + a cos v) A at one v (eq. 6's numerator times eq. 8); 0 unless both cosines are > 0.
+    Times the ``scale`` of :func:`filament_direction` it is Algorithm 2's integrand without f_c."""
+    ci = normal_cosine(wix, ci0, sin_v, cos_v)
+    cr = normal_cosine(wox, cr0, sin_v, cos_v)
     if ci <= 0.0 or cr <= 0.0:
         return 0.0
-    total = ci + cr
-    return a * (radius + a * cos_v) * ci * cr / (abs_sin_psi * total * total)
+    return volume_element(radius, a, cos_v) * seeliger(ci, cr)  # eq. 6 numerator x eq. 8
+
+
+# ------------------------------------------------------------------ quadrature loops (eqs. 1, 2, 10)
 
 
 @njit(cache=True)
 def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
-    """sum_k weights[n, k] G_v A(nodes[n, k]) for each direction pair n (rows of wi, wo: yarn frame).
+    """sum_k weights[n, k] G_v A(nodes[n, k]) (eq. 1 without f_c) for each direction pair n (yarn frame).
 
     ``nodes`` / ``weights`` of shape (1, K) are shared by all directions: sin, cos and R are then computed
     once per node instead of once per (direction, node)."""
@@ -72,15 +264,13 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
         for k in range(n_nodes):
             su[k] = math.sin(nodes[0, k])
             cu[k] = math.cos(nodes[0, k])
-            radius[k] = spine_radius_scalar(nodes[0, k], umax, kappa, w, l)
+            radius[k] = spine_radius(nodes[0, k], umax, kappa, w, l)
     for n in range(n_dir):
         wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
         wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
-        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
-        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
         if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
             continue
-        hx, hy, hz = sx / length, sy / length, sz / length
         row = 0 if shared else n
         acc = 0.0
         for k in range(n_nodes):
@@ -91,62 +281,16 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
                 s, c, r = su[k], cu[k], radius[k]
             else:
                 u = nodes[n, k]
-                s, c, r = math.sin(u), math.cos(u), spine_radius_scalar(u, umax, kappa, w, l)
-            acc += wk * staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, s, c, r, cot_psi, abs_sin_psi, a)
+                s, c, r = math.sin(u), math.cos(u), spine_radius(u, umax, kappa, w, l)
+            acc += wk * staple_integrand(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, s, c, r, cot_psi, abs_sin_psi,
+                                         a)[0]  # eq. 1
         out[n] = acc
     return out
 
 
-@njit(cache=True, inline="always")
-def filament_setup(wix, wiy, wiz, wox, woy, woz, umax, delta):
-    """Per-direction part of the filament integrand (eqs. 4, 6, 9): (ok, u, scale, p_i, p_o) with u the
-    specular inclination of eq. 4, scale = smoothstep fade / (|wi + wo| |(t x h)_x|) and p = w_y sin u + w_z cos u
-    (so that w.n = w_x sin v + p cos v)."""
-    sx, sy, sz = wix + wox, wiy + woy, wiz + woz
-    length = math.sqrt(sx * sx + sy * sy + sz * sz)
-    if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
-        return False, 0.0, 0.0, 0.0, 0.0
-    hy, hz = sy / length, sz / length
-    u = math.atan(hy / hz)
-    if abs(u) >= umax:
-        return False, u, 0.0, 0.0, 0.0
-    fade = 1.0
-    if delta > 0.0:
-        x = min(max((abs(u) - (1.0 - delta) * umax) / (delta * umax), 0.0), 1.0)
-        fade = 1.0 - x * x * (3.0 - 2.0 * x)
-    rho_yz = math.sqrt(hy * hy + hz * hz)
-    if fade <= 0.0 or rho_yz <= 0.0:
-        return False, u, 0.0, 0.0, 0.0
-    su = math.sin(u)
-    cu = math.cos(u)
-    return True, u, fade / (length * rho_yz), wiy * su + wiz * cu, woy * su + woz * cu
-
-
-@njit(cache=True, inline="always")
-def filament_node(wix, p_i, wox, p_o, sv, cv, a, radius):
-    """a (R + a cos v) c_i c_r / (c_i + c_r) at one v (eq. 8 with eq. 6's volume element); 0 if a cosine <= 0."""
-    ci = wix * sv + p_i * cv
-    cr = wox * sv + p_o * cv
-    if ci <= 0.0 or cr <= 0.0:
-        return 0.0
-    return a * (radius + a * cv) * ci * cr / (ci + cr)
-
-
-@njit(cache=True, inline="always")
-def positive_arc(x, p):
-    """The interval of v in (-pi/2, pi/2) where x sin v + p cos v > 0, as (lo, hi) (empty if lo >= hi):
-    dividing by cos v > 0, x tan v + p > 0."""
-    if x == 0.0:
-        return (-0.5 * math.pi, 0.5 * math.pi) if p > 0.0 else (0.0, 0.0)
-    v0 = math.atan(-p / x)
-    if x > 0.0:
-        return v0, 0.5 * math.pi
-    return -0.5 * math.pi, v0
-
-
 @njit(cache=True)
 def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc):
-    """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eqs. 4, 6, 8, 9) for each direction pair n (yarn frame).
+    """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eq. 2 without f_c) for each direction pair n (yarn frame).
 
     ``nodes`` / ``weights`` of shape (1, K) are shared by all directions (sin v, cos v computed once).
     ``on_arc``: the nodes are unit nodes in [0, 1] mapped per direction onto the closed-form arc where both
@@ -164,22 +308,22 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc
             cv_shared[k] = math.cos(nodes[0, k])
     for n in range(n_dir):
         wix, wox = wi[n, 0], wo[n, 0]
-        ok, u, scale, p_i, p_o = filament_setup(wix, wi[n, 1], wi[n, 2], wox, wo[n, 1], wo[n, 2], umax, delta)
+        ok, u, scale, ci0, cr0 = filament_direction(wix, wi[n, 1], wi[n, 2], wox, wo[n, 1], wo[n, 2], umax, delta)
         if not ok:
             continue
-        radius = spine_radius_scalar(u, umax, kappa, w, l)
+        radius = spine_radius(u, umax, kappa, w, l)
         row = 0 if shared else n
         acc = 0.0
         if on_arc:
-            lo_i, hi_i = positive_arc(wix, p_i)
-            lo_o, hi_o = positive_arc(wox, p_o)
+            lo_i, hi_i = lit_arc(wix, ci0)
+            lo_o, hi_o = lit_arc(wox, cr0)
             lo, hi = max(lo_i, lo_o), min(hi_i, hi_o)
             span = hi - lo
             if span <= 0.0:
                 continue
             for k in range(n_nodes):
                 v = lo + span * nodes[row, k]
-                acc += weights[row, k] * filament_node(wix, p_i, wox, p_o, math.sin(v), math.cos(v), a, radius)
+                acc += weights[row, k] * filament_integrand(wix, ci0, wox, cr0, math.sin(v), math.cos(v), a, radius)
             acc *= span
         else:
             for k in range(n_nodes):
@@ -190,8 +334,53 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc
                     sv, cv = sv_shared[k], cv_shared[k]
                 else:
                     sv, cv = math.sin(nodes[n, k]), math.cos(nodes[n, k])
-                acc += wk * filament_node(wix, p_i, wox, p_o, sv, cv, a, radius)
-        out[n] = acc * scale
+                acc += wk * filament_integrand(wix, ci0, wox, cr0, sv, cv, a, radius)
+        out[n] = acc * scale  # eq. 2
+    return out
+
+
+# ------------------------------------------------------------------ breakpoints of the support rule
+
+
+@njit(cache=True)
+def half_vectors(wi, wo):
+    """Unit half vectors (N, 3) and |wi + wo| (N,) of (N, 3) directions (zeros for wo = -wi)."""
+    n_dir = wi.shape[0]
+    h = np.zeros((n_dir, 3))
+    length = np.zeros(n_dir)
+    for n in range(n_dir):
+        h[n, 0], h[n, 1], h[n, 2], length[n] = half_vector(wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2])
+    return h, length
+
+
+@njit(cache=True)
+def staple_break_candidates(h, psi):
+    """(N, 20) angles u where the staple integrand may jump: :func:`staple_break_angles` + k pi, |k| <= 2."""
+    out = np.empty((h.shape[0], 20))
+    abs_sin_psi = abs(math.sin(psi))
+    for n in range(h.shape[0]):
+        bases = staple_break_angles(h[n, 1], h[n, 2], psi, abs_sin_psi)
+        m = 0
+        for base in bases:
+            for k in range(-2, 3):
+                out[n, m] = base + k * math.pi
+                m += 1
+    return out
+
+
+@njit(cache=True)
+def filament_break_candidates(wi, wo, h):
+    """(N, 2) angles v where c_i or c_r of eq. 8 cross zero on the filament's specular curve (NaN: none)."""
+    out = np.full((h.shape[0], 2), np.nan)
+    for n in range(h.shape[0]):
+        if h[n, 2] <= 0.0:
+            continue
+        u = specular_u(h[n, 1], h[n, 2])  # eq. 4
+        su, cu = math.sin(u), math.cos(u)
+        for j, d in enumerate((wi, wo)):
+            c0 = spine_normal_cosine(d[n, 1], d[n, 2], su, cu)
+            if d[n, 0] != 0.0:
+                out[n, j] = math.atan(-c0 / d[n, 0])  # w . n(u, v) = 0
     return out
 
 
@@ -218,24 +407,18 @@ def staple_points(wi, wo, u, umax, psi, kappa, w, l):
         row = 0 if shared else n
         wix, wiy, wiz = wi[row, 0], wi[row, 1], wi[row, 2]
         wox, woy, woz = wo[row, 0], wo[row, 1], wo[row, 2]
-        sx, sy, sz = wix + wox, wiy + woy, wiz + woz
-        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
         if wiz <= 0.0 or woz <= 0.0 or length <= 0.0 or abs(u[n]) > umax[n]:
             continue
-        hx, hy, hz = sx / length, sy / length, sz / length
         su = math.sin(u[n])
         cu = math.cos(u[n])
-        r = spine_radius_scalar(u[n], umax[n], kappa, w, l)
-        g = staple_value(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, su, cu, r, cot_psi, abs_sin_psi, a)
+        r = spine_radius(u[n], umax[n], kappa, w, l)
+        g, cos_v, sin_v = staple_integrand(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, su, cu, r, cot_psi,
+                                           abs_sin_psi, a)
         if g <= 0.0:
             continue
-        # the same root as staple_value: cos v, sin v of the +arccos(D) solution (yarn.py docstring)
-        b = hy * su + hz * cu
-        rho = math.sqrt(hx * hx + b * b)
-        d = (hy * cu - hz * su) * cot_psi / rho
-        root = math.sqrt(max(1.0 - d * d, 0.0))
         value[n] = g
-        vpos[n] = math.atan2((hx * root - b * d) / rho, (hx * d + b * root) / rho)
+        vpos[n] = math.atan2(sin_v, cos_v)  # eq. 3: v
     return value, vpos
 
 
@@ -255,11 +438,11 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta):
     for n in range(n_pts):
         row = 0 if shared else n
         wix, wox = wi[row, 0], wo[row, 0]
-        ok, uu, scale, p_i, p_o = filament_setup(wix, wi[row, 1], wi[row, 2], wox, wo[row, 1], wo[row, 2],
-                                                 umax[n], delta)
+        ok, uu, scale, ci0, cr0 = filament_direction(wix, wi[row, 1], wi[row, 2], wox, wo[row, 1], wo[row, 2],
+                                                     umax[n], delta)
         upos[n] = uu
         if not ok or abs(v[n]) > 0.5 * math.pi:
             continue
-        radius = spine_radius_scalar(uu, umax[n], kappa, w, l)
-        value[n] = filament_node(wix, p_i, wox, p_o, math.sin(v[n]), math.cos(v[n]), a, radius) * scale
+        radius = spine_radius(uu, umax[n], kappa, w, l)
+        value[n] = filament_integrand(wix, ci0, wox, cr0, math.sin(v[n]), math.cos(v[n]), a, radius) * scale
     return value, upos

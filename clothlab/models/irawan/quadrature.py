@@ -1,5 +1,7 @@
 """Quadrature rules for the reflectance integrals of eq. 10 (Irawan & Marschner 2012, sec. 7.3).
 
+Pure quadrature (nodes and weights); the integrands are in :mod:`clothlab.models.irawan.kernels`.
+
 Rules (``rule`` in fabric.yaml ``model.quadrature``):
 
 - ``trapezoid`` - n equally spaced nodes including both ends; the paper's recommendation is n = 11.
@@ -47,7 +49,9 @@ def interval_rule(rule: str, n: int, lo: float, hi: float) -> tuple[np.ndarray, 
 
 
 @lru_cache(maxsize=64)
-def _cosine_mapped_unit_rule(n: int) -> tuple[np.ndarray, np.ndarray]:
+def cosine_mapped_unit_rule(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """n-node Gauss-Legendre on [0, 1] after the map s = (1 - cos(pi t)) / 2 (nodes cluster at both ends;
+    the per-piece rule of ``support``)."""
     t, w = unit_rule("gauss", n)
     s = 0.5 * (1.0 - np.cos(np.pi * t))
     return s, w * 0.5 * np.pi * np.sin(np.pi * t)
@@ -58,7 +62,7 @@ def piecewise_rule(breaks: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
     Zero-length pieces get zero weights, so every direction carries the same number of nodes (vectorised).
     """
-    s, w = _cosine_mapped_unit_rule(n)
+    s, w = cosine_mapped_unit_rule(n)
     a = breaks[:, :-1, None]
     length = np.diff(breaks, axis=1)[:, :, None]
     nodes = a + length * s

@@ -1,28 +1,16 @@
-"""The specular integral of one yarn segment type (Irawan & Marschner 2012, eqs. 1-10, Algorithms 1-2).
+"""The specular integral of one yarn segment type (Irawan & Marschner 2012, eqs. 1, 2, 10, Algorithms 1-2).
 
-Both functions return the geometric part  I(wi, wo) = integral G A  of eq. 10; the phase function f_c
-(eq. 7) depends on wi.wo only, so it factors out of the integral and is applied by the caller.
+:func:`yarn_integral` returns the geometric part  I(wi, wo) = integral G A  of eq. 10; the phase function
+f_c (eq. 7) depends on wi.wo only, so it factors out of the integral and is applied by the caller.
 Directions are (N, 3) unit vectors in the *yarn* frame (z normal, y along the yarn), both with z > 0.
 Angles in radians; w and l in any common length unit (only w / l matters after normalisation).
 
-Staple yarns (psi != 0) integrate over u (eq. 1, Algorithm 1).  With h the unit half vector and
-B = h_y sin u + h_z cos u, eq. 3 gives v = atan2(-B, h_x) + arccos(D), D = (h_y cos u - h_z sin u) cot psi
-/ sqrt(h_x^2 + B^2); only the +arccos root has n.h >= 0 (sec. 6.3), and it is evaluated without
-trigonometric calls via cos v = (h_x D + B sqrt(1-D^2)) / rho, sin v = (h_x sqrt(1-D^2) - B D) / rho.
-Since c_i + c_r = |wi + wo| (n.h), the product of eq. 5 and Seeliger's law (eq. 8) is the bounded
-
-    G_v A = a (R(u) + a cos v) c_i c_r / (|sin psi| (c_i + c_r)^2),
-
-finite where n.h -> 0 although eq. 5 alone is not.  Zero unless |D| <= 1 and |v| < pi/2 (Algorithm 1).
-
-Filament yarns (psi = 0) integrate over v (eq. 2, Algorithm 2).  Eq. 4 gives u = atan(h_y / h_z), the root in
-(-pi/2, pi/2); |(t x h)_x| = sqrt(h_y^2 + h_z^2), so with eqs. 6, 8, 9
-
-    G_u A_s = a (R(u) + a cos v) c_i c_r / ((c_i + c_r) |wi + wo| sqrt(h_y^2 + h_z^2)) (1 - s(...)).
-
-The staple integrand's specular support is closed-form: |D| <= 1 <=> |cos(u + gamma)| <= |sin psi| / rho
-with rho = sqrt(h_y^2 + h_z^2), gamma = atan2(h_z, h_y); the visibility cut |v| = pi/2 happens where
-cos(u -/+ psi + gamma) = 0.  The ``support`` rule splits the integral at these points (numerics.md).
+Staple yarns (psi != 0) integrate G_v A over u in [-umax, umax] (eq. 1), filament yarns G_u A_s over v in
+[-pi/2, pi/2] (eq. 2); the integrands, one helper per equation, are in :mod:`clothlab.models.irawan.kernels`.
+This module chooses the path (:func:`staple_path`) and the nodes (:mod:`clothlab.models.irawan.quadrature`).
+The ``support`` and ``adaptive`` rules split the staple integral where its integrand jumps, at closed-form
+points (the ends of eq. 3's support |D| <= 1 and the visibility cut |v| = pi/2), and integrate the filament
+one over the closed-form arc where both clamped cosines of eq. 8 are positive.
 """
 
 from __future__ import annotations
@@ -41,36 +29,25 @@ from clothlab.models.irawan.quadrature import (
 
 def half_vectors(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit half vectors (N, 3) and |wi + wo| (N,); a degenerate pair (wo = -wi) gets length 0."""
-    s = wi + wo
-    length = np.sqrt(np.einsum("nk,nk->n", s, s))
-    h = s / np.where(length > 0.0, length, 1.0)[:, None]
-    return h, length
+    from clothlab.models.irawan import kernels
+
+    return kernels.half_vectors(np.ascontiguousarray(wi, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64))
 
 
 def _staple_breaks(h, psi, umax):
-    """Breakpoints (N, P+1) of the staple integrand over [-umax, umax]: support ends and |v| = pi/2."""
-    hy, hz = h[:, 1], h[:, 2]
-    rho = np.sqrt(hy * hy + hz * hz)
-    gamma = np.arctan2(hz, hy)
-    c0 = np.arccos(np.minimum(abs(np.sin(psi)) / np.where(rho > 0, rho, 1.0), 1.0))
-    k = np.pi * np.arange(-2, 3)
-    base = np.stack([-gamma + c0, -gamma - c0, psi - gamma + 0.5 * np.pi, -psi - gamma + 0.5 * np.pi], axis=1)
-    candidates = (base[:, :, None] + k).reshape(len(h), -1)
-    return compact_breaks(-umax, umax, candidates)
+    """Breakpoints (N, P+1) of the staple integrand over [-umax, umax]: support ends and |v| = pi/2
+    (:func:`clothlab.models.irawan.kernels.staple_break_angles`)."""
+    from clothlab.models.irawan import kernels
+
+    return compact_breaks(-umax, umax, kernels.staple_break_candidates(np.ascontiguousarray(h), float(psi)))
 
 
 def _filament_breaks(wi, wo, h):
-    """Breakpoints (N, 4) over [-pi/2, pi/2]: where c_i or c_r of eq. 8 cross zero."""
-    hy, hz = h[:, 1], h[:, 2]
-    u = np.arctan(hy / np.where(hz > 0.0, hz, 1.0))
-    cols = []
-    for d in (wi, wo):
-        c = d[:, 1] * np.sin(u) + d[:, 2] * np.cos(u)
-        v = np.arctan2(-c, d[:, 0])
-        v = np.where(v > 0.5 * np.pi, v - np.pi, v)
-        v = np.where(v <= -0.5 * np.pi, v + np.pi, v)
-        cols.append(v)
-    return compact_breaks(-0.5 * np.pi, 0.5 * np.pi, np.stack(cols, axis=1))
+    """Breakpoints (N, <= 4) over [-pi/2, pi/2]: where c_i or c_r of eq. 8 cross zero."""
+    from clothlab.models.irawan import kernels
+
+    return compact_breaks(-0.5 * np.pi, 0.5 * np.pi, kernels.filament_break_candidates(
+        np.ascontiguousarray(wi), np.ascontiguousarray(wo), np.ascontiguousarray(h)))
 
 
 def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
