@@ -11,6 +11,7 @@ long work through :class:`Progress`.  The CLI calls :func:`configure` once (``-q
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
 import time
@@ -28,10 +29,11 @@ def get_logger(name: str = "") -> logging.Logger:
     return logging.getLogger(f"{ROOT_LOGGER}.{name}" if name else ROOT_LOGGER)
 
 
-def configure(verbosity: int = 0, stream=None) -> None:
+def configure(verbosity: int = 0, stream=None, formatter: logging.Formatter | None = None) -> None:
     """Send clothlab's log records to ``stream`` (stderr) as plain lines and enable progress output.
 
-    ``verbosity``: -1 quiet (warnings and errors, no progress), 0 normal (info), >= 1 debug."""
+    ``verbosity``: -1 quiet (warnings and errors, no progress), 0 normal (info), >= 1 debug; ``formatter``
+    (default: the bare message) formats the records."""
     stream = sys.stderr if stream is None else stream
     logger = logging.getLogger(ROOT_LOGGER)
     for handler in list(logger.handlers):
@@ -39,11 +41,30 @@ def configure(verbosity: int = 0, stream=None) -> None:
             logger.removeHandler(handler)
     handler = logging.StreamHandler(stream)
     handler._clothlab = True
-    handler.setFormatter(logging.Formatter("%(message)s"))
+    handler.setFormatter(formatter or logging.Formatter("%(message)s"))
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING if verbosity < 0 else logging.DEBUG if verbosity > 0 else logging.INFO)
     logger.propagate = False
     _settings.update(verbosity=verbosity, stream=stream)
+
+
+@contextlib.contextmanager
+def configured(verbosity: int = 0, stream=None, formatter: logging.Formatter | None = None):
+    """:func:`configure` for the duration of a ``with`` block, then the logging and progress state as before
+    (a command run in-process, from a test or a notebook, leaves nothing behind)."""
+    logger = logging.getLogger(ROOT_LOGGER)
+    saved = (list(logger.handlers), logger.level, logger.propagate, dict(_settings))
+    configure(verbosity, stream, formatter)
+    try:
+        yield
+    finally:
+        for handler in list(logger.handlers):
+            logger.removeHandler(handler)
+        for handler in saved[0]:
+            logger.addHandler(handler)
+        logger.setLevel(saved[1])
+        logger.propagate = saved[2]
+        _settings.update(saved[3])
 
 
 def progress_enabled() -> bool:

@@ -163,7 +163,6 @@ def test_oren_nayar_recovers_sigma_from_its_own_simulated_data(tmp_path):
     assert problem.solve({"sigma": 30.0}).objective < problem.solve({"sigma": 0.0}).objective
 
 
-@pytest.mark.xfail(reason="zero-free fits land with the fit package", strict=False)
 def test_lambert_fit_solves_kd_alone(tmp_path):
     from clothlab.fit.runner import run_fit
 

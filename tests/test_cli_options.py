@@ -89,7 +89,7 @@ def test_every_option_and_positional_has_help(bench_api):
 
 def test_lists_of_names_in_help_come_from_their_modules(bench_api):
     from clothlab.colour.chart import METHODS
-    from clothlab.config import QUADRATURE_RULES
+    from clothlab.models.irawan.quadrature import RULES as QUADRATURE_RULES
     from clothlab.texfit.fit import REFINABLE, TEXTURE_FREE
 
     helps = {name: p.format_help() for name, p in _parsers(build_parser())}
@@ -102,7 +102,7 @@ def test_lists_of_names_in_help_come_from_their_modules(bench_api):
 
 
 def test_unknown_choice_is_a_usage_error_listing_the_names(capsys):
-    from clothlab.config import QUADRATURE_RULES
+    from clothlab.models.irawan.quadrature import RULES as QUADRATURE_RULES
 
     with pytest.raises(SystemExit) as exit_info:
         build_parser().parse_args(["eval", "fits/x", "dirs.csv", "--rule", "simpson"])

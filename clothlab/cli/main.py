@@ -96,28 +96,11 @@ class _Formatter(logging.Formatter):
         return text
 
 
-@contextlib.contextmanager
 def _configured(level: int):
-    """:func:`clothlab.progress.configure` for one command, then the logging and progress state as before
-    (so that calling :func:`main` in-process, e.g. from a test or a notebook, leaves nothing behind)."""
-    from clothlab import progress
+    """:func:`clothlab.progress.configured` with the CLI's ``clothlab: warning:`` formatter."""
+    from clothlab.progress import configured
 
-    logger = logging.getLogger(progress.ROOT_LOGGER)
-    saved = (list(logger.handlers), logger.level, logger.propagate, dict(progress._settings))
-    progress.configure(level)
-    for handler in logger.handlers:
-        if getattr(handler, "_clothlab", False):
-            handler.setFormatter(_Formatter("%(message)s"))
-    try:
-        yield
-    finally:
-        for handler in list(logger.handlers):
-            logger.removeHandler(handler)
-        for handler in saved[0]:
-            logger.addHandler(handler)
-        logger.setLevel(saved[1])
-        logger.propagate = saved[2]
-        progress._settings.update(saved[3])
+    return configured(level, formatter=_Formatter("%(message)s"))
 
 
 @contextlib.contextmanager

@@ -55,7 +55,7 @@ yarn.centerU, centerV  Segment.center_u, center_v  tile      required
 clothlab has exactly two segment types (paper sec. 5: one geometry per segment type), ``warp`` and
 ``weft``: all yarns of one type must share psi, umax, kappa, width and length (a documented limitation;
 a file whose yarns of one type disagree is rejected with a message naming the yarns).  Values are also
-checked against the physical ranges declared in :data:`clothlab.models.irawan.parameters.IRAWAN_PARAMS`.
+checked against the physical ranges declared in :data:`clothlab.weave.parameters.IRAWAN_PARAMS`.
 """
 
 from __future__ import annotations
@@ -69,8 +69,8 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import InputError, ParameterError
-from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 from clothlab.weave.model import YARN_KINDS, Segment, Weave, YarnGeometry
+from clothlab.weave.parameters import IRAWAN_PARAMS
 
 #: Weave-level scalar fields of the format (file spelling) and the Weave attribute each one fills.
 WEAVE_FLOAT_FIELDS = {

@@ -63,15 +63,14 @@ import numpy as np
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
 from clothlab.models.components import combine
-from clothlab.models.irawan.model import (
+from clothlab.models.irawan.integrals import (
     COMPONENTS,
     PSI_FILAMENT_THRESHOLD,
-    IrawanModel,
     Quadrature,
     geometry_warnings,
     specular_albedo,
 )
-from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
 from clothlab.models.irawan.phase import phase_function
 from clothlab.models.irawan.texture_noise import exponential_noise, perlin_1d
 from clothlab.weave.lookup import locate_segments
@@ -112,8 +111,7 @@ class IrawanTexture:
 
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None, *, seed: int = 0):
         self.weave = weave
-        self.model = IrawanModel(weave, quadrature)
-        self.quadrature = self.model.quadrature
+        self.quadrature = quadrature or Quadrature()
         self.seed = int(seed)
         self.cell_shares = {kind: weave.cell_share(kind) for kind in YARN_KINDS}
         w, h = weave.tile_width, weave.tile_height
@@ -126,10 +124,14 @@ class IrawanTexture:
         self._key_v = np.rint(2.0 * self._centre_v).astype(np.int64)
 
     def default_parameters(self) -> dict[str, float]:
-        return self.model.default_parameters()
+        return weave_parameters(self.weave)
 
     def resolve(self, params: dict | None) -> dict[str, float]:
-        return self.model.resolve(params)
+        """The weave's parameters overridden by ``params``, validated (as :meth:`IrawanModel.resolve`)."""
+        full = self.default_parameters()
+        if params:
+            full.update(IRAWAN_PARAMS.validate(params))
+        return full
 
     # ------------------------------------------------------------------ geometry and noise
 

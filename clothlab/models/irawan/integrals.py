@@ -1,0 +1,117 @@
+"""The Irawan-Marschner yarn integrals over a fabric and their normalisation (Irawan & Marschner 2012,
+sec. 6, eq. 2 and Algorithms 1-2): the quadrature choice, the per-yarn-type specular I_j times the phase
+function, its albedo a_j (a fixed Sobol estimate, so the normalised component has unit albedo) and the
+geometry checks of sec. 5.3.  Used by the reflectance model (:mod:`.model`) and the texture model
+(:mod:`.texture`)."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from clothlab.errors import GeometryWarning, ParameterError
+from clothlab.frames import to_yarn_frame
+from clothlab.models.irawan.phase import phase_function
+from clothlab.models.irawan.quadrature import RULES
+from clothlab.models.irawan.yarn import yarn_integral
+from clothlab.weave.model import YARN_KINDS
+
+PSI_FILAMENT_THRESHOLD = 1e-3  # radians
+ALBEDO_SAMPLES = 2**16
+ALBEDO_SEED = 20120101
+COMPONENTS = ("diffuse", "specular_warp", "specular_weft")
+
+
+@dataclass(frozen=True)
+class Quadrature:
+    """A quadrature choice: ``rule`` in RULES and ``nodes`` (per piece for support / adaptive)."""
+
+    rule: str = "trapezoid"
+    nodes: int = 11
+
+    def __post_init__(self):
+        if self.rule not in RULES:
+            raise ParameterError(f"unknown quadrature rule {self.rule!r}; choose one of {', '.join(RULES)}",
+                                 field="model.quadrature.rule")
+        minimum = 2 if self.rule == "trapezoid" else 1
+        if int(self.nodes) != self.nodes or not minimum <= self.nodes <= 1000:
+            raise ParameterError(f"quadrature nodes must be an integer in [{minimum}, 1000], got {self.nodes!r}",
+                                 field="model.quadrature.nodes")
+
+
+def geometry_warnings(params: dict, fabric: str = "") -> list[str]:
+    """Messages for segment types whose rectangle cannot hold the segment (sec. 5.3: w sin umax < l)."""
+    out = []
+    for kind in YARN_KINDS:
+        w, l, umax = params[f"{kind}.w"], params[f"{kind}.l"], params[f"{kind}.umax"]
+        if w * np.sin(np.deg2rad(umax)) >= l:
+            out.append(
+                f"{fabric + ' ' if fabric else ''}{kind}: w sin(umax) = {w:g} * sin({umax:g} deg) = "
+                f"{w * np.sin(np.deg2rad(umax)):.4g} >= l = {l:g} violates the segment-fitting constraint of "
+                f"sec. 5.3; the spine radius is clamped to its limit R = 0"
+            )
+    return out
+
+
+GEOMETRY_KEYS = ("psi", "umax", "kappa", "w", "l")
+
+
+def yarn_geometry_key(params: dict, kind: str) -> tuple:
+    """The parameters the yarn integral I_j depends on (not alpha, beta: f_c factors out of eq. 10)."""
+    return tuple(params[f"{kind}.{k}"] for k in GEOMETRY_KEYS) + (params["delta"],)
+
+
+def yarn_integral_fabric(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
+    """I_j (eq. 10 without f_c) for segment type ``kind`` at fabric-frame directions (N, 3)."""
+    lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
+    return yarn_integral(
+        lw, lo,
+        psi=np.deg2rad(params[f"{kind}.psi"]), umax=np.deg2rad(params[f"{kind}.umax"]),
+        kappa=params[f"{kind}.kappa"], w=params[f"{kind}.w"], l=params[f"{kind}.l"],
+        delta=params["delta"], rule=quadrature.rule, n=int(quadrature.nodes),
+        psi_threshold=PSI_FILAMENT_THRESHOLD,
+    )
+
+
+def yarn_specular(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
+    """Raw f_c I_j for segment type ``kind`` at fabric-frame directions (N, 3); params in declared units."""
+    integral = yarn_integral_fabric(wi, wo, params, kind, quadrature)
+    return phase_function(wi, wo, params["alpha"], params["beta"]) * integral
+
+
+@lru_cache(maxsize=1)
+def _albedo_directions(samples: int) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.stats import qmc
+
+    xi = qmc.Sobol(d=4, scramble=True, rng=np.random.default_rng(ALBEDO_SEED)).random(samples)
+
+    def cosine_hemisphere(a, b):
+        r = np.sqrt(a)
+        phi = 2.0 * np.pi * b
+        return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(1.0 - a, 0.0))], axis=1)
+
+    return cosine_hemisphere(xi[:, 0], xi[:, 1]), cosine_hemisphere(xi[:, 2], xi[:, 3])
+
+
+def specular_albedo(params: dict, kind: str, quadrature: Quadrature, samples: int = ALBEDO_SAMPLES) -> float:
+    """a_j = (1/pi) int int f_c I_j cos cos dwi dwo (deterministic Sobol estimate; see module docstring)."""
+    key = (kind, quadrature, samples) + tuple(
+        params[k] for k in ("alpha", "beta", "delta", f"{kind}.psi", f"{kind}.umax", f"{kind}.kappa",
+                            f"{kind}.w", f"{kind}.l"))
+    return _specular_albedo_cached(key, samples)
+
+
+@lru_cache(maxsize=256)
+def _specular_albedo_cached(key, samples):
+    kind, quadrature = key[0], key[1]
+    names = ("alpha", "beta", "delta", f"{kind}.psi", f"{kind}.umax", f"{kind}.kappa", f"{kind}.w", f"{kind}.l")
+    params = dict(zip(names, key[3:], strict=True))
+    wi, wo = _albedo_directions(samples)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        values = yarn_specular(wi, wo, params, kind, quadrature)
+    # E[f] under cosine-weighted sampling of both directions times pi^2, divided by pi.
+    return float(np.pi * values.mean())
