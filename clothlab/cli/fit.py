@@ -70,27 +70,8 @@ def run(args) -> int:
 
 
 def present_fit(result, saved_to=None) -> str:
-    """The summary printed after a fit: ``result.fit_report()`` when the result offers one, else the
-    parameters (with bound flags), coefficients, error percentiles, evaluations and time.  ``saved_to``: the
-    fit directory, named in the summary."""
-    fit_report = getattr(result, "fit_report", None)
-    if fit_report is not None:
-        text = fit_report()
-        return text if saved_to is None else f"{text}\n  saved to {saved_to}"
-    p = result.problem
-    lines = [f"{result.name}: {p.model.kind} fit of {p.measurement.n} directions x {len(p.measurement.channels)} "
-             f"channels" + (f" -> {saved_to}" if saved_to is not None else "")]
-    for i, name in enumerate(p.free):
-        spec = p.model.params[name]
-        flag = ("  (at lower bound)" if result.optimum.at_lower[i] else
-                "  (at upper bound)" if result.optimum.at_upper[i] else "")
-        lines.append(f"  {name:12s} = {result.params[name]:10.4g} {spec.unit}{flag}")
-    for name, coef in result.coefficients.items():
-        lines.append(f"  {name:12s} = " + ", ".join(f"{c:.4g}" for c in coef))
-    e = result.errors["overall"]
-    lines.append("  relative error: " + ", ".join(
-        f"{'median' if k == 'p50' else k[1:] + 'th'} {100 * e[k]:.2f} %" for k in e if k.startswith("p")))
-    lines.append(f"  {int(result.optimum.nevals)} evaluations, {result.wall_time:.1f} s")
-    for w in result.warnings:
-        lines.append(f"  warning: {w}")
-    return "\n".join(lines)
+    """The summary printed after a fit: :meth:`clothlab.fit.runner.FitResult.fit_report` (parameters with
+    uncertainty, coefficients per channel, error percentiles, time by stage, notes); ``saved_to``: the fit
+    directory, named at the end."""
+    text = result.fit_report()
+    return text if saved_to is None else f"{text}\n  saved to {saved_to}"

@@ -74,14 +74,14 @@ def run(args) -> int:
     from clothlab.weave.presets import resolve_weave
 
     source = args.source
-    params, rule, nodes, kind = {}, "trapezoid", 11, DEFAULT_KIND
+    params, rule, nodes, kind, options = {}, "trapezoid", 11, DEFAULT_KIND, {}
     if source.endswith((".yaml", ".yml")):
         from clothlab.config import load_config
 
         cfg = load_config(source)
         weave = resolve_weave(cfg.model.weave, cfg.base_dir)
-        params, rule, nodes, kind = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes, \
-            cfg.model.kind
+        params, rule, nodes = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes
+        kind, options = cfg.model.kind, dict(cfg.model.options)
     else:
         weave = resolve_weave(source, Path.cwd())
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
@@ -89,7 +89,7 @@ def run(args) -> int:
     coefficients = {"kd": channel_values(args.kd or "0.1", "--kd", n),
                     "ks_warp": channel_values(args.ks_warp or "0.1", "--ks-warp", n),
                     "ks_weft": channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
-    model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes))
+    model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes), **options)
     noise = NoiseModel(args.noise_mult, args.noise_add, args.seed)
     m = simulate(model, params, coefficients, channels=channels, noise=noise,
                  provenance={"sample_name": f"{weave.name} (SIMULATED)"})
