@@ -87,6 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--figures", type=Path, help="directory for the benchmark plots (default reports/bench)")
     p.add_argument("--sections", help="comma-separated subset of sections to run")
     p.add_argument("--report", type=Path, metavar="DIR", help="also write an HTML page of the figures into DIR")
+    p.add_argument("--data", type=Path, metavar="DIR",
+                   help="directory holding measurements/<fabric>/ and fits/<fabric>/ (e.g. the repository root); "
+                        "default: the example measurements regenerated into a temporary directory, no saved fits")
 
     p = sub.add_parser("fit-btf", help="fit the texture parameters (tile offset, rotation, w/l ratio, hWidth, "
                                        "noise) to a BTF stack, the BRDF parameters from a reflectance fit held")
@@ -370,45 +373,24 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def _emit(line: str) -> None:
+    print(line, flush=True)
+
+
 def cmd_bench(args) -> int:
-    from clothlab.studies.bench import SECTIONS, run_benchmarks
+    from clothlab.studies.bench import run_bench
 
-    sections = SECTIONS
-    if args.sections:
-        sections = tuple(s.strip() for s in args.sections.split(",") if s.strip())
-        unknown = [s for s in sections if s not in SECTIONS]
-        if unknown:
-            raise ConfigError(f"unknown bench section(s) {', '.join(unknown)}; choose from {', '.join(SECTIONS)}",
-                              field="--sections")
-    json_path = args.json
-    if args.report and json_path is None:
-        json_path = args.report / "bench.json"
-    code = run_benchmarks(quick=args.quick, json_path=json_path, figures_dir=args.figures or args.report,
-                          sections=sections)
-    if args.report:
-        import json
-
-        from clothlab.report.studies import write_study_report
-
-        figures = sorted((args.figures or args.report).glob("*.png"))
-        page = write_study_report(json.loads(Path(json_path).read_text()), args.report,
-                                  title="clothlab bench: speed and accuracy", figures=figures)
-        print(f"report: {page}")
-    return code
+    sections = tuple(s.strip() for s in args.sections.split(",") if s.strip()) if args.sections else None
+    return run_bench(sections=sections, quick=args.quick, data_dir=args.data, output=args.report or args.figures,
+                     json_path=args.json, emit=_emit)
 
 
 def cmd_check(args) -> int:
-    from clothlab.studies.stability import exit_code, run_check
+    from clothlab.studies.stability import run_check_command
 
-    result = run_check(full=args.full, json_path=args.json, seed=args.seed, figures_dir=args.figures or args.report)
-    if args.report:
-        from clothlab.report.studies import write_study_report
-
-        figures = sorted((args.figures or args.report).glob("*.png")) if (args.figures or args.report).is_dir() else []
-        page = write_study_report(result, args.report, title="clothlab check: numerical stability and stiff fits",
-                                  figures=figures)
-        print(f"report: {page}")
-    return exit_code(result)  # 1 when the sweep found a non-finite / negative value or a reciprocity violation
+    # exit 1 when the sweep found a non-finite / negative value or a reciprocity violation
+    return run_check_command(full=args.full, seed=args.seed, data_dir=None, output=args.report or args.figures,
+                             json_path=args.json, emit=_emit)
 
 
 def cmd_fit_btf(args) -> int:
