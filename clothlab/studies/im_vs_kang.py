@@ -41,10 +41,11 @@ def im_vs_kang(quick: bool, data: StudyData) -> list[dict]:
         weave = get_preset(name)
         im, im_params, im_fit = fitted(name, IrawanModel(weave, Quadrature("trapezoid", 11)))
         kang, kang_params, kang_fit = fitted(f"{name}-kang", KangModel(weave))
-        candidates = [(f"irawan {im.quadrature.rule}-{im.quadrature.nodes} (fit)", im, im_params, im_fit),
+        candidates = [(f"irawan {im.quadrature.rule}-{im.quadrature.nodes}{' (fit)' if im_fit else ''}", im, im_params,
+                       im_fit),
                       ("irawan support-8", IrawanModel(weave, Quadrature("support", 8)), im_params, None),
-                      (f"kang {'adaptive' if kang.tile_nodes is None else kang.tile_nodes} nodes (fit)", kang,
-                       kang_params, kang_fit),
+                      (f"kang {'adaptive' if kang.tile_nodes is None else kang.tile_nodes} nodes"
+                       f"{' (fit)' if kang_fit else ''}", kang, kang_params, kang_fit),
                       ("kang tile_nodes=8", KangModel(weave, tile_nodes=8, alternating=kang.alternating),
                        kang_params, None)]
         for label, model, p, fit in candidates:
@@ -77,12 +78,12 @@ def run(context) -> dict:
 
 def lines(result: dict) -> list[str]:
     out = ["== IM vs Kang: evaluation speed on 1,575 directions (same run) and the saved example fits ==",
-           f"  {'fabric':18s} {'model':22s} {'params':8s} {'pairs/s':>12s} {'median':>8s} {'80th':>8s} "
+           f"  {'fabric':18s} {'model':26s} {'params':8s} {'pairs/s':>12s} {'median':>8s} {'80th':>8s} "
            f"{'optim. (s)':>10s}"]
     for r in result["rows"]:
         err = (f"{100 * r['p50']:7.2f}% {100 * r['p80']:7.2f}% {r['fit_wall_time_s']:10.1f}" if "p50" in r
                else f"{'-':>8s} {'-':>8s} {'-':>10s}")
-        out.append(f"  {r['fabric']:18s} {r['model']:22s} {r['parameters']:8s} {r['pairs_per_second']:12,.0f} {err}")
+        out.append(f"  {r['fabric']:18s} {r['model']:26s} {r['parameters']:8s} {r['pairs_per_second']:12,.0f} {err}")
     if result.get("note"):
         out.append(f"  note: {result['note']}")
     return out

@@ -64,10 +64,18 @@ def kernels_available() -> bool:
     return importlib.util.find_spec(KERNELS_MODULE) is not None
 
 
+def kernels_comparison(quick: bool) -> dict | None:
+    """``compare_kernels(quick)`` of the comparison module, or None when it is not installed."""
+    if not kernels_available():
+        return None
+    return importlib.import_module(KERNELS_MODULE).compare_kernels(quick=quick)
+
+
 def run(context) -> dict:
     result = {"model": model_speed(context.quick)}
-    if kernels_available():
-        result["kernels"] = importlib.import_module(KERNELS_MODULE).compare_kernels(quick=context.quick)
+    kernels = kernels_comparison(context.quick)
+    if kernels is not None:
+        result["kernels"] = kernels
     return result
 
 
