@@ -200,6 +200,22 @@ def test_pareto_front_is_the_non_dominated_set():
         assert (i in front) == (not dominated)
 
 
+def test_accuracy_section_small():
+    from clothlab.studies import quadrature_accuracy
+
+    rows = quadrature_accuracy.accuracy_study(True, fabrics=("polyester-lining",))
+    assert len(rows) == 2 * len(quadrature_accuracy.RULES) and {r["yarn"] for r in rows} == {"warp", "weft"}
+    by_rule = {(r["yarn"], f"{r['rule']}-{r['nodes']}"): r for r in rows}
+    for yarn in ("warp", "weft"):
+        assert by_rule[yarn, "adaptive-4"]["p80"] < 1e-6 and by_rule[yarn, "support-16"]["p80"] < 1e-6
+        assert by_rule[yarn, "trapezoid-81"]["p80"] < by_rule[yarn, "trapezoid-3"]["p80"]
+    for r in rows:
+        assert 0 <= r["p50"] <= r["p80"] and r["seconds_1575"] > 0 and r["quad_warnings"] >= 0
+        assert r["quad_seconds_1575"] > r["seconds_1575"]  # the compiled rule beats the quad loop
+    text = "\n".join(quadrature_accuracy.lines({"rows": rows}))
+    assert "polyester-lining" in text and "trapezoid-11 p80" in text
+
+
 def test_tradeoff_section_small(tmp_path):
     out = quadrature_tradeoff.tradeoff_study(True, figures_dir=tmp_path, fabrics=("polyester-lining",),
                                              n_reference=25, repeats=1)
