@@ -97,9 +97,13 @@ def test_a_data_directory_without_measurements_is_an_error_naming_data(tmp_path)
     with pytest.raises(ConfigError, match="--data") as info:
         bench.run_bench(sections=("fit",), quick=True, data_dir=tmp_path, output=None, json_path=None,
                         emit=lines.append)
-    assert "measurements" in str(info.value) and "fabric.yaml" in str(info.value)
+    assert "has no measurements/" in str(info.value) and lines == []  # before any section ran
     with pytest.raises(ConfigError, match="--data"):
         StudyData(tmp_path / "missing")
+    (tmp_path / "measurements").mkdir()
+    with StudyData(tmp_path) as data, pytest.raises(ConfigError, match="--data") as info:
+        data.config_path("polyester-lining")
+    assert "polyester-lining/fabric.yaml not found" in str(info.value)
 
 
 def test_run_bench_writes_json_report_and_emits_each_section(tmp_path):

@@ -84,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="speed and accuracy figures, measured side by side in one run")
     p.add_argument("--quick", action="store_true", help="a reduced run (seconds instead of minutes)")
     p.add_argument("--json", type=Path, help="also write the figures as JSON")
-    p.add_argument("--figures", type=Path, help="directory for the benchmark plots (default reports/bench)")
+    p.add_argument("--figures", type=Path, help="directory for the benchmark plots and HTML page (as --report)")
     p.add_argument("--sections", help="comma-separated subset of sections to run")
     p.add_argument("--report", type=Path, metavar="DIR", help="also write an HTML page of the figures into DIR")
     p.add_argument("--data", type=Path, metavar="DIR",

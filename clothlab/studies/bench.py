@@ -80,12 +80,13 @@ def run_bench(*, sections: tuple[str, ...] | None, quick: bool, data_dir: Path |
     from clothlab.studies.timing import machine
 
     chosen = _selected(sections)
+    data = StudyData(data_dir)  # a bad --data stops the run here, before any section
     output = None if output is None else Path(output)
     figures: dict = {"machine": machine(), "quick": quick, "sections": [s.name for s in chosen],
                      "section_seconds": {}}
     emit(f"clothlab bench ({'quick' if quick else 'full'}) on {figures['machine']['cpus']} CPUs; sections: "
          f"{', '.join(figures['sections'])}")
-    with StudyData(data_dir) as data:
+    with data:
         figures["data"] = data.describe()
         emit(figures["data"])
         context = Context(quick=quick, data=data, figures_dir=output)

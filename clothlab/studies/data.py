@@ -33,8 +33,10 @@ class StudyData:
 
     def __init__(self, data_dir: Path | None = None):
         self.data_dir = None if data_dir is None else Path(data_dir)
-        if self.data_dir is not None and not self.data_dir.is_dir():
-            raise ConfigError(f"data directory {self.data_dir} not found; it should hold {LAYOUT}", field="--data")
+        if self.data_dir is not None and not (self.data_dir / "measurements").is_dir():
+            found = "has no measurements/" if self.data_dir.is_dir() else "not found"
+            raise ConfigError(f"data directory {self.data_dir} {found}; it should hold {LAYOUT}; without --data the "
+                              "example measurements are regenerated", field="--data")
         self._tmp: Path | None = None
 
     @property
