@@ -392,3 +392,15 @@ def test_texture_speed_section():
     assert f["size"] == 64 and 0 < f["seconds"] < 60 and f["pixels_per_second"] > 0
     assert f["target_s"] < texture_speed.TARGET_S  # scaled with the pixel count
     assert texture_speed.lines(f)[1].startswith(f"  {f['seconds']:.3f} s")
+
+
+def test_clothlab_bench_command_runs_the_chosen_sections(tmp_path, capsys):
+    from clothlab.cli import main
+
+    path = tmp_path / "bench.json"
+    assert main(["bench", "--quick", "--sections", "cli", "--json", str(path), "--report", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "== cli ==" in out and f"figures written to {path}" in out and (tmp_path / "r" / "index.html").is_file()
+    assert json.loads(path.read_text())["sections"] == ["cli"]
+    assert main(["bench", "--sections", "cli,bogus"]) == 2
+    assert "--sections" in capsys.readouterr().err
