@@ -8,7 +8,8 @@ the installed package.
 Without a data directory (an installed wheel run in an empty directory) the six example measurements are
 regenerated on first use, deterministically, by :func:`clothlab.simulate.examples.write_paper_examples` into
 a temporary directory removed when the run ends (a few seconds; the same generator as ``clothlab simulate
---paper-examples DIR``).  There are no saved fits then: the sections that read them say so and use their
+--paper-examples DIR``; its tables agree with the repository's measurements to rounding, within 1e-15
+relative).  There are no saved fits then: the sections that read them say so and use their
 fallback (model defaults, or the live reduced study).
 """
 

@@ -68,7 +68,7 @@ def kernels_comparison(quick: bool) -> dict | None:
     """``compare_kernels(quick)`` of the comparison module, or None when it is not installed."""
     if not kernels_available():
         return None
-    return importlib.import_module(KERNELS_MODULE).compare_kernels(quick=quick)
+    return importlib.import_module(KERNELS_MODULE).compare_kernels(quick)
 
 
 def run(context) -> dict:
