@@ -198,9 +198,11 @@ def test_pareto_front_of_known_points():
 def test_pareto_front_is_the_non_dominated_set():
     rng = np.random.default_rng(3)
     times, errors = rng.uniform(size=40), rng.uniform(size=40)
+    times[5], errors[7] = times[4], errors[6]  # ties in time and in error
     front = set(quadrature_tradeoff.pareto_front(times, errors))
-    for i in range(40):
-        dominated = any(times[j] <= times[i] and errors[j] < errors[i] for j in range(40) if j != i)
+    points = list(zip(times, errors, strict=True))
+    for i, (t, e) in enumerate(points):
+        dominated = any(tj <= t and ej <= e and (tj, ej) != (t, e) for tj, ej in points)
         assert (i in front) == (not dominated)
 
 
@@ -237,10 +239,11 @@ def test_tradeoff_section_small(tmp_path):
         # each rule's time is its ratio times the base's time in its own pairing, which is >= the base's fastest
         assert r["seconds_1575"] >= r["time_ratio"] * base["seconds_1575"] * (1 - 1e-12), name
         assert 0 <= r["p50"] <= r["p80"] <= r["max"], name
-    # the Pareto flags: exactly the rows no other row beats in both time and p80
+    # the Pareto flags: exactly the rows no other row dominates (no slower and no less accurate, better in one)
     for name, r in rows.items():
-        beaten = any(o["seconds_1575"] <= r["seconds_1575"] and o["p80"] < r["p80"] for o in rows.values()
-                     if o is not r)
+        t, e = r["seconds_1575"], r["p80"]
+        beaten = any(o["seconds_1575"] <= t and o["p80"] <= e and (o["seconds_1575"] < t or o["p80"] < e)
+                     for o in rows.values())
         assert r["pareto"] == (not beaten), name
     assert f["claim_rules"] == [name for name, r in rows.items() if r["p80"] <= 0.1 * base["p80"]
                                 and r["time_ratio"] <= 1.0]
