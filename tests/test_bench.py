@@ -1,22 +1,39 @@
-"""Smoke test of the benchmark sections (small sizes), with properties that must hold."""
+"""The benchmark sections at small sizes, the section registry and the run loop, with properties that must hold."""
 
 from __future__ import annotations
 
+import ast
+import importlib
 import json
+import math
+import sys
+import tempfile
+import time
+import types
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from clothlab.studies import bench
+from clothlab.errors import ConfigError
+from clothlab.studies import bench, coverage, full_fit, model_speed, nlopt_algorithms, quadrature_tradeoff, timing
+from clothlab.studies.data import StudyData
 
-FITS = Path(__file__).resolve().parents[1] / "fits"
+REPO = Path(__file__).resolve().parents[1]
+FITS = REPO / "fits"
+STUDIES = REPO / "clothlab" / "studies"
 
 
 def _checkpoints(root: Path) -> dict:
     """Posterior checkpoints (hidden .npz files) under ``root`` with their modification times.  (Only these: other
     engineers may regenerate the example fits while the tests run.)"""
     return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in root.rglob("*checkpoint*")}
+
+
+@pytest.fixture
+def repo_data():
+    with StudyData(REPO) as data:
+        yield data
 
 
 @pytest.fixture
@@ -47,15 +64,167 @@ def no_cv_no_checkpoint(monkeypatch):
         assert path is None or not Path(path).exists(), "a temporary checkpoint was left behind"
 
 
+# ------------------------------------------------------------------------------------- registry and run loop
+
+def test_every_section_is_a_module_with_run_and_lines():
+    assert len(set(bench.SECTION_NAMES)) == len(bench.SECTION_NAMES) == len(bench.SECTIONS)
+    for section in bench.SECTIONS:
+        module = importlib.import_module(section.module)
+        assert callable(module.run) and callable(module.lines), section.name
+        assert section.summary
+
+
+def test_no_studies_module_prints_or_finds_files_through_its_own_path():
+    """Studies return lines and take their data as an argument: no print() call, no __file__."""
+    for path in sorted(STUDIES.glob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+                assert node.func.id != "print", f"{path.name}:{node.lineno} prints"
+            if isinstance(node, ast.Name):
+                assert node.id != "__file__", f"{path.name}:{node.lineno} uses __file__"
+
+
+def test_unknown_sections_are_an_error_naming_the_choices():
+    with pytest.raises(ConfigError, match="--sections") as info:
+        bench.run_bench(sections=("cli", "nope"), quick=True, data_dir=None, output=None, json_path=None,
+                        emit=lambda line: None)
+    assert "nope" in str(info.value) and all(name in str(info.value) for name in bench.SECTION_NAMES)
+
+
+def test_a_data_directory_without_measurements_is_an_error_naming_data(tmp_path):
+    lines = []
+    with pytest.raises(ConfigError, match="--data") as info:
+        bench.run_bench(sections=("fit",), quick=True, data_dir=tmp_path, output=None, json_path=None,
+                        emit=lines.append)
+    assert "has no measurements/" in str(info.value) and lines == []  # before any section ran
+    with pytest.raises(ConfigError, match="--data"):
+        StudyData(tmp_path / "missing")
+    (tmp_path / "measurements").mkdir()
+    with StudyData(tmp_path) as data, pytest.raises(ConfigError, match="--data") as info:
+        data.config_path("polyester-lining")
+    assert "polyester-lining/fabric.yaml not found" in str(info.value)
+
+
+def test_run_bench_writes_json_report_and_emits_each_section(tmp_path):
+    path, report, lines = tmp_path / "bench.json", tmp_path / "report", []
+    code = bench.run_bench(sections=("cli",), quick=True, data_dir=None, output=report, json_path=path,
+                           emit=lines.append)
+    assert code == 0
+    data = json.loads(path.read_text())
+    assert data["machine"]["cpus"] >= 1 and data["machine"]["versions"]["numpy"]
+    assert data["sections"] == ["cli"] and data["section_seconds"]["cli"] > 0
+    cli = data["cli"]
+    assert 0 < cli["help_seconds_best"] <= cli["help_seconds_median"] < data["section_seconds"]["cli"]
+    assert cli["import_pulls"] == []  # import clothlab stays light
+    assert any(line.startswith("== cli ==") for line in lines) and lines[-1].startswith("report: ")
+    assert (report / "index.html").is_file() and json.loads((report / "result.json").read_text())["cli"] == cli
+
+
+def test_bench_from_an_empty_directory_regenerates_the_examples(tmp_path, monkeypatch, no_cv_no_checkpoint):
+    """No data directory: the examples are regenerated into a temporary directory (removed afterwards), the fit
+    section fits them and the saved-fit section says it fell back; nothing is written where it runs."""
+    monkeypatch.chdir(tmp_path)
+    before = set(Path(tempfile.gettempdir()).glob("clothlab-examples-*"))
+    lines = []
+    json_path = tmp_path.parent / f"{tmp_path.name}-bench.json"
+    assert bench.run_bench(sections=("fit", "models"), quick=True, data_dir=None, output=None, json_path=json_path,
+                           emit=lines.append) == 0
+    data = json.loads(json_path.read_text())
+    assert "no --data" in data["data"]
+    fit = data["fit"]
+    assert fit["fabric"].startswith("polyester-lining") and 0 < fit["evaluations"] and fit["wall_time_s"] > 0
+    assert math.isfinite(fit["p50"]) and 0 < fit["p50"] < fit["p80"] < 1  # the noisy example fits
+    rows = data["models"]["rows"]
+    assert rows and all(r["parameters"] == "defaults" and "p50" not in r for r in rows)
+    assert all(r["pairs_per_second"] > 0 for r in rows)
+    assert "--data" in data["models"]["note"] and any("note:" in line for line in lines)
+    assert list(tmp_path.iterdir()) == []
+    assert set(Path(tempfile.gettempdir()).glob("clothlab-examples-*")) == before
+
+
+def test_regenerated_examples_reproduce_the_shipped_measurements():
+    """The regenerated tables agree with the repository's measurements to rounding (the same seeded generator)."""
+    from clothlab.io.table import read_table
+
+    with StudyData(None) as data:
+        fabrics = sorted(p.parent.name for p in data.measurements.glob("*/fabric.yaml"))
+        assert fabrics == sorted(p.parent.name for p in (REPO / "measurements").glob("*/fabric.yaml"))
+        for fabric in fabrics:
+            for table in ("clean.csv", "noisy.csv"):
+                got = read_table(data.measurements / fabric / table)
+                want = read_table(REPO / "measurements" / fabric / table)
+                np.testing.assert_allclose(got.values, want.values, rtol=1e-14, atol=0)
+                for angle in ("theta_i", "phi_i", "theta_o", "phi_o"):
+                    np.testing.assert_array_equal(getattr(got, angle), getattr(want, angle))
+        root = data.measurements
+    assert not root.exists()
+
+
+# ------------------------------------------------------------------------------------------- timing harness
+
+def test_best_time_is_the_fastest_call():
+    seconds = timing.best_time(lambda: time.sleep(0.003), repeats=3, min_sample_s=0.0)
+    assert 0.003 <= seconds < 0.03
+
+
+def test_paired_timings_alternate_with_the_base_and_measure_the_ratio():
+    calls = []
+    base_best, timed = timing.paired_timings(lambda: calls.append("b"), [lambda: calls.append("o")], rounds=4,
+                                             min_sample_s=0.0)
+    assert calls[:2] == ["b", "o"]  # warm-up calls
+    assert calls[2:] == ["b", "o"] * 4  # strict alternation, at least ``rounds`` pairs
+
+    def base():
+        time.sleep(0.002)
+
+    def triple():
+        time.sleep(0.006)
+
+    base_best, timed = timing.paired_timings(base, [triple, base], rounds=4, min_sample_s=0.0)
+    (t_triple, ratio), (t_base, _) = timed
+    assert 0.002 <= base_best <= t_base and 2.0 < ratio < 4.0
+    assert t_triple >= ratio * base_best * (1 - 1e-12)  # the ratio is to the base's time in its own pairing
+
+
+# ------------------------------------------------------------------------------------------------ sections
+
 def test_pareto_front_of_known_points():
     times = np.array([1.0, 2.0, 3.0, 1.5, 4.0])
     errors = np.array([1e-1, 1e-3, 1e-2, 1e-1, 1e-5])
-    assert bench.pareto_front(times, errors) == [0, 1, 4]
+    assert quadrature_tradeoff.pareto_front(times, errors) == [0, 1, 4]
+
+
+def test_pareto_front_is_the_non_dominated_set():
+    rng = np.random.default_rng(3)
+    times, errors = rng.uniform(size=40), rng.uniform(size=40)
+    times[5], errors[7] = times[4], errors[6]  # ties in time and in error
+    front = set(quadrature_tradeoff.pareto_front(times, errors))
+    points = list(zip(times, errors, strict=True))
+    for i, (t, e) in enumerate(points):
+        dominated = any(tj <= t and ej <= e and (tj, ej) != (t, e) for tj, ej in points)
+        assert (i in front) == (not dominated)
+
+
+def test_accuracy_section_small():
+    from clothlab.studies import quadrature_accuracy
+
+    rows = quadrature_accuracy.accuracy_study(True, fabrics=("polyester-lining",))
+    assert len(rows) == 2 * len(quadrature_accuracy.RULES) and {r["yarn"] for r in rows} == {"warp", "weft"}
+    by_rule = {(r["yarn"], f"{r['rule']}-{r['nodes']}"): r for r in rows}
+    for yarn in ("warp", "weft"):
+        assert by_rule[yarn, "adaptive-4"]["p80"] < 1e-6 and by_rule[yarn, "support-16"]["p80"] < 1e-6
+        assert by_rule[yarn, "trapezoid-81"]["p80"] < by_rule[yarn, "trapezoid-3"]["p80"]
+    for r in rows:
+        assert 0 <= r["p50"] <= r["p80"] and r["seconds_1575"] > 0 and r["quad_warnings"] >= 0
+        assert r["quad_seconds_1575"] > r["seconds_1575"]  # the compiled rule beats the quad loop
+    text = "\n".join(quadrature_accuracy.lines({"rows": rows}))
+    assert "polyester-lining" in text and "trapezoid-11 p80" in text
 
 
 def test_tradeoff_section_small(tmp_path):
-    out = bench.tradeoff_section(True, figures_dir=tmp_path, fabrics=("polyester-lining",), n_reference=25,
-                                 repeats=1)
+    out = quadrature_tradeoff.tradeoff_study(True, figures_dir=tmp_path, fabrics=("polyester-lining",),
+                                             n_reference=25, repeats=1)
     f = out["fabrics"]["polyester-lining"]
     rows = {f"{r['rule']}-{r['nodes']}": r for r in f["rows"]}
     assert set(rows) == set(out["rules"])
@@ -63,10 +232,20 @@ def test_tradeoff_section_small(tmp_path):
     assert rows["adaptive-4"]["p80"] < 1e-8
     assert rows["support-16"]["p80"] < 1e-6
     assert rows["trapezoid-81"]["p80"] < rows["trapezoid-3"]["p80"]
-    assert all(r["seconds_1575"] > 0 for r in rows.values())
-    assert any(r["pareto"] for r in rows.values())
-    assert rows["trapezoid-11"]["time_ratio"] == 1.0
-    assert f["claim_rules"] == [name for name, r in rows.items() if r["p80"] <= 0.1 * rows["trapezoid-11"]["p80"]
+    base = rows["trapezoid-11"]
+    assert base["seconds_1575"] == f["trapezoid11"]["seconds_1575"]
+    for name, r in rows.items():
+        assert 0 < r["seconds_1575"] and 0 < r["time_ratio"] < math.inf, name
+        # each rule's time is its ratio times the base's time in its own pairing, which is >= the base's fastest
+        assert r["seconds_1575"] >= r["time_ratio"] * base["seconds_1575"] * (1 - 1e-12), name
+        assert 0 <= r["p50"] <= r["p80"] <= r["max"], name
+    # the Pareto flags: exactly the rows no other row dominates (no slower and no less accurate, better in one)
+    for name, r in rows.items():
+        t, e = r["seconds_1575"], r["p80"]
+        beaten = any(o["seconds_1575"] <= t and o["p80"] <= e and (o["seconds_1575"] < t or o["p80"] < e)
+                     for o in rows.values())
+        assert r["pareto"] == (not beaten), name
+    assert f["claim_rules"] == [name for name, r in rows.items() if r["p80"] <= 0.1 * base["p80"]
                                 and r["time_ratio"] <= 1.0]
     assert (tmp_path / "tradeoff.png").stat().st_size > 10_000
     if f["claim_rules"]:
@@ -74,6 +253,8 @@ def test_tradeoff_section_small(tmp_path):
     else:  # the report explains, with numbers, why no rule qualifies
         assert "polyester-lining" in out["explanation"] and "filament" in out["explanation"]
         assert f"{1e3 * f['trapezoid11']['seconds_1575']:.2f} ms" in out["explanation"]
+    text = "\n".join(quadrature_tradeoff.lines(out))
+    assert "polyester-lining" in text and "trapezoid-11 p80" in text
 
 
 def _row(rule, nodes, ms, p80, base_ms=1.0, base_p80=1e-2):
@@ -81,7 +262,7 @@ def _row(rule, nodes, ms, p80, base_ms=1.0, base_p80=1e-2):
             "p80_ratio": p80 / base_p80}
 
 
-def test_tradeoff_explanation_from_the_numbers(capsys):
+def test_tradeoff_explanation_from_the_numbers():
     """The paragraph quotes the measured ratios of each yarn group; none when every fabric has a qualifying rule."""
     filament = {"staple": [False, False], "claim_rules": [], "fastest_time_ratio": 0.8, "staple_pieces": {},
                 "trapezoid11": {"p80": 1e-2, "seconds_1575": 1e-3},
@@ -95,7 +276,7 @@ def test_tradeoff_explanation_from_the_numbers(capsys):
                        _row("support", 16, 20.0, 2e-4), _row("gauss", 81, 4.0, 5e-4)]}
     staple["cheapest_10x"] = {"rule": "gauss-81", "time_ratio": 4.0}
     result = {"n_reference": 10, "fabrics": {"polyester-lining": filament, "cotton-denim": staple}}
-    text = bench.explain_tradeoff(result)
+    text = quadrature_tradeoff.explain_tradeoff(result)
     assert text.startswith("No rule reaches 10x") and "2 of 2 fabrics" in text
     assert "filament-yarn fabrics (polyester-lining)" in text and "staple-yarn fabrics (cotton-denim)" in text
     assert "support-4 at 1.10x its time" in text  # the cheapest 10x rule of the filament group
@@ -104,84 +285,125 @@ def test_tradeoff_explanation_from_the_numbers(capsys):
     assert "support-16 at 20.0x" in text and "gauss-81 (7.4x the nodes)" in text
     assert "80 % of trapezoid-11's time" in text and "50 % of trapezoid-11's time" in text  # outside the integrals
     result["explanation"] = text
-    bench.print_tradeoff({**result, "fabrics": {}})
-    assert "why no rule qualifies" in capsys.readouterr().out
+    assert "  why no rule qualifies (from the numbers above):" in quadrature_tradeoff.lines({**result, "fabrics": {}})
     filament["claim_rules"], staple["claim_rules"] = ["support-4"], ["gauss-81"]
-    assert bench.explain_tradeoff(result) is None
+    assert quadrature_tradeoff.explain_tradeoff(result) is None
 
 
-def test_paired_timings_alternate_with_the_base():
-    calls = []
-    base = lambda: calls.append("b")  # noqa: E731
-    other = lambda: calls.append("o")  # noqa: E731
-    base_best, timed = bench._paired_timings(base, [other, base], rounds=4, min_sample_s=0.0)
-    assert timed[1] == (base_best, 1.0)  # the base against itself
-    assert timed[0][1] > 0 and base_best > 0
-    assert calls[:2] == ["b", "o"]  # warm-up calls
-    assert calls[2:] == ["b", "o"] * 4  # strict alternation, at least ``rounds`` pairs
-
-
-def test_fit_section_times_the_optimisation_alone(no_cv_no_checkpoint):
+def test_fit_section_times_the_optimisation_alone(no_cv_no_checkpoint, repo_data):
     """The "one full fit" figure is the optimisation only: no cross-validation, no posterior, no checkpoint, nothing
     written under fits/ (the example fabric.yaml asks for 5-fold CV and a posterior)."""
-    f = bench.fit_section(True, max_evals=120)
+    f = full_fit.full_fit(True, data=repo_data, max_evals=120)
     assert no_cv_no_checkpoint == []  # no posterior ran
     assert f["cross_validation"] is False and f["posterior"] is False
     assert len(f["free"]) == 6 and f["values"] == 1575 * 3
     assert f["budget"] == 120 and 0 < f["evaluations"] < 1000  # the bench budget, not fabric.yaml's 6,000 x 8
     assert 0 < f["wall_time_s"] <= f["total_wall_time_s"]
-    assert f["target_s"] == 20.0 and f["meets_target"] == (f["wall_time_s"] < 20.0)
+    assert f["seconds_per_evaluation"] * f["evaluations"] == pytest.approx(f["wall_time_s"])
+    assert "met" in full_fit.lines(f)[1]
 
 
-def test_coverage_section_small(no_cv_no_checkpoint, capsys):
-    out = bench.coverage_section(True, fabrics=("polyester-lining",), walkers=12, steps=40, max_steps=40,
-                                 check_every=20, optimizer={"max_evals": 150, "starts": 1})
+def test_coverage_section_small(no_cv_no_checkpoint, repo_data):
+    out = coverage.coverage(True, data=repo_data, fabrics=("polyester-lining",), walkers=12, steps=40, max_steps=40,
+                            check_every=20, optimizer={"max_evals": 150, "starts": 1})
     assert len(no_cv_no_checkpoint) == 1 and no_cv_no_checkpoint[0] is not None  # one posterior, temp checkpoint
     r = out["fabrics"]["polyester-lining"]
-    assert r["n_free"] == 6 and out["total"] == 6 and 0 <= out["covered"] <= 6  # truth known for all six
-    assert out["fraction"] == out["covered"] / 6 and out["passed"] == (out["fraction"] >= 0.9)
-    assert r["steps"] == 40 and r["wall_time_s"] > 0
-    bench.print_coverage(out)
-    text = capsys.readouterr().out
+    assert r["n_free"] == 6 and out["total"] == 6  # truth known for all six
+    assert out["covered"] == r["n_covered"] == sum(r["covered"].values())
+    for name, (lo, hi, truth) in r["intervals"].items():  # covered = the truth inside the 95 % interval
+        assert r["covered"][name] == (lo <= truth <= hi)
+    assert r["steps"] == 40 and r["wall_time_s"] > 0 and out["reduced"]
+    text = "\n".join(coverage.lines(out))
     assert "polyester-lining" in text and "criterion >= 90 %" in text
 
 
-def test_posterior_benchmark_samples_once(no_cv_no_checkpoint, monkeypatch):
+@pytest.mark.skipif(not all((FITS / f / "posterior.json").is_file() for f in coverage.COVERAGE_FABRICS),
+                    reason="the example fits' posteriors are not in this checkout")
+def test_saved_coverage_reads_the_example_posteriors():
+    out = coverage.saved_coverage(FITS, coverage.COVERAGE_FABRICS)
+    assert set(out["fabrics"]) == set(coverage.COVERAGE_FABRICS)
+    for name, r in out["fabrics"].items():
+        post = json.loads((FITS / name / "posterior.json").read_text())
+        for parameter, hit in r["covered"].items():
+            e = post["parameters"][parameter]
+            assert hit == (e["p2.5"] <= e["truth"] <= e["p97.5"]), (name, parameter)
+    assert out["total"] == sum(r["n_free"] for r in out["fabrics"].values())
+    assert 0 <= out["covered"] <= out["total"]
+
+
+def test_full_coverage_without_saved_posteriors_runs_the_reduced_study_and_says_so(monkeypatch, tmp_path):
+    calls = []
+
+    def fake_study(fabrics, *, data, **settings):
+        calls.append(settings)
+        return {"fabrics": {}, "covered": 0, "total": 0, "fraction": math.nan, "settings": settings}
+
+    monkeypatch.setattr(coverage, "coverage_study", fake_study)
+    (tmp_path / "measurements").mkdir()
+    with StudyData(tmp_path) as data:  # a data directory without fits/
+        out = coverage.coverage(False, data=data)
+    assert calls == [coverage.REDUCED] and out["reduced"] and "--data" in out["note"]
+    out = coverage.coverage(False, data=StudyData(tmp_path), rerun=True)
+    assert calls[-1] == coverage.FULL and not out["reduced"]
+
+
+def test_posterior_benchmark_samples_once(no_cv_no_checkpoint, repo_data):
     """One posterior, under the time cap, checkpointed in a temporary directory (the fit itself samples none)."""
-    import clothlab.studies.posterior as posterior
+    from clothlab.studies import posterior
 
-    real = posterior._fabric_config
-
-    def cheap(fabric, variant="noisy"):  # the example's fabric.yaml (CV and posterior on), a small optimiser budget
-        from dataclasses import replace
-
-        cfg = real(fabric, variant)
-        assert cfg.fit.cv_folds >= 2 and cfg.fit.posterior is not None
-        return replace(cfg, fit=replace(cfg.fit, optimizer=replace(cfg.fit.optimizer, max_evals=150, starts=1)))
-
-    monkeypatch.setattr(posterior, "_fabric_config", cheap)
-    out = posterior.posterior_benchmark("polyester-lining", max_minutes=0.02, walkers=12, progress=False)
+    assert repo_data.load_config("polyester-lining").fit.posterior is not None  # the yaml asks for one
+    out = posterior.posterior_benchmark("polyester-lining", max_minutes=0.02, data=repo_data, walkers=12,
+                                        progress=False, optimizer={"max_evals": 150, "starts": 1})
     assert len(no_cv_no_checkpoint) == 1 and no_cv_no_checkpoint[0] is not None
     assert out["stop_reason"] == "max_seconds" and not out["within_limit"]
     assert out["posterior_wall_time_s"] < 10.0
+    assert "polyester-lining" in posterior.lines(out)[0]
 
 
-def test_fit_algorithms_section_small(tmp_path):
+def test_fit_algorithms_section_small(tmp_path, repo_data):
     from clothlab.fit.optimize import SUPPORTED_GLOBAL, SUPPORTED_LOCAL
 
-    out = bench.fit_algorithms_section(True, figures_dir=tmp_path, fabrics=("polyester-lining",), max_evals=30)
+    out = nlopt_algorithms.nlopt_algorithms(True, data=repo_data, figures_dir=tmp_path, fabrics=("polyester-lining",),
+                                            max_evals=30)
     f = out["fabrics"]["polyester-lining"]
     assert len(f["rows"]) == len(SUPPORTED_GLOBAL) + len(SUPPORTED_LOCAL)
     for r in f["rows"]:
-        assert r["evaluations"] <= 30
+        assert r["evaluations"] <= 30 and r["excess"] >= 0.0 and r["wall_time_s"] > 0
         assert r["objective"] <= f["start_objective"] * (1 + 1e-12) or "+" in r["algorithm"]
-    assert min(r["excess"] for r in f["rows"]) == 0.0
+        assert np.all(np.diff(r["trace_best"]) <= 0)  # best so far never rises
     assert (tmp_path / "fit_algorithms.png").is_file()
 
 
-def test_run_benchmarks_writes_machine_json(tmp_path):
+def test_speed_section_reports_the_kernels_comparison_when_present(monkeypatch):
+    """The model-speed section calls compare_kernels when its module exists, and shows each preset's figures."""
+    assert model_speed.kernels_comparison(quick=True) is None or model_speed.kernels_available()
+    fake = types.ModuleType(model_speed.KERNELS_MODULE)
+    fake.__spec__ = importlib.machinery.ModuleSpec(model_speed.KERNELS_MODULE, None)
+    fake.compare_kernels = lambda quick: {"cotton-denim": {"old_pairs_per_second": 2.0e6,
+                                                           "new_pairs_per_second": 2.1e6, "ratio": 1.05}}
+    monkeypatch.setitem(sys.modules, model_speed.KERNELS_MODULE, fake)
+    kernels = model_speed.kernels_comparison(quick=True)
+    assert kernels == fake.compare_kernels(True)
+    text = "\n".join(model_speed.kernel_lines(kernels))
+    assert "cotton-denim" in text and "2,100,000" in text and "1.05" in text
+
+
+def test_texture_speed_section():
+    from clothlab.studies import texture_speed
+
+    f = texture_speed.texture_speed(quick=True, size=64)
+    assert f["size"] == 64 and 0 < f["seconds"] < 60 and f["pixels_per_second"] > 0
+    assert f["target_s"] < texture_speed.TARGET_S  # scaled with the pixel count
+    assert texture_speed.lines(f)[1].startswith(f"  {f['seconds']:.3f} s")
+
+
+def test_clothlab_bench_command_runs_the_chosen_sections(tmp_path, capsys):
+    from clothlab.cli import main
+
     path = tmp_path / "bench.json"
-    assert bench.run_benchmarks(quick=True, json_path=path, figures_dir=tmp_path, sections=("cli",)) == 0
-    data = json.loads(path.read_text())
-    assert data["machine"]["cpus"] >= 1 and data["machine"]["versions"]["numpy"]
-    assert "help_seconds_best" in data["cli"]
+    assert main(["bench", "--quick", "--sections", "cli", "--json", str(path), "--report", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "== cli ==" in out and f"figures written to {path}" in out and (tmp_path / "r" / "index.html").is_file()
+    assert json.loads(path.read_text())["sections"] == ["cli"]
+    assert main(["bench", "--sections", "cli,bogus"]) == 2
+    assert "--sections" in capsys.readouterr().err

@@ -341,7 +341,7 @@ def test_writer_checks_evaluate_and_directions(tmp_path):
 
 
 def test_memory_benchmark_quick(tmp_path):
-    figures = btf_memory_benchmark(quick=True, directory=tmp_path, verbose=False)
+    figures = btf_memory_benchmark(quick=True, directory=tmp_path)
     assert figures["n_images"] == 200 and figures["passed"]
     assert figures["max_rss_mb"] < 2048 and figures["images_per_second"] > 0
     # streaming: far less traced memory than the decoded stack (200 x 256 x 256 x 3 float32 = 150 MB)

@@ -2,27 +2,34 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
 from clothlab.studies import stability as check
-from clothlab.studies.stiff import FAST_POSTERIOR, conditioning, run_case, stiff_cases
+from clothlab.studies.stiff import FAST_POSTERIOR, conditioning, run_case, stiff_cases, stiff_lines
 
 
 def test_fast_check_finds_no_non_finite_negative_or_non_reciprocal_value(tmp_path):
-    result = check.run_check(full=False, json_path=tmp_path / "check.json", seed=3)
+    lines = []
+    code = check.run_check_command(full=False, seed=3, data_dir=None, output=tmp_path / "report",
+                                   json_path=tmp_path / "check.json", emit=lines.append)
+    assert code == 0
+    result = json.loads((tmp_path / "check.json").read_text())
     t = result["totals"]
     assert t["configurations"] > 50_000
     assert t["non_finite"] == t["negative"] == t["reciprocity"] == t["exceptions"] == 0
     assert t["back_facing_nonzero"] == 0
     assert result["verdict"]["passed"] and check.exit_code(result) == 0
-    assert (tmp_path / "check.json").is_file()
+    assert (tmp_path / "report" / "index.html").is_file()
+    assert any(line.startswith("verdict: PASS") for line in lines)
+    assert f"  total: {t['configurations']:,d} configurations; non-finite 0, negative 0" in "\n".join(lines)
     rows = {(r["sweep"], r["rule"]): r for r in result["continuity"]}
-    # the unsmoothed filament cutoff |u| = umax is a true discontinuity (numerics.md): it must be found
+    # the unsmoothed filament cutoff |u| = umax is a true discontinuity: it must be found
     assert rows[("umax, filament delta 0 (unsmoothed cutoff)", "support-8")]["jumps"] > 0
-    # R(u) is continuous in kappa (spine.py): no jump with the support rule
+    # the spine radius R(u) is continuous in kappa (sec. 5.4): no jump with the support rule
     assert rows[("kappa, staple", "support-8")]["jumps"] == 0
     assert rows[("kappa, filament", "support-8")]["jumps"] == 0
 
@@ -55,8 +62,9 @@ def test_verdict_fails_on_any_finding(key):
     assert check.exit_code({"totals": {**clean, key: 3}}) == 1
 
 
-def test_run_check_exit_code_is_1_when_the_sweep_finds_a_problem(monkeypatch, capsys):
-    """run_check records the verdict of its sweep; one non-finite value makes ``clothlab check`` exit 1."""
+def test_run_check_exit_code_is_1_when_the_sweep_finds_a_problem(monkeypatch):
+    """run_check records the verdict of its sweep; one non-finite value makes ``clothlab check`` exit 1; the lines
+    of each part are emitted as the part finishes, in order."""
     real = check.sweep_extremes
 
     def one_nan(parameter_sets, wi, wo, rule, max_examples=5):
@@ -66,11 +74,19 @@ def test_run_check_exit_code_is_1_when_the_sweep_finds_a_problem(monkeypatch, ca
     monkeypatch.setattr(check, "sweep_extremes", one_nan)
     monkeypatch.setattr(check, "continuity_study", lambda *a, **k: [])
     monkeypatch.setattr(check, "psi_threshold_jump", lambda *a, **k: [])
-    result = check.run_check(full=False, seed=1)
+    parts = []
+    result = check.run_check(full=False, seed=1, on_part=lambda name, partial: parts.append((name, set(partial))))
+    assert [name for name, _ in parts] == ["start", "extremes", "continuity", "psi_threshold", "verdict"]
+    assert "totals" in parts[1][1] and "continuity" not in parts[1][1]  # called when the part is done, not later
     assert result["totals"]["non_finite"] == 2  # grid and random part of the first rule
     assert result["verdict"] == {**result["verdict"], "passed": False, "failures": {"non_finite": 2}}
     assert check.exit_code(result) == 1
-    assert "verdict: FAIL (non-finite 2)" in capsys.readouterr().out
+    lines = []
+    assert check.run_check_command(full=False, seed=1, data_dir=None, output=None, json_path=None,
+                                   emit=lines.append) == 1
+    assert "verdict: FAIL (non-finite 2)" in lines
+    assert lines[0].startswith("clothlab check (fast subset, seed 1)")
+    assert lines == check.check_lines(result)[:len(lines) - 1] + [lines[-1]]  # same text, only the time differs
 
 
 def test_one_stiff_case_quickly():
@@ -92,6 +108,8 @@ def test_one_stiff_case_quickly():
     assert len(strengths) >= 3 and strengths == sorted(strengths, reverse=True)
     assert post["steps"] == FAST_POSTERIOR["steps"] and post["walkers"] == FAST_POSTERIOR["walkers"]
     assert case["strongest_correlations"] == post["strongest_text"]
+    text = "\n".join(stiff_lines({"seed": 0, "cases": [case]}))
+    assert case["name"] in text and post["strongest_text"] in text
 
 
 def test_kappa_parabola_makes_r_hat_zero():

@@ -317,7 +317,7 @@ def test_receding_plane_error_bound_and_monotone_cost_at_a_tiny_resolution(tmp_p
     distances = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 16.0, 64.0, 256.0)
     result = render_benchmark(resolution=(16, 12), distances=distances, reference_spp=16, repeats=1,
                               shaders=("im-lod", "im-texture", "kang-lod", "kang-texture"),
-                              figures_dir=tmp_path, verbose=False)
+                              figures_dir=tmp_path)
     rows, f0, f1 = result["rows"], result["settings"]["lod_f0_tiles"], result["settings"]["lod_f1_tiles"]
     assert [r["distance_mm"] for r in rows] == list(distances)
     assert all(not isinstance(v, dict | list) for r in rows for v in r.values())  # shown on the HTML page
@@ -341,7 +341,7 @@ def test_receding_plane_error_bound_and_monotone_cost_at_a_tiny_resolution(tmp_p
     assert result["lod_cost_falls"] is True
     # the counts are deterministic: a second run gives the same
     again = render_benchmark(resolution=(16, 12), distances=distances[:4], reference_spp=4, repeats=1,
-                             shaders=("im-lod", "im-texture"), verbose=False)
+                             shaders=("im-lod", "im-texture"))
     assert [r["im_lod_model_evaluations"] for r in again["rows"]] == cost[:4]
     assert (tmp_path / "render_lod.png").read_bytes()[:4] == b"\x89PNG" and result["figure"].endswith("render_lod.png")
 

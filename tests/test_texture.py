@@ -259,18 +259,16 @@ def test_extreme_inputs_finite_and_non_negative():
             assert np.all(comps["specular_warp"][back] == 0) and np.all(comps["diffuse"][back] == 0)
 
 
-def test_texture_is_fast():
-    import time
-
+def test_texture_evaluates_a_512_grid_at_once():
+    """A 512 x 512 grid of tile positions in one call keeps the grid's shape (its time is measured by the bench
+    section ``texture``, not here)."""
     weave = get_preset("silk-shantung")  # Perlin noise on
     texture = IrawanTexture(weave)
     u, v = np.meshgrid((np.arange(512) + 0.5) / 512, (np.arange(512) + 0.5) / 512)
     wi, wo = directions(PAIRS[:1])
-    texture.components(u[:2], v[:2], wi, wo)  # compile / albedo
-    start = time.perf_counter()
     comps = texture.components(u, v, wi, wo)
-    assert time.perf_counter() - start < 1.0
     assert comps["specular_weft"].shape == (512, 512)
+    assert np.all(np.isfinite(comps["specular_weft"])) and comps["specular_weft"].max() > 0
 
 
 # ------------------------------------------------------------------ noise (sec. 7.2.1)

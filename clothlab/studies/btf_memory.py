@@ -1,5 +1,5 @@
-"""Memory/throughput benchmark of BTF stack streaming (issue 4, "Must show": 6,561 images of 256 x 256 px
-loaded and tile-averaged under 2 GB peak).
+"""Bench section ``btf``: memory and throughput of BTF stack streaming (6,561 images of 256 x 256 px loaded
+and tile-averaged under a 2 GB peak; 200 images in the quick run).
 
 A synthetic stack is written to a temporary directory as 8-bit sRGB PNGs in UTIA layout on the UTIA 81 x 81
 direction sampling (theta 0/15/30/45/60/75 deg with 1/6/12/18/20/24 azimuths), each a periodic weave-like
@@ -86,8 +86,7 @@ def write_synthetic_stack(directory, n_images: int, size: int, *, seed: int = 0)
     return paths
 
 
-def btf_memory_benchmark(n_images: int = 6561, size: int = 256, *, quick: bool = False, directory=None,
-                         verbose: bool = True) -> dict:
+def btf_memory_benchmark(n_images: int = 6561, size: int = 256, *, quick: bool = False, directory=None) -> dict:
     """Generate, open and tile-average a synthetic stack; return timings, images/s and peak memory (MB).
 
     quick: 200 images (the default test).  directory: where to write the stack (default: a temporary
@@ -115,10 +114,17 @@ def btf_memory_benchmark(n_images: int = 6561, size: int = 256, *, quick: bool =
         "period_true": list(BENCH_PERIOD), "limit_mb": 2048.0,
     }
     figures["passed"] = bool(result.max_rss_mb < 2048.0 and period_error < 0.1)
-    if verbose:
-        print(f"BTF stream: {n_images} images {size}x{size}: {figures['images_per_second']:.0f} images/s "
-              f"(tile averaging), open {open_seconds:.1f} s, generate {generate:.1f} s; peak traced "
-              f"{figures['peak_traced_mb']:.0f} MB, process peak RSS {figures['max_rss_mb']:.0f} MB "
-              f"(limit 2048 MB); period {result.period.px:.3f} x {result.period.py:.3f} px "
-              f"(true {BENCH_PERIOD[0]} x {BENCH_PERIOD[1]})")
     return figures
+
+
+def run(context) -> dict:
+    return btf_memory_benchmark(quick=context.quick)
+
+
+def lines(f: dict) -> list[str]:
+    return [f"== BTF stack: {f['n_images']} images of {f['size']} x {f['size']} px ==",
+            f"  {f['images_per_second']:.0f} images/s (tile averaging), open {f['open_seconds']:.1f} s, generate "
+            f"{f['generate_seconds']:.1f} s; peak traced {f['peak_traced_mb']:.0f} MB, process peak RSS "
+            f"{f['max_rss_mb']:.0f} MB (limit {f['limit_mb']:.0f} MB); period {f['period_found'][0]:.3f} x "
+            f"{f['period_found'][1]:.3f} px (true {f['period_true'][0]} x {f['period_true'][1]}); "
+            f"{'PASS' if f['passed'] else 'FAIL'}"]

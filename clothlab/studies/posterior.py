@@ -1,5 +1,10 @@
-"""Posterior studies: a full posterior run to the tau criterion (the benchmark) and the coverage of the 95 %
-intervals over the simulated example sets (emcee docs, "Autocorrelation analysis")."""
+"""Posterior studies: a full posterior run to the tau criterion (the benchmark, bench section ``posterior``)
+and the coverage of the 95 % intervals over the simulated example sets (emcee docs, "Autocorrelation
+analysis"; the bench section ``coverage`` is :mod:`clothlab.studies.coverage`).
+
+The fabrics' fabric.yaml files come from a :class:`clothlab.studies.data.StudyData` (``data``: a data
+directory, or None for the example measurements regenerated into a temporary directory).
+"""
 
 from __future__ import annotations
 
@@ -9,13 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.fit.posterior import PosteriorResult, run_posterior
-
-
-def _fabric_config(fabric: str, variant: str = "noisy"):
-    from clothlab.config import load_config
-
-    root = Path(__file__).resolve().parents[2] / "measurements" / fabric
-    return load_config(root / ("fabric.yaml" if variant == "noisy" else "fabric-clean.yaml"))
+from clothlab.studies.data import StudyData, study_data
 
 
 def optimisation_only(config, **optimizer):
@@ -39,20 +38,21 @@ def _study_posterior(fit, **kwargs) -> PosteriorResult:
         return run_posterior(fit.problem, fit.params, checkpoint_path=Path(tmp) / "checkpoint.npz", **kwargs)
 
 
-def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 10.0, *, walkers: int = 32,
-                        seed: int = 1, progress: bool = True) -> dict:
+def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 10.0, *, data: StudyData | None = None,
+                        walkers: int = 32, seed: int = 1, progress: bool = True, optimizer: dict | None = None) -> dict:
     """A full posterior (the fabric's six free parameters, noisy data) run to the tau criterion.
 
-    The optimum comes from the fabric's fabric.yaml optimiser settings (cross-validation and the configured
-    posterior off; its wall time is reported apart); the posterior then runs once, with a minimum of 1,000 steps,
-    and stops by the tau rule, at 50,000 steps or after ``max_minutes``.  Returns the wall times, tau, steps,
-    acceptance and whether it converged within the limit.
+    The optimum comes from the fabric's fabric.yaml optimiser settings (``optimizer`` replaces some;
+    cross-validation and the configured posterior off; its wall time is reported apart); the posterior then
+    runs once, with a minimum of 1,000 steps, and stops by the tau rule, at 50,000 steps or after
+    ``max_minutes``.  Returns the wall times, tau, steps, acceptance and whether it converged within the limit.
     """
     import os
 
     from clothlab.fit.runner import run_fit
 
-    fit = run_fit(optimisation_only(_fabric_config(fabric)))
+    with study_data(data) as d:
+        fit = run_fit(optimisation_only(d.load_config(fabric), **(optimizer or {})))
     post = _study_posterior(fit, walkers=walkers, steps=1000, max_steps=50_000, seed=seed, progress=progress,
                             max_seconds=60.0 * max_minutes)
     summary = post.to_json()
@@ -73,8 +73,8 @@ COVERAGE_TARGET = 0.9
 parameters, over the six noisy simulated sets."""
 
 
-def coverage_study(fabrics=COVERAGE_FABRICS, *, walkers: int = 32, steps: int = 1000, max_steps: int = 20_000,
-                   seed: int = 1, progress: bool = False, optimizer: dict | None = None,
+def coverage_study(fabrics=COVERAGE_FABRICS, *, data: StudyData | None = None, walkers: int = 32, steps: int = 1000,
+                   max_steps: int = 20_000, seed: int = 1, progress: bool = False, optimizer: dict | None = None,
                    check_every: int = 100) -> dict:
     """Coverage of the 95 % intervals over the noisy simulated sets (measurements/<fabric>/fabric.yaml, six free
     parameters each): each set is fitted with its fabric.yaml optimiser settings (``optimizer`` replaces some,
@@ -85,21 +85,36 @@ def coverage_study(fabrics=COVERAGE_FABRICS, *, walkers: int = 32, steps: int = 
     from clothlab.fit.runner import run_fit
 
     rows, inside, total = {}, 0, 0
-    for fabric in fabrics:
-        fit = run_fit(optimisation_only(_fabric_config(fabric), **(optimizer or {})))
-        post = _study_posterior(fit, walkers=walkers, steps=steps, max_steps=max_steps, seed=seed,
-                                progress=progress, check_every=check_every)
-        params = post.to_json()["parameters"]
-        hits = {n: e["truth_in_95"] for n, e in params.items() if "truth_in_95" in e}
-        inside += sum(hits.values())
-        total += len(hits)
-        rows[fabric] = {"covered": hits, "n_covered": int(sum(hits.values())), "n_free": len(hits),
-                        "converged": post.converged, "stop_reason": post.stop_reason, "steps": post.steps,
-                        "walkers": post.walkers, "max_tau": float(np.max(post.tau)),
-                        "fit_wall_time_s": fit.timings["optimisation_s"], "wall_time_s": post.wall_time,
-                        "intervals": {n: [e["p2.5"], e["p97.5"], e.get("truth")] for n, e in params.items()}}
+    with study_data(data) as d:
+        for fabric in fabrics:
+            fit = run_fit(optimisation_only(d.load_config(fabric), **(optimizer or {})))
+            post = _study_posterior(fit, walkers=walkers, steps=steps, max_steps=max_steps, seed=seed,
+                                    progress=progress, check_every=check_every)
+            params = post.to_json()["parameters"]
+            hits = {n: e["truth_in_95"] for n, e in params.items() if "truth_in_95" in e}
+            inside += sum(hits.values())
+            total += len(hits)
+            rows[fabric] = {"covered": hits, "n_covered": int(sum(hits.values())), "n_free": len(hits),
+                            "converged": post.converged, "stop_reason": post.stop_reason, "steps": post.steps,
+                            "walkers": post.walkers, "max_tau": float(np.max(post.tau)),
+                            "fit_wall_time_s": fit.timings["optimisation_s"], "wall_time_s": post.wall_time,
+                            "intervals": {n: [e["p2.5"], e["p97.5"], e.get("truth")] for n, e in params.items()}}
     fraction = inside / total if total else math.nan
     return {"fabrics": rows, "covered": inside, "total": total, "fraction": fraction, "target": COVERAGE_TARGET,
             "passed": bool(total and fraction >= COVERAGE_TARGET),
             "settings": {"walkers": walkers, "steps": steps, "max_steps": max_steps, "seed": seed,
                          "optimizer": dict(optimizer or {})}}
+
+
+def run(context) -> dict:
+    """Bench section ``posterior``: :func:`posterior_benchmark` of the noisy polyester-lining set, limit
+    10 minutes (the quick run caps it at 1 minute and will usually report 'not converged')."""
+    return posterior_benchmark("polyester-lining", max_minutes=1.0 if context.quick else 10.0, data=context.data,
+                               progress=False)
+
+
+def lines(p: dict) -> list[str]:
+    return [f"== posterior ({p['fabric']}, {len(p['free'])} free, {p['walkers']} walkers) ==",
+            f"  {p['steps']} steps in {p['posterior_wall_time_s']:.0f} s; converged by the tau rule: "
+            f"{p['converged']} (within {p['limit_minutes']:g} min: {p['within_limit']}); "
+            f"max tau {max(p['tau'].values()):.0f}; not determined: {p['not_determined'] or 'none'}"]

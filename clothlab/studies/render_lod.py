@@ -1,4 +1,4 @@
-"""Render benchmark: the receding plane (issue 4 "must show") and the IM and Kang shaders timed in one scene.
+"""Bench section ``render``: the receding plane, and the IM and Kang shaders timed in one scene.
 
 :func:`render_benchmark` renders a flat cotton-denim patch seen at 45 deg elevation from a sequence of
 distances.  Per distance and shader (im-lod, im-texture = always texture, kang-lod, kang-texture, 4 samples
@@ -109,9 +109,8 @@ def lod_trend(rows: list[dict], f0: float, f1: float, shader: str = "im-lod", te
 
 
 def render_benchmark(quick: bool = False, *, figures_dir=None, resolution=None, distances=None, spp: int = 4,
-                     reference_spp: int | None = None, repeats: int | None = None, shaders=SHADERS,
-                     verbose: bool = True) -> dict:
-    """Receding-plane table (printed) and figures: {'settings', 'rows' (flat), 'error_bound', 'within_bound',
+                     reference_spp: int | None = None, repeats: int | None = None, shaders=SHADERS) -> dict:
+    """Receding-plane figures: {'settings', 'rows' (flat), 'error_bound', 'within_bound',
     'lod_cost_falls', 'lod_time_falls', 'trend', 'figure'}; ``quick``: a smaller image and fewer distances (a
     few seconds).  ``figures_dir``: also write ``render_lod.png`` there.  The other arguments override the
     mode's settings (tests use a tiny image)."""
@@ -146,38 +145,44 @@ def render_benchmark(quick: bool = False, *, figures_dir=None, resolution=None, 
     }
     if figures_dir is not None and trend:
         result["figure"] = str(plot_render_benchmark(result, Path(figures_dir) / "render_lod.png"))
-    if verbose:
-        print_render_benchmark(result)
     return result
 
 
-def print_render_benchmark(result: dict) -> None:
-    s = result["settings"]
-    print(f"\nRender LoD: {s['scene']}; {s['width_px']} x {s['height_px']} px, {s['spp']} spp; reference: texture "
-          f"level at {s['reference_spp']} spp; f0 = {s['lod_f0_tiles']:g}, f1 = {s['lod_f1_tiles']:g} tiles")
-    print(f"err: relative L1 vs the reference; evals: model evaluations per image (thousands); ms: {s['time']} "
-          f"(ms); us/point: texture {s['texture_us_per_point']:.2f}, reflectance {s['reflectance_us_per_point']:.2f}"
-          f", Kang {s['kang_us_per_point']:.2f}")
-    print(f"{'dist mm':>7} {'footprint':>13} | {'err LoD':>7} {'err tex':>7} {'evals LoD':>9} {'(tex+refl)':>13} "
-          f"{'evals tex':>9} {'ms LoD':>6} {'ms tex':>6} {'tex px':>6} | {'err KLoD':>8} {'err KTex':>8} "
-          f"{'ms KLoD':>7} {'ms KTex':>7}")
+def run(context) -> dict:
+    return render_benchmark(quick=context.quick, figures_dir=context.figures_dir)
+
+
+def lines(result: dict) -> list[str]:
+    """The receding-plane table and the checked statements."""
+    s, t = result["settings"], result["trend"]
+    out = [f"== render LoD: {s['scene']}; {s['width_px']} x {s['height_px']} px, {s['spp']} spp; reference: "
+           f"texture level at {s['reference_spp']} spp; f0 = {s['lod_f0_tiles']:g}, f1 = {s['lod_f1_tiles']:g} "
+           "tiles ==",
+           f"  err: relative L1 vs the reference; evals: model evaluations per image (thousands); ms: {s['time']} "
+           f"(ms); us/point: texture {s['texture_us_per_point']:.2f}, reflectance "
+           f"{s['reflectance_us_per_point']:.2f}, Kang {s['kang_us_per_point']:.2f}",
+           f"  {'dist mm':>7} {'footprint':>13} | {'err LoD':>7} {'err tex':>7} {'evals LoD':>9} {'(tex+refl)':>13} "
+           f"{'evals tex':>9} {'ms LoD':>6} {'ms tex':>6} {'tex px':>6} | {'err KLoD':>8} {'err KTex':>8} "
+           f"{'ms KLoD':>7} {'ms KTex':>7}"]
     for r in result["rows"]:
         tex_refl = f"{r['im_lod_texture_evaluations'] / 1e3:.1f}+{r['im_lod_reflectance_evaluations'] / 1e3:.1f}"
-        print(f"{r['distance_mm']:7g} {r['footprint_min_tiles']:6.3f}-{r['footprint_max_tiles']:<6.3g} | "
-              f"{r['im_lod_relative_error']:7.3f} {r['im_texture_relative_error']:7.3f} "
-              f"{r['im_lod_model_evaluations'] / 1e3:9.1f} {'(' + tex_refl + ')':>13} "
-              f"{r['im_texture_model_evaluations'] / 1e3:9.1f} {1e3 * r['im_lod_shading_cpu_seconds']:6.1f} "
-              f"{1e3 * r['im_texture_shading_cpu_seconds']:6.1f} {100 * r['im_lod_texture_pixel_fraction']:5.1f}% | "
-              f"{r['kang_lod_relative_error']:8.3f} {r['kang_texture_relative_error']:8.3f} "
-              f"{1e3 * r['kang_lod_shading_cpu_seconds']:7.1f} {1e3 * r['kang_texture_shading_cpu_seconds']:7.1f}")
-    t = result["trend"]
-    print(f"LoD error <= {result['error_bound']:g} at every distance: {result['within_bound']} "
-          f"(max {t['error_max']:.3f}); "
-          f"from {t['trend_from_mm']} mm on (no pixel left in the texture range) LoD evaluations never increase: "
-          f"{t['cost_non_increasing']}; fewer evaluations than always-texture from "
-          f"{t['evaluations_below_texture_from_mm']} mm on; far/near evaluations "
-          f"{t['cost_ratio_far_vs_near']:.2f}, shading time {t['time_ratio_far_vs_near']:.2f}; far LoD faster than "
-          f"always-texture: {t['time_far_below_texture']}")
+        out.append(f"  {r['distance_mm']:7g} {r['footprint_min_tiles']:6.3f}-{r['footprint_max_tiles']:<6.3g} | "
+                   f"{r['im_lod_relative_error']:7.3f} {r['im_texture_relative_error']:7.3f} "
+                   f"{r['im_lod_model_evaluations'] / 1e3:9.1f} {'(' + tex_refl + ')':>13} "
+                   f"{r['im_texture_model_evaluations'] / 1e3:9.1f} {1e3 * r['im_lod_shading_cpu_seconds']:6.1f} "
+                   f"{1e3 * r['im_texture_shading_cpu_seconds']:6.1f} "
+                   f"{100 * r['im_lod_texture_pixel_fraction']:5.1f}% | "
+                   f"{r['kang_lod_relative_error']:8.3f} {r['kang_texture_relative_error']:8.3f} "
+                   f"{1e3 * r['kang_lod_shading_cpu_seconds']:7.1f} {1e3 * r['kang_texture_shading_cpu_seconds']:7.1f}")
+    out.append(f"  LoD error <= {result['error_bound']:g} at every distance: {result['within_bound']} "
+               f"(max {t['error_max']:.3f}); from {t['trend_from_mm']} mm on (no pixel left in the texture range) "
+               f"LoD evaluations never increase: {t['cost_non_increasing']}; fewer evaluations than always-texture "
+               f"from {t['evaluations_below_texture_from_mm']} mm on; far/near evaluations "
+               f"{t['cost_ratio_far_vs_near']:.2f}, shading time {t['time_ratio_far_vs_near']:.2f}; far LoD faster "
+               f"than always-texture: {t['time_far_below_texture']}")
+    if "figure" in result:
+        out.append(f"  plot: {result['figure']}")
+    return out
 
 
 def plot_render_benchmark(result: dict, path) -> Path:

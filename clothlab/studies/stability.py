@@ -1,24 +1,25 @@
-"""``clothlab check``: numerical stability of the IM model on the numerics.md traps (issue 3, item 3).
+"""``clothlab check``: numerical stability of the IM model (Irawan & Marschner 2012, secs. 5.1-5.4) at its
+numerical traps.
 
-Three parts, printed as a summary and returned as a dict (``run_check``):
+Three parts, returned as a dict (:func:`run_check`) with their human-readable lines (:func:`check_lines`):
 
-1. extremes - the numerics.md list (kappa -> -1, r_hat = 0 and either side, umax -> 0 / 90 deg, psi -> 0 and
+1. extremes - the traps (kappa -> -1, r_hat = 0 and either side, umax -> 0 / 90 deg, psi -> 0 and
    at the filament threshold, psi -> 90 deg, beta from 1e-6 to 1e5, segments violating sec. 5.3, delta 0 /
    -> 1) swept on a grid and at random (seeded), each parameter set evaluated on many direction pairs at once
    (random pairs over the hemisphere plus special ones: normal incidence, wi = wo, mirror pairs, grazing to
-   89.99999 deg, wi ~ -wo at grazing (|h| -> 0, item 7), back-facing).  Per quadrature rule: counts of
+   89.99999 deg, wi ~ -wo at grazing (|h| -> 0), back-facing).  Per quadrature rule: counts of
    non-finite values, negative values, non-zero back-facing values and reciprocity violations
    |f(wi, wo) - f(wo, wi)| > 1e-9 max(|f(wi, wo)|, |f(wo, wi)|), with a reproducer for the first few.
 2. continuity - kappa, psi and umax swept finely; f at x and at x + eps (eps = 1e-9 of the sweep range) are
    compared per direction; the jump is |f(x + eps) - f(x)| / max_x |f| (per direction).  Jumps above
    JUMP_TOLERANCE are listed with where they happen.  Expected: at the psi filament threshold (measured
-   separately) and, with delta = 0, at the filament cutoff |u| = umax (numerics.md); anything else is a
+   separately) and, with delta = 0, at the filament cutoff |u| = umax (unsmoothed); anything else is a
    finding (e.g. a trapezoid node crossing a support end of the staple integrand).
 3. stiff fits (``full`` only) - :func:`clothlab.studies.stiff.run_stiff`.
 
 The full run evaluates more than 10^6 (parameter, direction) configurations per rule.
 
-Verdict (``result["verdict"]``, :func:`verdict`; ``clothlab check`` exits with :func:`exit_code`): the sweep
+Verdict (``result["verdict"]``, :func:`verdict`; :func:`run_check_command` returns :func:`exit_code`): the sweep
 fails when it finds any non-finite or negative value, any reciprocity violation above RECIPROCITY_RTOL relative,
 or any evaluation that raised (its value is unknown); exit code 1 then, 0 otherwise.  Continuity jumps, the
 psi-threshold switch and the stiff fits are findings to read, not failures.
@@ -30,6 +31,8 @@ import itertools
 import math
 import time
 import warnings
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -82,7 +85,7 @@ def kappa_parabola(umax_deg: float) -> float:
 
 
 def grid_parameter_sets(fast: bool) -> list[dict]:
-    """Parameter sets (warp yarn) on a grid over the numerics.md extremes."""
+    """Parameter sets (warp yarn) on a grid over the extremes of the module docstring."""
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
 
     edge = math.degrees(PSI_FILAMENT_THRESHOLD)
@@ -269,9 +272,18 @@ def psi_threshold_jump(wi, wo, rules=RULES_CHECKED + (("support", 32),)) -> list
     return out
 
 
-def run_check(full: bool = False, json_path=None, seed: int = 0, figures_dir=None) -> dict:
+PARTS = ("extremes", "continuity", "psi_threshold", "stiff", "verdict")
+"""The parts of :func:`run_check`, in order (``stiff`` in the full run only)."""
+
+
+def run_check(full: bool = False, seed: int = 0, figures_dir=None, on_part=None) -> dict:
     """Run the stability study (fast subset by default, ``full`` for >= 10^6 configurations per rule and
-    the stiff fits); print a summary; write the dict as JSON to ``json_path`` if given."""
+    the stiff fits) and return its findings.  ``on_part(name, result)`` is called as each part of
+    :data:`PARTS` finishes (``"start"`` first, with the run's sizes)."""
+    def done(name):
+        if on_part is not None:
+            on_part(name, result)
+
     started = time.perf_counter()
     rng = np.random.default_rng(seed)
     wi, wo = check_directions(200 if full else 40, rng)
@@ -279,15 +291,11 @@ def run_check(full: bool = False, json_path=None, seed: int = 0, figures_dir=Non
     random_sets = random_parameter_sets(4000 if full else 150, rng)
     result = {"full": full, "seed": seed, "directions": len(wi), "grid_sets": len(grid),
               "random_sets": len(random_sets), "extremes": {}}
+    done("start")
     for rule in RULES_CHECKED:
         label = f"{rule[0]}-{rule[1]}"
         result["extremes"][label] = {"grid": sweep_extremes(grid, wi, wo, rule),
                                      "random": sweep_extremes(random_sets, wi, wo, rule)}
-    cwi, cwo = check_directions(60 if full else 24, np.random.default_rng(seed + 1))
-    front = (cwi[:, 2] > 0) & (cwo[:, 2] > 0)
-    cwi, cwo = cwi[front], cwo[front]
-    result["continuity"] = continuity_study(not full, cwi, cwo)
-    result["psi_threshold"] = psi_threshold_jump(*check_directions(400, np.random.default_rng(seed + 2)))
     totals = {"configurations": 0, "non_finite": 0, "negative": 0, "back_facing_nonzero": 0, "reciprocity": 0,
               "exceptions": 0}
     for parts in result["extremes"].values():
@@ -295,60 +303,108 @@ def run_check(full: bool = False, json_path=None, seed: int = 0, figures_dir=Non
             for key in totals:
                 totals[key] += part.get(key, 0)
     result["totals"] = totals
-    result["verdict"] = verdict(totals)
+    done("extremes")
+    cwi, cwo = check_directions(60 if full else 24, np.random.default_rng(seed + 1))
+    front = (cwi[:, 2] > 0) & (cwo[:, 2] > 0)
+    cwi, cwo = cwi[front], cwo[front]
+    result["continuity"] = continuity_study(not full, cwi, cwo)
+    done("continuity")
+    result["psi_threshold"] = psi_threshold_jump(*check_directions(400, np.random.default_rng(seed + 2)))
+    done("psi_threshold")
     if full:
         from clothlab.studies.stiff import run_stiff
 
         result["stiff"] = run_stiff(seed=seed, figures_dir=figures_dir)
+        done("stiff")
+    result["verdict"] = verdict(totals)
     result["wall_time_s"] = time.perf_counter() - started
-    print_check(result)
-    if json_path:
+    done("verdict")
+    return result
+
+
+def part_lines(name: str, result: dict) -> list[str]:
+    """The human-readable lines of one part of a (possibly partial) :func:`run_check` result."""
+    if name == "start":
+        return [f"clothlab check ({'full' if result['full'] else 'fast subset'}, seed {result['seed']}): "
+                f"{result['grid_sets']} grid + {result['random_sets']} random parameter sets x "
+                f"{result['directions']} direction pairs per rule"]
+    if name == "extremes":
+        out = ["", "== extreme inputs ==",
+               f"  {'rule':13s} {'part':6s} {'configs':>9s} {'non-fin':>7s} {'neg':>5s} {'back':>5s} {'recip':>6s} "
+               f"{'exc':>4s} {'worst recip rel':>15s}"]
+        for label, parts in result["extremes"].items():
+            for part, c in parts.items():
+                out.append(f"  {label:13s} {part:6s} {c['configurations']:9,d} {c['non_finite']:7d} "
+                           f"{c['negative']:5d} {c['back_facing_nonzero']:5d} {c['reciprocity']:6d} "
+                           f"{c.get('exceptions', 0):4d} {c['worst_reciprocity_rel']:15.2e}")
+                out += [f"      reproducer ({ex['kind']}): {ex}" for ex in c["examples"]]
+        t = result["totals"]
+        out.append(f"  total: {t['configurations']:,d} configurations; non-finite {t['non_finite']}, negative "
+                   f"{t['negative']}, back-facing non-zero {t['back_facing_nonzero']}, reciprocity > "
+                   f"{RECIPROCITY_RTOL:g} relative {t['reciprocity']}, exceptions {t['exceptions']}")
+        return out
+    if name == "continuity":
+        out = ["", f"== continuity (jump = |f(x + eps) - f(x)| / max_x |f| per direction; tolerance "
+               f"{JUMP_TOLERANCE:g}) ==",
+               f"  {'sweep':44s} {'rule':13s} {'cand.':>6s} {'jumps':>6s} {'largest':>9s} {'at':>10s}  expected; "
+               "direction (theta_i, phi_i, theta_o, phi_o)"]
+        for r in result["continuity"]:
+            at = "-" if r["at"] is None else f"{r['at']:.6g}"
+            out.append(f"  {r['sweep']:44s} {r['rule']:13s} {r['candidates']:6d} {r['jumps']:6d} "
+                       f"{r['largest_jump']:9.2e} {at:>10s}  {r['expected'] or '-'}; {r['direction_deg']}")
+        return out
+    if name == "psi_threshold":
+        out = ["", "== staple/filament switch at |psi| = threshold (relative change across it, significant values) =="]
+        for r in result["psi_threshold"]:
+            out.append(f"  {r['rule']:13s} at {r['threshold_deg']:.4g} deg {r['directions']:4d} directions: "
+                       f"median {r['median_rel']:.2e}, 80th {r['p80_rel']:.2e}, max {r['max_rel']:.2e}; sum below "
+                       f"{r['sum_below']:.5g}, above {r['sum_above']:.5g}")
+        return out
+    if name == "stiff":
+        from clothlab.studies.stiff import stiff_lines
+
+        return stiff_lines(result["stiff"])
+    if name == "verdict":
+        v = result.get("verdict") or verdict(result["totals"])
+        reason = (", ".join(f"{k.replace('_', '-')} {n}" for k, n in v["failures"].items()) if v["failures"] else
+                  f"no non-finite or negative value, no reciprocity violation above {RECIPROCITY_RTOL:g} relative, "
+                  "no exception")
+        return ["", f"verdict: {'PASS' if v['passed'] else 'FAIL'} ({reason})",
+                f"(check took {result['wall_time_s']:.1f} s)"]
+    raise ValueError(f"unknown check part {name!r}; choose from start, {', '.join(PARTS)}")
+
+
+def check_lines(result: dict) -> list[str]:
+    """All lines of a finished :func:`run_check` result."""
+    return [line for name in ("start", *PARTS) if name != "stiff" or "stiff" in result
+            for line in part_lines(name, result)]
+
+
+def run_check_command(*, full: bool, seed: int, data_dir: Path | None, output: Path | None,
+                      json_path: Path | None, emit: Callable[[str], None]) -> int:
+    """``clothlab check``: run :func:`run_check`, hand its lines to ``emit`` as each part finishes, write the
+    findings as JSON to ``json_path`` and, with ``output``, an HTML page (and the JSON) into that directory.
+    Returns :func:`exit_code` (1 when the sweep found a problem).  ``data_dir`` is accepted for symmetry with
+    ``clothlab bench`` and not needed: every data set of the check is simulated in the run."""
+    del data_dir
+
+    def on_part(name, partial):
+        for line in part_lines(name, partial):
+            emit(line)
+
+    result = run_check(full=full, seed=seed, figures_dir=output, on_part=on_part)
+    if json_path is not None:
         import json
 
         from clothlab.atomic import atomic_write_text
 
         atomic_write_text(json_path, json.dumps(result, indent=1, default=float) + "\n")
-        print(f"\nresults written to {json_path}")
-    return result
+        emit(f"results written to {json_path}")
+    if output is not None:
+        from clothlab.report.studies import write_study_report
 
-
-def print_check(result: dict) -> None:
-    print(f"clothlab check ({'full' if result['full'] else 'fast subset'}, seed {result['seed']}): "
-          f"{result['grid_sets']} grid + {result['random_sets']} random parameter sets x {result['directions']} "
-          "direction pairs per rule")
-    print("\n== extreme inputs (numerics.md) ==")
-    print(f"  {'rule':13s} {'part':6s} {'configs':>9s} {'non-fin':>7s} {'neg':>5s} {'back':>5s} {'recip':>6s} "
-          f"{'exc':>4s} {'worst recip rel':>15s}")
-    for label, parts in result["extremes"].items():
-        for part, c in parts.items():
-            print(f"  {label:13s} {part:6s} {c['configurations']:9,d} {c['non_finite']:7d} {c['negative']:5d} "
-                  f"{c['back_facing_nonzero']:5d} {c['reciprocity']:6d} {c.get('exceptions', 0):4d} "
-                  f"{c['worst_reciprocity_rel']:15.2e}")
-            for ex in c["examples"]:
-                print(f"      reproducer ({ex['kind']}): {ex}")
-    t = result["totals"]
-    print(f"  total: {t['configurations']:,d} configurations; non-finite {t['non_finite']}, negative "
-          f"{t['negative']}, back-facing non-zero {t['back_facing_nonzero']}, reciprocity > {RECIPROCITY_RTOL:g} "
-          f"relative {t['reciprocity']}, exceptions {t['exceptions']}")
-    print(f"\n== continuity (jump = |f(x + eps) - f(x)| / max_x |f| per direction; tolerance {JUMP_TOLERANCE:g}) ==")
-    print(f"  {'sweep':44s} {'rule':13s} {'cand.':>6s} {'jumps':>6s} {'largest':>9s} {'at':>10s}  expected; "
-          "direction (theta_i, phi_i, theta_o, phi_o)")
-    for r in result["continuity"]:
-        at = "-" if r["at"] is None else f"{r['at']:.6g}"
-        print(f"  {r['sweep']:44s} {r['rule']:13s} {r['candidates']:6d} {r['jumps']:6d} {r['largest_jump']:9.2e} "
-              f"{at:>10s}  {r['expected'] or '-'}; {r['direction_deg']}")
-    print("\n== staple/filament switch at |psi| = threshold (relative change across it, significant values) ==")
-    for r in result["psi_threshold"]:
-        print(f"  {r['rule']:13s} at {r['threshold_deg']:.4g} deg {r['directions']:4d} directions: "
-              f"median {r['median_rel']:.2e}, 80th "
-              f"{r['p80_rel']:.2e}, max {r['max_rel']:.2e}; sum below {r['sum_below']:.5g}, above {r['sum_above']:.5g}")
-    if "stiff" in result:
-        from clothlab.studies.stiff import print_stiff
-
-        print_stiff(result["stiff"])
-    v = result.get("verdict") or verdict(result["totals"])
-    print(f"\nverdict: {'PASS' if v['passed'] else 'FAIL'} ("
-          + (", ".join(f"{k.replace('_', '-')} {n}" for k, n in v["failures"].items()) if v["failures"] else
-             "no non-finite or negative value, no reciprocity violation above "
-             f"{RECIPROCITY_RTOL:g} relative, no exception") + ")")
-    print(f"(check took {result['wall_time_s']:.1f} s)")
+        output = Path(output)
+        page = write_study_report(result, output, title="clothlab check: numerical stability and stiff fits",
+                                  figures=sorted(output.glob("*.png")) if output.is_dir() else ())
+        emit(f"report: {page}")
+    return exit_code(result)

@@ -1,6 +1,7 @@
-"""Stiff fits (issue 3, item 3): ill-conditioned IM fits, recovery of the truth and Jacobian conditioning.
+"""Stiff fits (part of ``clothlab check --full``): ill-conditioned IM fits, recovery of the truth and Jacobian
+conditioning.
 
-Cases (numerics.md item 12): silk charmeuse (beta 7.3, kappa 2), polyester lining (filament, kappa -0.7),
+Cases: silk charmeuse (beta 7.3, kappa 2), polyester lining (filament, kappa -0.7),
 a very narrow highlight (cotton-denim geometry with umax 2 deg on both yarns, beta 50) and a weak weft
 under a strong warp (cotton-denim with ks_weft = ks_warp / 20).  For each: noisy data are simulated
 (:func:`clothlab.simulate.gonio.simulate`, the examples' noise: 5 % log-normal + 2e-4 1/sr), then fitted with the
@@ -193,25 +194,27 @@ def run_stiff(seed: int = 0, *, perturbed: int = 3, max_evals: int = 3000, cases
                       for c in cases]}
 
 
-def print_stiff(result: dict) -> None:
-    print(f"\n== stiff fits (noisy simulated data, seed {result['seed']}; recovered = every free parameter within "
-          "2 % of its box range) ==")
+def stiff_lines(result: dict) -> list[str]:
+    """The human-readable lines of a :func:`run_stiff` result."""
+    out = ["", f"== stiff fits (noisy simulated data, seed {result['seed']}; recovered = every free parameter "
+           "within 2 % of its box range) =="]
     for case in result["cases"]:
-        print(f"\n  {case['name']}: condition number of the residual Jacobian (unit box) {case['condition']:.3g} "
-              f"(at the truth {case['at_truth']['condition']:.3g}); objective at the truth "
-              f"{case['truth_objective']:.4e}")
-        print(f"    weakest direction carried by: {', '.join(case['weakest_parameters']) or '-'}; collinear pairs "
-              f"(|cos| > {COLLINEAR_COSINE}): " + (", ".join(f"{a}/{b} {c:+.3f}" for a, b, c in case["collinear_pairs"])
-                                                   or "none"))
+        pairs = ", ".join(f"{a}/{b} {c:+.3f}" for a, b, c in case["collinear_pairs"]) or "none"
+        out += ["", f"  {case['name']}: condition number of the residual Jacobian (unit box) {case['condition']:.3g} "
+                f"(at the truth {case['at_truth']['condition']:.3g}); objective at the truth "
+                f"{case['truth_objective']:.4e}",
+                f"    weakest direction carried by: {', '.join(case['weakest_parameters']) or '-'}; collinear pairs "
+                f"(|cos| > {COLLINEAR_COSINE}): {pairs}"]
         if case["zero_columns"]:
-            print(f"    parameters with no effect at the optimum: {', '.join(case['zero_columns'])}")
+            out.append(f"    parameters with no effect at the optimum: {', '.join(case['zero_columns'])}")
         post = case["posterior"]
-        print(f"    posterior ({post['walkers']} walkers x {post['steps']} steps, max tau {post['max_tau']:.0f}, "
-              f"{'converged' if post['converged'] else 'not converged by the tau rule'}): strongest correlations "
-              f"{post['strongest_text'] or '-'}; not determined: {', '.join(post['not_determined']) or 'none'}")
-        header = "    " + f"{'start':26s} {'objective':>11s} {'ok':>3s} " + " ".join(f"{n:>11s}" for n in case["free"])
-        print(header)
-        print("    " + f"{'truth':26s} {'':11s} {'':3s} " + " ".join(f"{case['truth'][n]:11.4g}" for n in case["free"]))
+        out.append(f"    posterior ({post['walkers']} walkers x {post['steps']} steps, max tau {post['max_tau']:.0f}, "
+                   f"{'converged' if post['converged'] else 'not converged by the tau rule'}): strongest correlations "
+                   f"{post['strongest_text'] or '-'}; not determined: {', '.join(post['not_determined']) or 'none'}")
+        free = case["free"]
+        out.append(f"    {'start':26s} {'objective':>11s} {'ok':>3s} " + " ".join(f"{n:>11s}" for n in free))
+        out.append(f"    {'truth':26s} {'':11s} {'':3s} " + " ".join(f"{case['truth'][n]:11.4g}" for n in free))
         for f in case["fits"]:
-            print("    " + f"{f['start']:26s} {f['objective']:11.4e} {'yes' if f['recovered'] else 'no':>3s} "
-                  + " ".join(f"{f['errors'][n]:+11.3g}" for n in case["free"]))
+            out.append(f"    {f['start']:26s} {f['objective']:11.4e} {'yes' if f['recovered'] else 'no':>3s} "
+                       + " ".join(f"{f['errors'][n]:+11.3g}" for n in free))
+    return out

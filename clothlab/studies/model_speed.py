@@ -1,0 +1,111 @@
+"""Bench section ``speed``: direction pairs per second of the two-yarn IM model (Irawan & Marschner 2012,
+eq. 10 for warp and weft, phase function eq. 7, diffuse term), RGB, trapezoid 11, on the paper's 1,575
+directions (best of repeats), next to a per-direction scipy.integrate.quad loop (their ratio).
+
+When :mod:`clothlab.studies.kernels_speed` is present its ``compare_kernels`` runs too, in the same run: the
+yarn-integral speed of the previous and the current kernels per preset and their ratio (a ratio near 1 means
+no slowdown beyond noise).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import time
+import warnings
+
+import numpy as np
+
+from clothlab.studies.data import paper_directions
+from clothlab.studies.quad_reference import quad_reference
+from clothlab.studies.timing import best_time, clear_memo
+
+FABRICS = ("polyester-lining", "cotton-denim")
+KERNELS_MODULE = "clothlab.studies.kernels_speed"
+
+
+def model_speed(quick: bool, fabrics=FABRICS) -> dict:
+    """Per fabric: pairs_per_second and seconds_1575 of the model, quad_pairs_per_second of the quad loop,
+    speedup_vs_quad = pairs_per_second / quad_pairs_per_second."""
+    from scipy.integrate import IntegrationWarning
+
+    from clothlab.models.components import combine
+    from clothlab.models.irawan.model import IrawanModel
+    from clothlab.weave.presets import get_preset
+
+    wi, wo = paper_directions()
+    coef = {"kd": np.array([0.2, 0.1, 0.1]), "ks_warp": np.array([0.1, 0.1, 0.1]),
+            "ks_weft": np.array([0.1, 0.1, 0.1])}
+    out = {}
+    for name in fabrics:
+        model = IrawanModel(get_preset(name))
+        p = model.default_parameters()
+
+        def evaluate(model=model, p=p):
+            clear_memo(model)  # time the full evaluation, not the cache
+            return combine(model.components(wi, wo, p, normalised=False, warn=False), coef)
+
+        evaluate()
+        seconds = best_time(evaluate, 5 if quick else 20)
+        n_quad = 20 if quick else 60
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():  # only timed here; the accuracy sections count quad's warnings
+            warnings.simplefilter("ignore", IntegrationWarning)
+            for kind in ("warp", "weft"):
+                quad_reference(wi[:n_quad], wo[:n_quad], p, kind)
+        quad_rate = n_quad / (time.perf_counter() - t0)
+        out[name] = {"pairs_per_second": len(wi) / seconds, "seconds_1575": seconds,
+                     "quad_pairs_per_second": quad_rate, "speedup_vs_quad": len(wi) / seconds / quad_rate}
+    return out
+
+
+def kernels_available() -> bool:
+    """True when the kernels before/after comparison module is installed."""
+    return importlib.util.find_spec(KERNELS_MODULE) is not None
+
+
+def kernels_comparison(quick: bool) -> dict | None:
+    """``compare_kernels(quick)`` of the comparison module, or None when it is not installed."""
+    if not kernels_available():
+        return None
+    return importlib.import_module(KERNELS_MODULE).compare_kernels(quick)
+
+
+def run(context) -> dict:
+    result = {"model": model_speed(context.quick)}
+    kernels = kernels_comparison(context.quick)
+    if kernels is not None:
+        result["kernels"] = kernels
+    return result
+
+
+def _value(v) -> str:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return str(v)
+    return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+
+def kernel_lines(kernels: dict) -> list[str]:
+    """The before/after comparison as one line per preset (every scalar figure it reports)."""
+    out = ["", "  IM kernels before/after (yarn integral, same run):"]
+    for key, value in kernels.items():
+        if isinstance(value, dict) and value and all(isinstance(v, dict) for v in value.values()):
+            out += kernel_lines(value)[2:]  # a mapping of presets
+        elif isinstance(value, dict):
+            out.append(f"  {key:18s} " + ", ".join(f"{k} {_value(v)}" for k, v in value.items()
+                                                  if not isinstance(v, dict | list)))
+        elif not isinstance(value, list):
+            out.append(f"  {key}: {_value(value)}")
+    return out
+
+
+def lines(result: dict) -> list[str]:
+    out = ["== evaluation speed: two-yarn IM model, RGB, trapezoid 11, 1,575 directions =="]
+    for name, s in result["model"].items():
+        out.append(f"  {name:18s} {s['pairs_per_second']:12,.0f} pairs/s ({1e3 * s['seconds_1575']:.2f} ms per set); "
+                   f"quad loop {s['quad_pairs_per_second']:8,.1f} pairs/s; ratio {s['speedup_vs_quad']:,.0f}x")
+    if "kernels" in result:
+        out += kernel_lines(result["kernels"])
+    else:
+        out.append(f"  (kernels before/after: {KERNELS_MODULE} not present)")
+    return out

@@ -1,0 +1,79 @@
+"""The timing harness every benchmark section shares: fastest-call timings, paired (alternating) timings and
+the machine description recorded beside the figures.
+
+On a shared machine the minimum over many calls is the estimate least disturbed by other processes, and a
+ratio of two run times is stable to a few per cent only when the two are timed call by call in alternation.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import time
+
+MIN_SAMPLE_S = 0.02
+"""Every timing round calls a function for at least this long (a 1 ms evaluation ~20 times) and keeps the
+fastest single call: one call of a sub-millisecond evaluation is too noisy to compare."""
+
+
+def machine() -> dict:
+    """CPU count, platform, processor and the versions of the packages clothlab uses."""
+    from clothlab.fit.runner import package_versions
+
+    return {"cpus": os.cpu_count(), "platform": platform.platform(), "processor": platform.processor(),
+            "versions": package_versions()}
+
+
+def clear_memo(model) -> None:
+    """Empty a model's per-direction cache, if it has one, so that a timing measures the full evaluation."""
+    memo = getattr(model, "_memo", None)
+    if memo is not None:
+        memo.clear()
+
+
+def _once(fn) -> float:
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
+def _batch_size(fn, min_sample_s: float) -> int:
+    """Calls per timing round (one call of ``fn`` measures it; that call also warms it up)."""
+    return max(1, math.ceil(min_sample_s / max(_once(fn), 1e-9)))
+
+
+def _fastest_call(fn, calls: int) -> float:
+    return min(_once(fn) for _ in range(calls))
+
+
+def best_time(fn, repeats: int, min_sample_s: float = MIN_SAMPLE_S) -> float:
+    """Seconds per call of ``fn``: the fastest of ``repeats`` rounds of calls, each round lasting at least
+    ``min_sample_s`` (so at least ``repeats`` calls)."""
+    calls = _batch_size(fn, min_sample_s) if min_sample_s > 0 else 1
+    return min(_fastest_call(fn, calls) for _ in range(repeats))
+
+
+def paired_timings(base, fns, rounds: int, min_sample_s: float = MIN_SAMPLE_S):
+    """Run times of ``fns`` against ``base``, each timed in strict alternation with it (base, fn, base, fn, ...:
+    at least ``rounds`` pairs, and pairs lasting ``rounds x min_sample_s`` in all).
+
+    Returns the base's fastest call over all pairings and, per function, (its fastest call, its fastest call /
+    the base's fastest call in its own pairing).  Alternating call by call, a change in the machine's load hits
+    both sides of a ratio alike.  A function that ``is`` the base is not timed again: it gets the base's fastest
+    call and ratio 1."""
+    t_base = max(_once(base), 1e-9)  # also the warm-up
+    base_best, out = t_base, []
+    for fn in fns:
+        if fn is base:
+            out.append(None)
+            continue
+        t_fn = max(_once(fn), 1e-9)
+        pairs = max(rounds, math.ceil(rounds * min_sample_s / (t_fn + t_base)))
+        best_b = best_f = math.inf
+        for _ in range(pairs):
+            best_b = min(best_b, _once(base))
+            best_f = min(best_f, _once(fn))
+        base_best = min(base_best, best_b)
+        out.append((best_f, best_f / best_b))
+    return base_best, [(base_best, 1.0) if o is None else o for o in out]
