@@ -254,11 +254,6 @@ def test_clothlab_error_is_one_line_with_its_exit_code(monkeypatch, capsys):
     assert len(err) == 1 and err[0].startswith("clothlab: error:") and "fit.cv_folds" in err[0]
 
 
-PENDING = {"simulate/btf.py", "studies/bench.py", "studies/btf_memory.py", "studies/render_lod.py",
-           "studies/stability.py", "studies/stiff.py"}
-"""Modules that still print while their owners move them to returned results and ``emit``."""
-
-
 def test_only_the_cli_prints():
     root = Path(clothlab.__file__).parent
     printing = set()
@@ -270,4 +265,4 @@ def test_only_the_cli_prints():
         calls = (n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name))
         if any(n.func.id == "print" for n in calls):
             printing.add(rel)
-    assert printing <= PENDING, sorted(printing - PENDING)
+    assert not printing, sorted(printing)
