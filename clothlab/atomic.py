@@ -1,4 +1,4 @@
-"""Atomic writes: a result is either complete or absent, never half-written (DESIGN.md principle 6).
+"""Atomic writes: a result is either complete or absent, never half-written (docs/design.md principle 6).
 
 Files are written to a hidden temporary file in the destination's directory, flushed and fsync'ed, then
 moved over the destination with :func:`os.replace` (atomic on POSIX and Windows within one file system).

@@ -1,4 +1,4 @@
-"""Errors and warnings that speak the user's language (DESIGN.md principle 7).
+"""Errors and warnings that speak the user's language (docs/design.md principle 7).
 
 Every user mistake raises a :class:`ClothlabError` (or a subclass) whose message names the file, line,
 field, the value found and what was expected.  The CLI turns it into one line on stderr and exit code 2;

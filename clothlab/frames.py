@@ -1,4 +1,4 @@
-"""The one internal frame of clothlab and the conversions into it (DESIGN.md principle 1).
+"""The one internal frame of clothlab and the conversions into it (docs/design.md principle 1).
 
 Fabric frame: z is the surface normal, y the warp direction, x = y x z completes a right-handed frame
 (so x points along the weft).  Directions are unit vectors pointing *away* from the surface (towards the

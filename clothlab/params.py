@@ -1,4 +1,4 @@
-"""Parameter declarations: each model parameter is declared once (DESIGN.md principle 4).
+"""Parameter declarations: each model parameter is declared once (docs/design.md principle 4).
 
 A :class:`ParamSpec` holds the name, unit, physical range (what validation accepts), the default fit
 bounds, the default value and the transform used by the optimiser.  Fitting, priors, validation, the CLI

@@ -1,4 +1,4 @@
-"""Texture fitting: simulate -> load -> fit round trip (issue 4 must-show), directions, plots, errors."""
+"""Texture fitting: simulate -> load -> fit round trip, directions, plots, errors."""
 
 import json
 from pathlib import Path

@@ -1,6 +1,6 @@
 """The Irawan-Marschner texture model (sec. 7.2, eqs. 11-13, Algorithms 3-4) and its noise (sec. 7.2.1).
 
-Independent checks: the reflectance model with the adaptive rule (identity of irawan-presets.md), the
+Independent checks: the reflectance model with the adaptive rule (identity of docs/presets.md), the
 scalar reference integrands of tests/im_reference.py (band position and brightness), known splitmix64
 outputs, closed-form moments of the capped exponential, and a separate Python process (reproducibility).
 """
@@ -73,7 +73,7 @@ def reference_texture(weave, params, kind, x, y, wi, wo):
     return fc * value / weave.cell_share(kind) if lit else 0.0
 
 
-# ------------------------------------------------------------------ identity (irawan-presets.md)
+# ------------------------------------------------------------------ identity (docs/presets.md)
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_tile_average_equals_reflectance_model(name):

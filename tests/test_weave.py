@@ -26,7 +26,7 @@ def assert_same_weave(a: Weave, b: Weave) -> None:
             assert getattr(a, f.name) == getattr(b, f.name), f.name
 
 
-# --- the reference table (shared/reference/irawan-presets.md), typed independently of the .wv files -----
+# --- the reference table (docs/presets.md), typed independently of the .wv files -----
 # tile (W, H), alpha, beta, ss, warpArea, weftArea, fineness, dUmax (4), period,
 # warp (psi, umax, kappa, w, l), weft (...), number of warp yarns, top pattern row, one centre (yarn, U, V)
 TABLE = {

@@ -1,4 +1,4 @@
-"""Image files through OpenImageIO, with the reader's error state checked (libraries.md, formats.md).
+"""Image files through OpenImageIO, with the reader's error state checked (docs/libraries.md, docs/formats.md).
 
 Reading returns linear float32 (H, W, C): 8/16-bit integer images (PNG, JPEG, TIFF) are sRGB-encoded and are
 decoded with the exact sRGB EOTF (IEC 61966-2-1); half/float images (EXR, float TIFF) are linear already.

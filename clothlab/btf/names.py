@@ -1,4 +1,4 @@
-"""Angles of BTF images: from Bonn UBO2003 / UTIA file names or from a manifest (formats.md, "BTF image stacks").
+"""Angles of BTF images: from Bonn UBO2003 / UTIA file names or from a manifest (docs/formats.md, "BTF image stacks").
 
 File-name layouts (one image per light/view pair, angles in degrees):
 

@@ -1,4 +1,4 @@
-"""A BTF image stack read lazily, one image at a time (issue 4 item 2; formats.md "BTF image stacks").
+"""A BTF image stack read lazily, one image at a time (docs/formats.md, "BTF image stacks").
 
 A stack is a directory of images whose names carry the angles (Bonn UBO2003 / UTIA, see
 :mod:`clothlab.btf.names` for the naming and the azimuth convention assumed) or a directory / file with a

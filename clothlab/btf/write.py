@@ -1,4 +1,4 @@
-"""Simulated BTF stacks: images of any texture-evaluating callable, written as a loadable stack (issue 4 item 3).
+"""Simulated BTF stacks: images of any texture-evaluating callable, written as a loadable stack.
 
 ``evaluate(u, v, wi, wo)`` is supplied by the caller (e.g. the Irawan-Marschner texture model,
 :mod:`clothlab.models.irawan.texture`, wrapped with its parameters and coefficients).  It receives

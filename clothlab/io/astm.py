@@ -1,4 +1,4 @@
-"""ASTM E1392-96-style gonioreflectometer files (``/work/shared/reference/formats.md``).
+"""ASTM E1392-96-style gonioreflectometer files (docs/formats.md, "ASTM E1392-96 files").
 
 Layout: header lines ``KEYWORD value`` - ``NUM_POINTS n`` and ``VARS theta_i,phi_i,theta_s,phi_s,<channels>``
 are required, every other keyword is kept verbatim in ``provenance['astm_keywords']`` - then comma-separated

@@ -1,4 +1,4 @@
-"""pab-opto "Mountain" goniophotometer text files (``/work/shared/reference/formats.md``).
+"""pab-opto "Mountain" goniophotometer text files (docs/formats.md, "pab-opto goniophotometer text").
 
 One file per incident direction; ``#`` header lines, then rows ``theta_o phi_o value(s)`` (whitespace
 separated, degrees).  Header lines read (keyword with or without a colon, case-insensitive):

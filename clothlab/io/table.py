@@ -1,6 +1,6 @@
 """clothlab's own measurement table: a CSV with a YAML header, round-trip exact.
 
-Layout (``/work/shared/reference/formats.md``, "clothlab's own table")::
+Layout (docs/formats.md, "clothlab's own table")::
 
     # clothlab-table: 1
     # angle_unit: deg            # deg | rad

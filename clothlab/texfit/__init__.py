@@ -1,4 +1,4 @@
-"""Texture (BTF) simulation and fitting of the Irawan-Marschner texture model (issue 4 items 3-4).
+"""Fitting the Irawan-Marschner texture model (Irawan & Marschner 2012, sec. 7.2) to BTF stacks.
 
 - :mod:`clothlab.simulate.btf`: simulated BTF stacks in the paper's Fig. 4 arrangement;
 - :mod:`clothlab.texfit.fit`: fit the texture-only parameters (tile offset, rotation, segment ratio, hWidth,

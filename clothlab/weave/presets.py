@@ -1,7 +1,7 @@
 """The six fabrics of Irawan & Marschner 2012 (sec. 8, Table I) as named weave presets.
 
 The presets are the ``.wv`` files shipped in ``clothlab/weave/data/`` (the one source of truth; their numbers
-are the published ones, see shared/reference/irawan-presets.md); :func:`get_preset` reads them with
+are the published ones, see docs/presets.md); :func:`get_preset` reads them with
 :func:`clothlab.weave.wvformat.parse_wv_text`.  :func:`resolve_weave` interprets the ``weave:`` field of
 fabric.yaml: ``preset:<name>`` or a path to a ``.wv`` file.
 """
