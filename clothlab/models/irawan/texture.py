@@ -108,6 +108,8 @@ class IrawanTexture:
     kind = "irawan-texture"
     params = IRAWAN_PARAMS
     component_names = COMPONENTS
+    #: components() takes (1, 3) directions shared by every point (faster than one row per point)
+    shared_directions = True
 
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None, *, seed: int = 0):
         self.weave = weave
