@@ -213,8 +213,10 @@ class CosineTexture:
 
 def test_box_and_gaussian_averages_of_a_cosine_match_closed_forms():
     """Box of side s: 1 + cos(2 pi (c - u0)) sin(pi s) / (pi s); Gaussian with sigma = s / sqrt(12):
-    1 + cos(2 pi (c - u0)) exp(-2 pi^2 sigma^2).  SAT (midpoint texels: the texel mean differs from the
-    centre value by sinc(pi / R) - 1 ~ 1e-4 at R = 128) and MC (1,024 samples, 4 SE)."""
+    1 + cos(2 pi (c - u0)) exp(-2 pi^2 sigma^2).  SAT (R = 128) within its discretisation bound: the two
+    partly covered texel columns at the box edges are off by at most max|f'| h / 4 each (h = 1/R), over a
+    box s R texels wide, plus the midpoint bias of a texel, 1 - sinc(pi / R) ~ 1e-4 (measured: <= 0.008 /
+    (s R)); MC (1,024 samples) within 4 SE."""
     texture = CosineTexture()
     rng = np.random.default_rng(1)
     n = 200
@@ -225,7 +227,8 @@ def test_box_and_gaussian_averages_of_a_cosine_match_closed_forms():
     sigma = size / math.sqrt(12.0)
     gauss = 1.0 + np.cos(2 * np.pi * (centre[:, 0] - texture.u0)) * np.exp(-2 * np.pi ** 2 * sigma ** 2)
     sat = footprint_components(texture, None, wi, wo, centre, size)["wave"]
-    np.testing.assert_allclose(sat, box, atol=3e-4)
+    r = 128
+    assert np.all(np.abs(sat - box) <= 2 * np.pi / (4 * r) / (size * r) + 2e-4)
     for kernel, expected in (("box", box), ("gaussian", gauss)):
         mean, error = mc_estimate(texture, None, wi, wo, centre, size, samples=1024, seed=5, kernel=kernel)
         assert np.all(np.abs(mean["wave"] - expected) <= 4 * error["wave"] + 1e-12), kernel
@@ -238,7 +241,7 @@ class HeightFieldTexture:
 
     component_names = ("lambert",)
     weave = None
-    amplitude = 0.05
+    amplitude = 0.1  # slopes up to 0.63 (32 deg)
 
     def slope(self, u):
         return 2.0 * np.pi * self.amplitude * np.cos(2.0 * np.pi * np.asarray(u, dtype=np.float64))
@@ -256,7 +259,7 @@ def _eq3_by_quad(texture, wi, wo, c, s):
     """Eq. 3 / <wi . n_s> for a box footprint of side s at u = c (h depends on u only: 1-D integrals)."""
 
     def n_p(u):
-        return texture.micro_normals(np.array([u]))[0]
+        return texture.micro_normals(np.array([u]), np.zeros(1))[0]
 
     def area(u):
         n = n_p(u)
@@ -266,9 +269,8 @@ def _eq3_by_quad(texture, wi, wo, c, s):
         return (1.0 / np.pi) * max(float(wi @ n_p(u)), 0.0) / wi[2] * area(u)
 
     a, b = c - s / 2, c + s / 2
-    points = np.arange(math.ceil(a * 4), math.floor(b * 4) + 1) / 4.0
-    opts = dict(limit=200, points=points if 0 < len(points) < 50 else None)
-    return quad(numerator, a, b, **opts)[0] / quad(area, a, b, **opts)[0], quad(area, a, b, **opts)[0] / s
+    total = quad(area, a, b, limit=200)[0]
+    return quad(numerator, a, b, limit=200)[0] / total, total / s
 
 
 def test_projected_area_normalisation_of_eqs_4_and_5():
@@ -277,18 +279,20 @@ def test_projected_area_normalisation_of_eqs_4_and_5():
     field's mean normal n_f is n_s); a Lambertian f_p about tilted normals is not 1/pi at finite footprints."""
     texture = HeightFieldTexture()
     wi = spherical_to_vector([50.0, 20.0, 70.0], [0.0, 100.0, 200.0])
-    wo = spherical_to_vector([30.0, 60.0, 10.0], [180.0, 30.0, 300.0])
+    wo = spherical_to_vector([30.0, 50.0, 10.0], [180.0, 30.0, 300.0])  # < 58 deg: no clamping of a_o
     centre = np.array([[0.1, 0.0], [0.62, 0.4], [-0.3, 1.7]])
     size = np.array([0.3, 0.11, 1.7])
     table = FootprintTable.build(texture, None, wi, wo, 256)
     sat = table.query(centre, size, pair=np.arange(3))["lambert"]
     mean, error = mc_estimate(texture, None, wi, wo, centre, size, samples=4096, seed=3)
+    deviation = []
     for k in range(3):
         expected, area = _eq3_by_quad(texture, wi[k], wo[k], centre[k, 0], size[k])
         assert sat[k] == pytest.approx(expected, rel=2e-4)
         assert table.projected_area(centre[k], size[k], pair=k) == pytest.approx(area, rel=2e-4)
         assert abs(mean["lambert"][k] - expected) <= 3 * error["lambert"][k] + 1e-12
-        assert abs(expected - 1.0 / np.pi) > 1e-3  # the weights matter
+        deviation.append(abs(np.pi * expected - 1.0))
+    assert max(deviation) > 0.01  # the weights matter
     whole = table.projected_area(np.array([[0.37, 0.2]] * 3), 1.0, pair=np.arange(3))
     np.testing.assert_allclose(whole, wo[:, 2], rtol=1e-6)
 
