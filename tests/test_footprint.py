@@ -101,7 +101,8 @@ def test_whole_tile_footprints_equal_the_tile_average(kind):
     129 x 132 for the 3 x 6 denim tile), to 1e-9."""
     model, texture, params = texture_of(kind)
     weave = model.weave
-    r_u, r_v = weave.tile_width * math.ceil(128 / weave.tile_width), weave.tile_height * math.ceil(128 / weave.tile_height)
+    r_u = weave.tile_width * math.ceil(128 / weave.tile_width)
+    r_v = weave.tile_height * math.ceil(128 / weave.tile_height)
     v, u = np.meshgrid((np.arange(r_v) + 0.5) / r_v, (np.arange(r_u) + 0.5) / r_u, indexing="ij")
     rng = np.random.default_rng(3)
     wi, wo = random_pairs(rng, 3)
@@ -317,3 +318,89 @@ def test_bad_input_is_a_clear_error():
         footprint_components(texture, params, wi, wo, np.zeros((3, 2)), [0.5, 1.0])
     with pytest.raises(InputError, match="field 'centre'"):
         footprint_components(texture, params, wi, wo, np.zeros((2, 3)), [0.5, 1.0])
+
+
+# ------------------------------------------------------------------ clothlab eval with a footprint column
+
+def _csv(path, rows, header):
+    path.write_text(header + "\n" + "\n".join(",".join(repr(float(x)) for x in r) for r in rows) + "\n")
+    return path
+
+
+def _read(path):
+    import csv
+
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+def test_eval_footprint_column_gives_the_aggregated_values(tmp_path, capsys):
+    """``clothlab eval`` with u, v, footprint: a fit directory's f_r per channel = the fitted coefficients
+    times footprint_components called directly (SAT and MC); a fabric.yaml gives the components."""
+    import warnings
+    from pathlib import Path
+
+    from clothlab.cli import main
+    from clothlab.config import load_config
+    from clothlab.errors import GeometryWarning
+    from clothlab.fit.store import load_fitted
+    from clothlab.models.components import combine
+    from clothlab.weave.presets import resolve_weave
+
+    root = Path(__file__).resolve().parents[1]
+    rng = np.random.default_rng(12)
+    n = 30
+    rows = np.column_stack([rng.uniform(0, 80, n), rng.uniform(0, 360, n), rng.uniform(0, 80, n),
+                            rng.uniform(0, 360, n), rng.uniform(-1.5, 2.5, n), rng.uniform(-1.5, 2.5, n),
+                            np.exp(rng.uniform(math.log(0.05), math.log(4.0), n))])
+    rows[:4, 6] = 1.0  # whole tiles
+    path = _csv(tmp_path / "fp.csv", rows, "theta_i,phi_i,theta_o,phi_o,u,v,footprint")
+    wi, wo = spherical_to_vector(rows[:, 0], rows[:, 1]), spherical_to_vector(rows[:, 2], rows[:, 3])
+    fit_dir = root / "fits" / "polyester-lining"
+    model, params, coefficients, channels = load_fitted(fit_dir)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", GeometryWarning)
+        for method, extra in (("sat", ["--footprint-resolution", "64"]), ("mc", ["--footprint-samples", "32"])):
+            out_path = tmp_path / f"{method}.csv"
+            assert main(["eval", str(fit_dir), str(path), "-o", str(out_path), "--footprint-method", method,
+                         *extra]) == 0
+            out = _read(out_path)
+            np.testing.assert_array_equal(out["footprint"], rows[:, 6])
+            comps = footprint_components(model.texture(), params, wi, wo, rows[:, 4:6], rows[:, 6], method=method,
+                                         resolution=64, samples=32)
+            expected = combine(comps, coefficients)
+            np.testing.assert_allclose(np.column_stack([out[c] for c in channels]), expected, rtol=1e-12,
+                                       atol=1e-15)
+        config = root / "measurements" / "polyester-lining" / "fabric.yaml"
+        assert main(["eval", str(config), str(path), "-o", str(tmp_path / "cfg.csv"),
+                     "--footprint-resolution", "64"]) == 0
+        cfg = load_config(config)
+        q = cfg.model.quadrature
+        configured = build_model(cfg.model.kind, resolve_weave(cfg.model.weave, cfg.base_dir), (q.rule, q.nodes),
+                                 **cfg.model.options)
+        comps = footprint_components(configured.texture(), dict(cfg.model.params), wi, wo, rows[:, 4:6], rows[:, 6],
+                                     resolution=64)
+    out = _read(tmp_path / "cfg.csv")
+    for name, value in comps.items():
+        np.testing.assert_allclose(out[name], value, rtol=1e-12, atol=1e-15)
+    capsys.readouterr()
+
+
+def test_eval_footprint_column_errors(tmp_path, capsys):
+    from pathlib import Path
+
+    from clothlab.cli import main
+
+    fit_dir = Path(__file__).resolve().parents[1] / "fits" / "polyester-lining"
+    no_uv = _csv(tmp_path / "a.csv", [[30, 0, 30, 180, 0.5]], "theta_i,phi_i,theta_o,phi_o,footprint")
+    assert main(["eval", str(fit_dir), str(no_uv)]) == 2
+    err = capsys.readouterr().err
+    assert "field 'footprint'" in err and "columns u and v" in err and str(no_uv) in err and err.count("\n") == 1
+    zero = _csv(tmp_path / "b.csv", [[30, 0, 30, 180, 0.1, 0.2, 0.5], [30, 0, 30, 180, 0.1, 0.2, 0.0]],
+                "theta_i,phi_i,theta_o,phi_o,u,v,footprint")
+    assert main(["eval", str(fit_dir), str(zero)]) == 2
+    err = capsys.readouterr().err
+    assert f"{zero}:3" in err and "field 'footprint'" in err and "> 0" in err
+    assert main(["eval", str(fit_dir), str(zero), "--footprint-samples", "0", "--footprint-method", "mc"]) == 2
+    assert "--footprint-samples" in capsys.readouterr().err

@@ -12,13 +12,23 @@ from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
 def add_parser(sub):
     p = sub.add_parser("eval", help="evaluate a fitted or configured model at the directions of a CSV",
                        description="Evaluate the model of a fit directory or a fabric.yaml at the directions of a "
-                                   "CSV (with u, v columns: the Irawan-Marschner texture model).")
+                                   "CSV (with u, v columns: the model's texture model at those points; with a "
+                                   "footprint column too: the texture averaged over a box footprint of that side "
+                                   "in tiles centred at (u, v), Chen, Wang & Wang 2024, eqs. 3-5).")
     p.add_argument("source", type=Path, help="a fit directory (fits/<name>) or a fabric.yaml")
     p.add_argument("directions", type=Path, help="CSV with theta_i, phi_i, theta_o, phi_o in degrees")
     add_output(p, "output CSV (default: stdout)", metavar="CSV")
     p.add_argument("--components", action="store_true", help="add one column per component and channel")
     add_force(p, "output file")
     add_quadrature_overrides(p)
+    p.add_argument("--footprint-method", choices=("sat", "mc"), default="sat",
+                   help="footprint estimator: periodic summed-area tables (exact for box footprints; default) "
+                        "or stratified Monte Carlo")
+    p.add_argument("--footprint-resolution", type=int, default=128, metavar="R",
+                   help="texels per tile side of the summed-area tables (default 128)")
+    p.add_argument("--footprint-samples", type=int, default=256, metavar="N",
+                   help="Monte Carlo samples per footprint (default 256)")
+    p.add_argument("--footprint-seed", type=int, default=0, metavar="SEED", help="Monte Carlo seed (default 0)")
     return p
 
 
@@ -26,7 +36,9 @@ def run(args) -> int:
     from clothlab.fit.evaluate import evaluate_directions_file
 
     text = evaluate_directions_file(args.source, args.directions, components=args.components, rule=args.rule,
-                                    nodes=args.nodes)
+                                    nodes=args.nodes, footprint_method=args.footprint_method,
+                                    samples=args.footprint_samples, resolution=args.footprint_resolution,
+                                    seed=args.footprint_seed)
     if args.output is None:
         sys.stdout.write(text)
         return 0

@@ -4,8 +4,11 @@ Input CSV: columns theta_i, phi_i, theta_o, phi_o in degrees, clothlab conventio
 the weft, :mod:`clothlab.frames`), and optionally u, v (texture coordinates in weave tiles: u along the weft,
 v along the warp): then the model's *texture* model (:meth:`clothlab.models.base.Model.texture`; for IM the
 texture model of Irawan & Marschner 2012, sec. 7.2) is evaluated at those points instead of the reflectance
-model.  Other columns are ignored.
-Output CSV: the four angles (and u, v), then the BRDF
+model.  With u, v an optional column ``footprint`` (a box footprint's side in tiles, > 0) gives the texture
+model's components averaged over the footprint centred at (u, v) instead (Chen, Wang & Wang 2024, eqs. 3-5;
+:func:`clothlab.models.footprint.footprint_components`: periodic summed-area tables of the noise-free texture
+by default, or stratified Monte Carlo).  Other columns are ignored.
+Output CSV: the four angles (and u, v, footprint), then the BRDF
 (1/sr) per channel for a fit directory, and with ``components`` one column ``<component>_<channel>`` per
 component and channel (the component times its fitted coefficient).  A fabric.yaml has no fitted
 coefficients: its output holds the components with unit coefficients (``<component>`` columns: diffuse
@@ -25,10 +28,12 @@ from clothlab.frames import spherical_to_vector
 from clothlab.io.table import ANGLE_COLUMNS as ANGLES
 
 TEXTURE = ("u", "v")
+FOOTPRINT = "footprint"
 
 
 def read_directions(path) -> dict[str, np.ndarray]:
-    """The four angle columns of a CSV (degrees) and, when present, u and v (tiles); file/line/column errors."""
+    """The four angle columns of a CSV (degrees) and, when present, u and v (tiles) and footprint (tiles, > 0,
+    only with u and v); file/line/column errors."""
     path = Path(path)
     if not path.is_file():
         raise InputError("directions file not found", path=path)
@@ -44,6 +49,11 @@ def read_directions(path) -> dict[str, np.ndarray]:
     names = ANGLES + tuple(c for c in TEXTURE if c in header)
     if len(names) == len(ANGLES) + 1:
         raise InputError("texture coordinates need both columns u and v", path=path, line=rows[0][0])
+    if FOOTPRINT in header:
+        if len(names) == len(ANGLES):
+            raise InputError("a footprint column needs the footprint centres: columns u and v (tiles)", path=path,
+                             line=rows[0][0], field=FOOTPRINT)
+        names += (FOOTPRINT,)
     idx = [header.index(c) for c in names]
     out = np.empty((len(rows) - 1, len(names)))
     for k, (line, row) in enumerate(rows[1:]):
@@ -57,6 +67,9 @@ def read_directions(path) -> dict[str, np.ndarray]:
             if not np.isfinite(value) or (limit is not None and not 0.0 <= value <= limit):
                 raise InputError(f"{col} = {value!r} deg is outside [0, 90]" if limit else f"{col} is not finite",
                                  path=path, line=line, field=col)
+            if col == FOOTPRINT and not value > 0.0:
+                raise InputError(f"footprint = {value!r}: expected a footprint size > 0 (tiles)", path=path,
+                                 line=line, field=col)
             out[k, j] = value
     return dict(zip(names, out.T, strict=True))
 
@@ -82,10 +95,20 @@ def _model_source(source, rule, nodes):
     return model, params, coefficients, channels
 
 
-def evaluate_directions_file(source, directions, *, components: bool = False, rule=None, nodes=None) -> str:
-    """CSV text of the model of ``source`` (fit directory or fabric.yaml) at the directions of a CSV."""
+def evaluate_directions_file(source, directions, *, components: bool = False, rule=None, nodes=None,
+                             footprint_method: str = "sat", samples: int = 256, resolution: int = 128,
+                             seed: int = 0) -> str:
+    """CSV text of the model of ``source`` (fit directory or fabric.yaml) at the directions of a CSV.
+
+    With a footprint column: ``footprint_method`` ``"sat"`` (tables of ``resolution`` texels per tile side)
+    or ``"mc"`` (``samples`` stratified samples per row, ``seed``)."""
     from clothlab.models.components import coefficient_name
 
+    for name, value in (("--footprint-samples", samples), ("--footprint-resolution", resolution)):
+        if int(value) < 1:
+            from clothlab.errors import ConfigError
+
+            raise ConfigError(f"expected a positive integer, got {value!r}", field=name)
     angles = read_directions(directions)
     model, params, coefficients, channels = _model_source(source, rule, nodes)
     wi = spherical_to_vector(angles["theta_i"], angles["phi_i"])
@@ -98,7 +121,14 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
             with_texture = [kind for kind in MODEL_KINDS if model_class(kind).has_texture]
             raise InputError(f"u, v columns need a model with a texture model ({', '.join(with_texture)}); model "
                              f"kind {model.kind!r} has none", path=directions, field="u")
-        comps = model.texture().components(angles["u"], angles["v"], wi, wo, params)
+        if FOOTPRINT in angles:
+            from clothlab.models.footprint import footprint_components
+
+            comps = footprint_components(model.texture(), params, wi, wo, np.column_stack([angles["u"], angles["v"]]),
+                                         angles[FOOTPRINT], method=footprint_method, samples=samples, seed=seed,
+                                         resolution=resolution)
+        else:
+            comps = model.texture().components(angles["u"], angles["v"], wi, wo, params)
     else:
         comps = model.components(wi, wo, params)
     columns = dict(angles)
