@@ -404,3 +404,25 @@ def test_eval_footprint_column_errors(tmp_path, capsys):
     assert f"{zero}:3" in err and "field 'footprint'" in err and "> 0" in err
     assert main(["eval", str(fit_dir), str(zero), "--footprint-samples", "0", "--footprint-method", "mc"]) == 2
     assert "--footprint-samples" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the bench section
+
+def test_footprint_bench_section_small():
+    """The ``footprint`` section on a tiny problem: one row per estimator, finite errors per size bin, MC
+    error falling with the sample count on footprints of 0.3 tiles and more, and the lines show the table."""
+    from clothlab.studies import bench
+    from clothlab.studies import footprint as section
+
+    assert "footprint" in bench.SECTION_NAMES
+    result = section.footprint_benchmark(True, pairs=2, footprints=60, kinds=("irawan",), reference_resolution=96)
+    f = result["kinds"]["irawan"]
+    assert [r["estimator"] for r in f["rows"]] == ["SAT R=128"] + [f"MC {s}" for s in section.MC_SAMPLES]
+    assert sum(f["queries_per_bin"]) == f["queries"] == 120
+    for row in f["rows"]:
+        assert row["queries_per_second"] > 0 and len(row["relative_rmse"]) == len(section.SIZE_BINS) - 1
+        assert all(np.isfinite(row["relative_rmse"]))
+    mc = {r["samples"]: r["relative_rmse"] for r in f["rows"][1:]}
+    assert mc[256][-1] < mc[1][-1] and mc[256][-2] < mc[1][-2]
+    text = "\n".join(section.lines(result))
+    assert "MC 256" in text and "SAT R=128" in text and "queries/s" in text
