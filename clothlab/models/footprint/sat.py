@@ -34,31 +34,7 @@ from clothlab.models.footprint.projection import weighted_values
 
 DEFAULT_RESOLUTION = 128
 _BUILD_POINTS = 1 << 18  # texture points per evaluation call while building (memory bound)
-
-
-def _bilinear(table: np.ndarray, pair, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """B(x, y), 0 <= x <= Ru, 0 <= y <= Rv (texel units) of tables (P, Rv + 1, Ru + 1): (N,) for pair (N,),
-    else (P, N)."""
-    i0 = np.minimum(np.floor(x), table.shape[-1] - 2).astype(np.intp)
-    j0 = np.minimum(np.floor(y), table.shape[-2] - 2).astype(np.intp)
-    a, b = x - i0, y - j0
-    if pair is None:
-        s00, s10 = table[:, j0, i0], table[:, j0, i0 + 1]
-        s01, s11 = table[:, j0 + 1, i0], table[:, j0 + 1, i0 + 1]
-    else:
-        s00, s10 = table[pair, j0, i0], table[pair, j0, i0 + 1]
-        s01, s11 = table[pair, j0 + 1, i0], table[pair, j0 + 1, i0 + 1]
-    return (1.0 - b) * ((1.0 - a) * s00 + a * s10) + b * ((1.0 - a) * s01 + a * s11)
-
-
-def _integral(table: np.ndarray, pair, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """I(x, y) of the periodic piecewise-constant texture (module docstring), x, y any reals (texel units)."""
-    r_u, r_v = table.shape[-1] - 1, table.shape[-2] - 1
-    nx, ny = np.floor(x / r_u), np.floor(y / r_v)
-    rx, ry = np.clip(x - nx * r_u, 0.0, r_u), np.clip(y - ny * r_v, 0.0, r_v)
-    full_u, full_v = np.full_like(rx, float(r_u)), np.full_like(ry, float(r_v))
-    return (_bilinear(table, pair, rx, ry) + nx * _bilinear(table, pair, full_u, ry)
-            + ny * _bilinear(table, pair, rx, full_v) + nx * ny * _bilinear(table, pair, full_u, full_v))
+_QUERY_CHUNK = 1 << 18  # footprints per compiled call (bounds the temporary arrays)
 
 
 def summed_area(values: np.ndarray) -> np.ndarray:
@@ -99,11 +75,17 @@ class FootprintTable:
                  single: bool = False):
         self.tables = tables
         self.wi, self.wo = wi, wo
-        self.area = area
         self.single = single
         first = next(iter(tables.values())) if tables else area
         self.shape = (first.shape[-1] - 1, first.shape[-2] - 1)  # (Ru, Rv) texels per tile
         self.pairs = first.shape[0]
+        # every table side by side, (P, (Rv + 1) (Ru + 1), components [+ a_o]): a query gathers each stencil
+        # entry once for all components; ``tables`` and ``area`` are views into it
+        columns = list(tables.values()) + ([] if area is None else [area])
+        self._stack = np.ascontiguousarray(np.stack([t.reshape(self.pairs, -1) for t in columns], axis=-1))
+        full = (self.pairs, self.shape[1] + 1, self.shape[0] + 1)
+        self.tables = {name: self._stack[..., k].reshape(full) for k, name in enumerate(tables)}
+        self.area = None if area is None else self._stack[..., -1].reshape(full)
 
     @classmethod
     def build(cls, texture, params, wi, wo, resolution: int = DEFAULT_RESOLUTION, *, need=None,
@@ -156,30 +138,50 @@ class FootprintTable:
         """Box-footprint averages: ``centre`` (N, 2) or (2,) in tiles (any reals), ``size`` (N,) or scalar,
         tiles, > 0.  Without ``pair``: every built pair, (P, N) ((N,) for a single pair; scalars for a
         single footprint too); with ``pair`` (N,) int: footprint k uses pair[k], (N,)."""
+        chunks = self._chunks(centre, size, pair)
+        if chunks is not None:
+            parts = [self.query(c, s, pair=q) for c, s, q in chunks]
+            return {name: np.concatenate([p[name] for p in parts], axis=-1) for name in parts[0]}
         box, area, shape = self._boxes(centre, size, pair)
-        denominator = area if self.area is None else box(self.area)
-        out = {}
-        for name, table in self.tables.items():
-            numerator = box(table)
-            if self.area is None:
-                value = numerator / denominator
-            else:
-                value = np.divide(numerator, denominator, out=np.zeros_like(numerator), where=denominator > 0.0)
-            out[name] = shape(value)
-        return out
+        values = box()  # (..., components [+ a_o])
+        names = list(self.tables)
+        if self.area is None:
+            ratio = values / area[:, None]
+        else:
+            denominator = values[..., -1:]
+            ratio = np.divide(values[..., :-1], denominator, out=np.zeros_like(values[..., :-1]),
+                              where=denominator > 0.0)
+        return {name: shape(ratio[..., k]) for k, name in enumerate(names)}
 
     def projected_area(self, centre, size, *, pair=None) -> np.ndarray:
         """A_P(wo) of eq. 5 over the footprints (shapes as :meth:`query`): the box average of
         a_o = <wo . n_p> / <n_s . n_p>, or wo_z for a texture without micro normals (n_p = n_s)."""
+        chunks = self._chunks(centre, size, pair)
+        if chunks is not None:
+            return np.concatenate([self.projected_area(c, s, pair=q) for c, s, q in chunks], axis=-1)
         box, area, shape = self._boxes(centre, size, pair)
         if self.area is not None:
-            return shape(box(self.area) / area)
+            return shape(box()[..., -1] / area)
         wo_z = self.wo[:, 2]
         return shape(np.broadcast_to(wo_z[:, None], (self.pairs, len(area))) if pair is None
                      else wo_z[np.broadcast_to(pair, area.shape)])
 
+    @staticmethod
+    def _chunks(centre, size, pair):
+        """Argument triples of at most :data:`_QUERY_CHUNK` footprints each, or None for a small call."""
+        centre, size = np.asarray(centre, dtype=np.float64), np.asarray(size, dtype=np.float64)
+        n = max(len(centre) if centre.ndim == 2 else 1, size.size)
+        if n <= _QUERY_CHUNK:
+            return None
+        centre = np.broadcast_to(np.atleast_2d(centre), (n, 2))
+        size = np.broadcast_to(size.reshape(-1) if size.ndim else size, (n,))
+        pair = None if pair is None else np.broadcast_to(np.asarray(pair), (n,))
+        return [(centre[k:k + _QUERY_CHUNK], size[k:k + _QUERY_CHUNK],
+                 None if pair is None else pair[k:k + _QUERY_CHUNK]) for k in range(0, n, _QUERY_CHUNK)]
+
     def _boxes(self, centre, size, pair):
-        """(box integral of a table, footprint areas (N,) in texels, output shaping) for the queries."""
+        """(box integrals of every table, (N, C) or (P, N, C); footprint areas (N,) in texels; output shaping)
+        for the queries."""
         centre = np.asarray(centre, dtype=np.float64)
         scalar = centre.ndim == 1 and np.ndim(size) == 0
         centre = np.atleast_2d(centre)
@@ -196,10 +198,15 @@ class FootprintTable:
         c = np.mod(centre, 1.0) * r  # periodic: stay near the first tile (small integrals, little rounding)
         half_u, half_v = 0.5 * size * r[0], 0.5 * size * r[1]
         x0, x1, y0, y1 = c[:, 0] - half_u, c[:, 0] + half_u, c[:, 1] - half_v, c[:, 1] + half_v
+        from clothlab.models.footprint.compiled import box_sums
 
-        def box(table):
-            return (_integral(table, pair, x1, y1) - _integral(table, pair, x0, y1)
-                    - _integral(table, pair, x1, y0) + _integral(table, pair, x0, y0))
+        def box():  # the four-corner difference of I for every table column at once (compiled)
+            stack = self._stack.reshape(-1, self._stack.shape[-1])
+            if pair is not None:
+                return box_sums(stack, np.ascontiguousarray(pair, dtype=np.int64), *self.shape, x0, x1, y0, y1)
+            every = np.repeat(np.arange(self.pairs, dtype=np.int64), n)
+            sums = box_sums(stack, every, *self.shape, *(np.tile(z, self.pairs) for z in (x0, x1, y0, y1)))
+            return sums.reshape(self.pairs, n, -1)
 
         def shape(value):
             if self.single and pair is None:
