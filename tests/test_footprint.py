@@ -415,7 +415,8 @@ def test_footprint_bench_section_small():
     from clothlab.studies import footprint as section
 
     assert "footprint" in bench.SECTION_NAMES
-    result = section.footprint_benchmark(True, pairs=2, footprints=60, kinds=("irawan",), reference_resolution=96)
+    result = section.footprint_benchmark(True, pairs=2, footprints=60, kinds=("irawan",), reference_resolution=96,
+                                         check=3)
     f = result["kinds"]["irawan"]
     assert [r["estimator"] for r in f["rows"]] == ["SAT R=128"] + [f"MC {s}" for s in section.MC_SAMPLES]
     assert sum(f["queries_per_bin"]) == f["queries"] == 120
@@ -424,5 +425,7 @@ def test_footprint_bench_section_small():
         assert all(np.isfinite(row["relative_rmse"]))
     mc = {r["samples"]: r["relative_rmse"] for r in f["rows"][1:]}
     assert mc[256][-1] < mc[1][-1] and mc[256][-2] < mc[1][-2]
+    assert set(f["discretisation_vs_mc"]) == {"SAT R=128", "SAT R=96"}
+    assert all(np.isfinite(f["discretisation_vs_mc"]["SAT R=128"]))
     text = "\n".join(section.lines(result))
     assert "MC 256" in text and "SAT R=128" in text and "queries/s" in text

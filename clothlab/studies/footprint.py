@@ -12,7 +12,10 @@ discretisation error is measured by the default R = 128 row against it).  Measur
   footprints, and the query alone) and stratified MC at 1 / 4 / 16 / 256 samples (one vectorised call);
 - MSE against the reference per size bin, as a relative RMSE: sqrt(sum of squared errors / sum of squared
   reference values) over the queries of the bin and the components that vary (a constant one, IM's
-  diffuse = 1/pi, is exact for every estimator and would only dilute the figure).
+  diffuse = 1/pi, is exact for every estimator and would only dilute the figure);
+- the tables' discretisation error itself: SAT at R = 128 and at the reference resolution against stratified
+  MC with :data:`CHECK_SAMPLES` samples on the first ``check`` queries of each size bin (MC's own error at
+  that count is the floor of this figure).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ MC_SAMPLES = (1, 4, 16, 256)
 RESOLUTION = 128
 REFERENCE_RESOLUTION = 512
 SIZE_BINS = (0.01, 0.03, 0.1, 0.3, 1.0, 5.0)  # tiles: bin edges
+CHECK_SAMPLES = 4096
 
 
 def _queries(rng, pairs: int, footprints: int):
@@ -51,15 +55,17 @@ def _relative_rmse(estimate: dict, reference: dict, rows: np.ndarray) -> float:
 
 
 def footprint_benchmark(quick: bool, *, pairs: int | None = None, footprints: int | None = None,
-                        kinds=None, reference_resolution: int = REFERENCE_RESOLUTION) -> dict:
+                        kinds=None, reference_resolution: int = REFERENCE_RESOLUTION, check: int | None = None) -> dict:
     """Figures per kind: settings, one row per estimator (queries_per_second, relative_rmse by size bin),
-    the SAT build time per pair and the query time.  ``quick``: 4 pairs x 250 footprints, IM only."""
+    the SAT build time per pair and the query time, and the tables' discretisation check (``check``
+    queries per bin).  ``quick``: 4 pairs x 250 footprints, 20 checked per bin, IM only."""
     from clothlab.models.footprint import FootprintTable, mc_estimate
     from clothlab.models.registry import MODEL_KINDS, build_model, model_class
     from clothlab.weave.presets import get_preset
 
     pairs = pairs or (4 if quick else 16)
     footprints = footprints or (250 if quick else 500)
+    check = check or (20 if quick else 200)
     if kinds is None:
         kinds = ("irawan",) if quick else tuple(k for k in MODEL_KINDS if model_class(k).has_texture)
     bins = [(SIZE_BINS[i], SIZE_BINS[i + 1]) for i in range(len(SIZE_BINS) - 1)]
@@ -91,9 +97,19 @@ def footprint_benchmark(quick: bool, *, pairs: int | None = None, footprints: in
             seconds = time.perf_counter() - started
             rows.append({"estimator": f"MC {samples}", "samples": samples, "queries_per_second": n / seconds,
                          "relative_rmse": [_relative_rmse(mean, reference, m) for m in in_bin]})
+        picked = np.concatenate([np.flatnonzero(m)[:check] for m in in_bin])
+        truth, _ = mc_estimate(texture, params, wi[pair[picked]], wo[pair[picked]], centre[picked], size[picked],
+                               samples=CHECK_SAMPLES, seed=3)
+        sub_bins = [m[picked] for m in in_bin]
+        discretisation = {
+            f"SAT R={RESOLUTION}": [_relative_rmse({k: v[picked] for k, v in sat.items()}, truth, m) for m in sub_bins],
+            f"SAT R={reference_resolution}": [_relative_rmse({k: v[picked] for k, v in reference.items()}, truth, m)
+                                             for m in sub_bins]}
         out["kinds"][kind] = {"rows": rows, "sat_build_seconds_per_pair": build_s / pairs,
                               "sat_query_seconds": query_s, "queries": n,
-                              "queries_per_bin": [int(m.sum()) for m in in_bin]}
+                              "queries_per_bin": [int(m.sum()) for m in in_bin],
+                              "discretisation_vs_mc": discretisation,
+                              "checked_per_bin": [int(m.sum()) for m in sub_bins]}
     return out
 
 
@@ -116,4 +132,8 @@ def lines(result: dict) -> list[str]:
             out.append(f"    {row['estimator']:<11} {row['queries_per_second']:11,.0f} {errors}")
         sat = f["rows"][0]
         out.append(f"    SAT query alone (table built): {sat['query_only_per_second']:,.0f} queries/s")
+        out.append(f"    tables vs MC {CHECK_SAMPLES} ({f['checked_per_bin']} queries per bin; MC's own error is "
+                   "the floor):")
+        for name, errors in f["discretisation_vs_mc"].items():
+            out.append(f"    {name:<11} {'':>11} " + " ".join(f"{e:9.2e}" for e in errors))
     return out
