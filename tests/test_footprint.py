@@ -13,6 +13,8 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import quad
+from test_texture import _eval_csv as _csv
+from test_texture import _read_csv as _read
 
 from clothlab.errors import InputError
 from clothlab.frames import spherical_to_vector
@@ -321,19 +323,6 @@ def test_bad_input_is_a_clear_error():
 
 
 # ------------------------------------------------------------------ clothlab eval with a footprint column
-
-def _csv(path, rows, header):
-    path.write_text(header + "\n" + "\n".join(",".join(repr(float(x)) for x in r) for r in rows) + "\n")
-    return path
-
-
-def _read(path):
-    import csv
-
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
-
 
 def test_eval_footprint_column_gives_the_aggregated_values(tmp_path, capsys):
     """``clothlab eval`` with u, v, footprint: a fit directory's f_r per channel = the fitted coefficients
