@@ -94,6 +94,37 @@ def test_footprint_components_sat_and_mc_routes(kind):
     assert not np.array_equal(a[name], c[name])
 
 
+class PerPointDirections:
+    """A texture seen without its ``shared_directions`` capability (every call gets one row per point)."""
+
+    def __init__(self, texture):
+        self.texture = texture
+        self.weave = texture.weave
+        self.component_names = texture.component_names
+
+    def components(self, u, v, wi, wo, params=None, **kw):
+        return self.texture.components(u, v, wi, wo, params, **kw)
+
+
+def test_shared_direction_calls_give_the_same_numbers():
+    """IM takes directions shared by all points: the tables (one call per pair) and MC (one call per pair
+    of a chunk) give the numbers of the one-row-per-point calls."""
+    _, texture, params = texture_of("irawan")
+    assert texture.shared_directions
+    rng = np.random.default_rng(6)
+    wi, wo = random_pairs(rng, 3)
+    pair = np.repeat(np.arange(3), 40)
+    centre, size = random_footprints(rng, 120)
+    plain = PerPointDirections(texture)
+    a = FootprintTable.build(texture, params, wi, wo, 48).query(centre, size, pair=pair)
+    b = FootprintTable.build(plain, params, wi, wo, 48).query(centre, size, pair=pair)
+    c = mc_estimate(texture, params, wi[pair], wo[pair], centre, size, samples=256, seed=1)[0]
+    d = mc_estimate(plain, params, wi[pair], wo[pair], centre, size, samples=256, seed=1)[0]
+    for name in a:
+        np.testing.assert_allclose(a[name], b[name], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(c[name], d[name], rtol=1e-12, atol=1e-15)
+
+
 # ------------------------------------------------------------------ whole tiles and the IM identity
 
 @pytest.mark.parametrize("kind", TEXTURE_KINDS)

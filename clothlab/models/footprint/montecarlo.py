@@ -20,6 +20,38 @@ from clothlab.models.footprint.kernels import stratified_unit, unit_offsets
 from clothlab.models.footprint.projection import weighted_values
 
 _CHUNK_POINTS = 1 << 17  # texture points per evaluation call (memory bound)
+_MIN_SHARED_POINTS = 4096  # points per call below which grouping by direction pair does not pay
+
+
+def _evaluate(texture, params, u, v, wi, wo, samples: int, **kw):
+    """weighted_values for k queries x ``samples`` points (u, v flat, query-major; wi, wo (k, 3)).
+
+    A texture with ``shared_directions`` is called once per distinct direction pair of the chunk with (1, 3)
+    directions when that gives calls of :data:`_MIN_SHARED_POINTS` points or more on average (IM: ~4x
+    faster per point); otherwise once with the directions repeated per sample.  The sample points are
+    drawn before, in query order, so the grouping never changes the numbers.
+    """
+    k = len(wi)
+    if getattr(texture, "shared_directions", False):
+        pairs, inverse = np.unique(np.concatenate([wi, wo], axis=1), axis=0, return_inverse=True)
+        if len(pairs) * _MIN_SHARED_POINTS <= k * samples:
+            inverse = inverse.reshape(-1)
+            values: dict[str, np.ndarray] = {}
+            area = None
+            for g, pair in enumerate(pairs):
+                rows = np.flatnonzero(inverse == g)
+                points = (rows[:, None] * samples + np.arange(samples)).ravel()
+                part, part_area = weighted_values(texture, params, u[points], v[points], pair[None, :3],
+                                                  pair[None, 3:], **kw)
+                kw["warn"] = False
+                for name, value in part.items():
+                    values.setdefault(name, np.zeros(k * samples))[points] = value
+                if part_area is not None:
+                    area = np.zeros(k * samples) if area is None else area
+                    area[points] = part_area
+            return values, area
+    return weighted_values(texture, params, u, v, np.repeat(wi, samples, axis=0), np.repeat(wo, samples, axis=0),
+                           **kw)
 
 
 def estimate(texture, params, wi, wo, centre, size, *, samples: int = 16, seed: int = 0, kernel: str = "box",
@@ -41,9 +73,8 @@ def estimate(texture, params, wi, wo, centre, size, *, samples: int = 16, seed: 
         offsets = unit_offsets(kernel, stratified_unit(rng, k, samples)) * size[start:stop, None, None]
         u = (centre[start:stop, 0, None] + offsets[..., 0]).ravel()
         v = (centre[start:stop, 1, None] + offsets[..., 1]).ravel()
-        values, area = weighted_values(texture, params, u, v, np.repeat(wi[start:stop], samples, axis=0),
-                                       np.repeat(wo[start:stop], samples, axis=0), need=need, noise=noise,
-                                       warn=warn and start == 0)
+        values, area = _evaluate(texture, params, u, v, wi[start:stop], wo[start:stop], samples, need=need,
+                                 noise=noise, warn=warn and start == 0)
         a = None if area is None else area.reshape(k, samples)
         a_mean = None if a is None else a.mean(axis=1)
         for name, value in values.items():
