@@ -20,7 +20,7 @@ from clothlab.models.footprint.kernels import stratified_unit, unit_offsets
 from clothlab.models.footprint.projection import weighted_values
 
 _CHUNK_POINTS = 1 << 17  # texture points per evaluation call (memory bound)
-_MIN_SHARED_POINTS = 4096  # points per call below which grouping by direction pair does not pay
+_MIN_SHARED_POINTS = 1024  # points per call below which grouping by direction pair does not pay
 
 
 def _evaluate(texture, params, u, v, wi, wo, samples: int, **kw):
