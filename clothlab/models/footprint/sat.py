@@ -3,17 +3,17 @@
 The texture of one direction pair is sampled at the Ru x Rv texel centres of one tile (u_i = (i + 1/2) / Ru,
 v_j = (j + 1/2) / Rv) and read as piecewise constant over the texels (the midpoint rule per texel).  Ru and
 Rv are the requested ``resolution`` R rounded up to whole texels per weave cell (:func:`table_shape`), so
-yarn and segment boundaries are texel edges.  The summed-area table S (Rv + 1, Ru + 1), S[j, i] = sum of the
-texels left of i and below j (Crow 1984), gives the
-integral I(x, y) of that piecewise-constant texture over [0, x] x [0, y] (texel units) for any real x, y:
-bilinear interpolation of S is exact inside a texel (the cross term is the texel's value), and periodicity
-adds whole tiles,
+yarn and segment boundaries are texel edges.  The summed-area table S (Rv + 1, Ru + 1), S[j, i] = sum of
+the texels left of i and below j (Crow 1984), gives the integral I(x, y) of that piecewise-constant texture
+over [0, x] x [0, y] (texel units) for any real x, y: bilinear interpolation of S is exact inside a texel
+(the cross term is the texel's value), and periodicity adds whole tiles,
 
     I(x, y) = B(rx, ry) + nx B(Ru, ry) + ny B(rx, Rv) + nx ny B(Ru, Rv),   x = nx Ru + rx,  y = ny Rv + ry,
 
-with B the bilinear interpolant of S and 0 <= rx < Ru, 0 <= ry < Rv.  A box footprint's average is the four-corner
-difference of I over its area, for any size (many tiles included), with no loop per query.  For the eq. 3-5
-normalisation (:mod:`.projection`) a second table of a_o gives the denominator.
+with B the bilinear interpolant of S and 0 <= rx < Ru, 0 <= ry < Rv.  A box footprint's average is the
+four-corner difference of I over its area, for any size (many tiles included); one compiled pass over the
+queries does it for every component (:mod:`.compiled`).  For the eq. 3-5 normalisation (:mod:`.projection`)
+a table of a_o gives the denominator.
 
 Exactness and discretisation error.  The query is exact (to rounding, ~1e-13 relative) for the
 piecewise-constant texture; whole-tile footprints give the table's mean exactly.  Against the continuous
