@@ -53,7 +53,8 @@ def get_preset(name: str) -> Weave:
 def resolve_weave(spec: str, base_dir) -> Weave:
     """The weave named by fabric.yaml's ``weave:`` field.
 
-    ``spec`` is ``preset:<name>``, ``pattern:<name>`` (:mod:`clothlab.weave.patterns`) or a path to a ``.wv`` file, relative to ``base_dir`` (the directory of
+    ``spec`` is ``preset:<name>``, ``pattern:<name>`` (:mod:`clothlab.weave.patterns`) or a
+    path to a ``.wv`` file, relative to ``base_dir`` (the directory of
     fabric.yaml) unless absolute.  An unknown preset or a missing file raises :class:`ConfigError` naming
     it; errors inside the file raise :class:`~clothlab.errors.InputError` naming file, line and field.
     """

@@ -88,7 +88,10 @@ def ply_nodes(p: dict, kind: str, nodes: tuple[int, int]) -> np.ndarray:
 def _tile_nodes(value) -> tuple[int, int]:
     if value is None:
         return DEFAULT_TILE_NODES
-    pair = (value, value) if isinstance(value, int | np.integer) else tuple(value) if isinstance(value, list | tuple) else ()
+    if isinstance(value, int | np.integer):
+        pair = (value, value)
+    else:
+        pair = tuple(value) if isinstance(value, list | tuple) else ()
     if len(pair) != 2 or not all(isinstance(n, int | np.integer) and not isinstance(n, bool) and n >= 1 for n in pair):
         raise ConfigError(f"tile_nodes must be a positive integer or a pair [across, along] of them, got {value!r}",
                           field="model.options.tile_nodes")

@@ -32,7 +32,8 @@ def _yarn_specs(kind: str) -> list[ParamSpec]:
 
 FABRIC_SPECS = [
     ParamSpec("gap", "1", (0.01, 0.9), (0.01, 0.5), 0.2, "linear",
-              "gap ratio: fraction of each yarn's width that is gap (no reflecting surface; sec. 5.1: 0.2); > 0: at g = 0 the eq. 11 height field is unbounded at the yarn edge"),
+              "gap ratio: fraction of each yarn's width that is gap (no reflecting surface; sec. 5.1: 0.2); > 0: at "
+              "g = 0 the eq. 11 height field is unbounded at the yarn edge"),
     ParamSpec("blend", "1", (0.0, 1.0), (0.0, 1.0), 0.5, "linear",
               "weight w of the ply-normal Lambertian in the blended diffuse term (eq. 1)"),
 ]

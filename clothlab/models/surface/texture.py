@@ -77,7 +77,8 @@ class SurfaceTexture:
             n_p, t_p = ply_frame(cu, cv, np.deg2rad(p[f"{kind}.psi"]), p[f"{kind}.beta"])
             spec, diff = kernels.point_values(
                 np.ascontiguousarray(np.concatenate([n_p, t_p], axis=1)),
-                np.ascontiguousarray(to_yarn_frame(wi[rows], kind)), np.ascontiguousarray(to_yarn_frame(wo[rows], kind)),
+                np.ascontiguousarray(to_yarn_frame(wi[rows], kind)),
+                np.ascontiguousarray(to_yarn_frame(wo[rows], kind)),
                 np.ascontiguousarray(area_i[rows]), np.ascontiguousarray(area_o[rows]),
                 np.full(rows.size, float(p[f"{kind}.alpha"])), float(p["blend"]))
             for name, value in ((f"specular_{kind}", spec), (f"diffuse_{kind}", diff)):
