@@ -434,3 +434,69 @@ def test_fit_recovers_the_shipped_sets_parameters():
             assert abs(fitted[name] - truth[name]) < 0.5, (name, fitted[name])
         else:
             assert fitted[name] == pytest.approx(truth[name], rel=1e-2), (name, fitted[name])
+
+
+# ------------------------------------------------------------------------------------------ reach
+
+
+def surface_scene(height):
+    from clothlab.render import scene_from_dict
+
+    return scene_from_dict({
+        "patch": {"size_mm": [20000, 20000], "tile_mm": 1.0},
+        "camera": {"position": [0, 0, height], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 20.0,
+                   "resolution": [8, 6]},
+        "light": {"type": "directional", "direction": [0.3, -0.2, 1.0], "intensity": 2.0},
+        "fabric": {"weave": "pattern:twill-3x3", "coefficients": {"kd": 0.2, "ks_warp": 0.3, "ks_weft": 0.1}},
+    })
+
+
+def test_surface_shaders_render_and_the_far_view_is_the_tile_average():
+    """surface-texture up close and surface-lod far away: finite, non-negative; far away every pixel takes the
+    tile average (components) at its pixel-centre directions, which a head-on view shares almost exactly."""
+    from clothlab.render import render
+
+    near = render(surface_scene(3.0), shader="surface-texture", spp=1)
+    assert np.all(np.isfinite(near.image)) and np.all(near.image >= 0.0) and near.image.max() > 0.0
+    assert near.stats["texture_pixel_fraction"] == 1.0
+    far = render(surface_scene(20000.0), shader="surface-lod", spp=1)
+    assert far.stats["texture_pixel_fraction"] == 0.0
+    model = build_model("surface", get_pattern("twill-3x3"))
+    wi, wo = unit([[0.3, -0.2, 1.0]]), np.array([[0.0, 0.0, 1.0]])
+    f = model.evaluate(wi, wo, {"kd_warp": 0.2, "kd_weft": 0.2, "ks_warp": 0.3, "ks_weft": 0.1})[0, 0]
+    irradiance = 2.0 * wi[0, 2]  # directional light of intensity 2, cosine at the patch
+    image = far.image[..., 0]  # pixels look 0-10 deg off the normal: the head-on value lies within their range
+    assert image.min() < f * irradiance < image.max() and np.allclose(image, f * irradiance, rtol=0.05)
+
+
+def test_eval_cli_with_texture_points(tmp_path, capsys):
+    from clothlab.cli.main import main
+
+    directions = tmp_path / "d.csv"
+    directions.write_text("theta_i,phi_i,theta_o,phi_o,u,v\n30,0,30,180,0.1,0.2\n40,90,10,250,0.55,0.45\n")
+    assert main(["eval", str(SURFACE_TWILL / "simulate.yaml"), str(directions)]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    header = lines[0].split(",")
+    model = build_model("surface", get_pattern("twill-3x3"))
+    from clothlab.config import load_config
+
+    params = dict(load_config(SURFACE_TWILL / "simulate.yaml").model.params)
+    row = dict(zip(header, map(float, lines[1].split(",")), strict=True))
+    wi = np.array([[np.sin(np.deg2rad(30)), 0, np.cos(np.deg2rad(30))]])
+    wo = np.array([[-np.sin(np.deg2rad(30)), 0, np.cos(np.deg2rad(30))]])
+    comps = model.texture().components(0.1, 0.2, wi, wo, params)
+    for name in model.component_names:
+        assert row[name] == pytest.approx(float(comps[name]), rel=1e-9, abs=1e-15)
+
+
+def test_btf_stack_of_a_surface_config(tmp_path):
+    from clothlab.simulate.btf import simulate_btf_command
+
+    out = tmp_path / "btf"
+    simulate_btf_command(SURFACE_TWILL / "simulate.yaml", out, n_directions=4, size=8, kd="0.3", ks_warp="0.2",
+                         ks_weft="0.1")
+    import yaml
+
+    manifest = yaml.safe_load((out / "manifest.yaml").read_text())
+    text = str(manifest)
+    assert "kd_warp" in text and "kd_weft" in text and "surface" in text
