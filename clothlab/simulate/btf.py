@@ -302,7 +302,8 @@ def with_coefficients(src: TextureSource, *, kd=None, ks_warp=None, ks_weft=None
         name = "kd_" + component.split("_", 1)[1] if component.startswith("diffuse_") else None
         if name is not None:
             if kd is None and name in own:
-                coefficients[name] = np.broadcast_to(np.atleast_1d(np.asarray(own[name], dtype=np.float64)), (n,)).copy()
+                value = np.atleast_1d(np.asarray(own[name], dtype=np.float64))
+                coefficients[name] = np.broadcast_to(value, (n,)).copy()
                 origin[name] = "source"
             else:
                 coefficients[name], origin[name] = coefficients["kd"], origin["kd"]
