@@ -401,7 +401,7 @@ def test_shipped_set_is_reproduced_at_its_generating_parameters():
     from clothlab.config import load_config
     from clothlab.fit.problem import build_problem
 
-    problem = build_problem(load_config(SURFACE_TWILL / "fabric-clean.yaml"))
+    problem = build_problem(load_config(SURFACE_TWILL / "surface-clean.yaml"))
     truth = problem.measurement.provenance["parameters"]
     solution = problem.solve({k: truth[k] for k in problem.start})
     assert solution.objective < 1e-20
@@ -418,7 +418,7 @@ def test_fit_recovers_the_shipped_sets_parameters():
     from clothlab.fit.optimize import minimize
     from clothlab.fit.problem import FitProblem, build_problem
 
-    full = build_problem(load_config(SURFACE_TWILL / "fabric-clean.yaml"))
+    full = build_problem(load_config(SURFACE_TWILL / "surface-clean.yaml"))
     truth = full.measurement.provenance["parameters"]
     rows = np.random.default_rng(8).choice(full.measurement.n, 400, replace=False)
     measurement = full.measurement.subset(rows)
