@@ -500,3 +500,30 @@ def test_btf_stack_of_a_surface_config(tmp_path):
     manifest = yaml.safe_load((out / "manifest.yaml").read_text())
     text = str(manifest)
     assert "kd_warp" in text and "kd_weft" in text and "surface" in text
+
+
+def test_warp_and_weft_swap_under_a_quarter_turn():
+    """Plain weave, identical yarn types: turning both directions by +90 deg about z turns every warp component
+    into the weft one (the weft's yarn frame is the warp's turned by 90 deg, and a segment is symmetric under
+    the remaining half turn, (u, v) -> (-u, -v))."""
+    model = build_model("surface", get_pattern("plain"))
+    params = {"warp.psi": 30.0, "weft.psi": 30.0, "warp.umax": 33.0, "weft.umax": 33.0, "warp.alpha": 0.2,
+              "weft.alpha": 0.2, "warp.beta": 1.4, "weft.beta": 1.4}
+    rng = np.random.default_rng(9)
+    wi, wo = hemisphere(rng, 300, 0.05), hemisphere(rng, 300, 0.05)
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # +90 deg about z
+    a = model.components(wi, wo, params)
+    b = model.components(wi @ turn.T, wo @ turn.T, params)
+    for comp in ("diffuse", "specular"):
+        np.testing.assert_allclose(b[f"{comp}_weft"], a[f"{comp}_warp"], rtol=1e-10, atol=1e-14)
+
+
+def test_fit_cli_runs_kind_surface(tmp_path):
+    from clothlab.cli.main import main
+
+    assert main(["-q", "fit", str(SURFACE_TWILL / "surface-clean.yaml"), "-o", str(tmp_path), "--max-evals", "4"]) == 0
+    import json
+
+    fit = json.loads((tmp_path / "surface-twill-clean" / "fit.json").read_text())
+    assert fit["model"]["kind"] == "surface" and set(fit["coefficients"]) == {"kd_warp", "kd_weft", "ks_warp",
+                                                                              "ks_weft"}
