@@ -112,12 +112,20 @@ def yarn_area(w, umax, beta, half, nodes):
     n = w.shape[0]
     out = np.zeros(n)
     log_cos_half = math.log(math.cos(half))
+    tan_u = np.zeros(nodes)
+    sec_u = np.zeros(nodes)
+    last = np.nan
     for k in range(n):
+        if umax[k] != last:  # the nodes' tan u and 1 / cos u, recomputed only when umax changes
+            last = umax[k]
+            for j in range(nodes):
+                u = last * (2.0 * (j + 0.5) / nodes - 1.0)
+                tan_u[j] = math.tan(u)
+                sec_u[j] = 1.0 / math.cos(u)
         total = 0.0
         for j in range(nodes):
-            u = umax[k] * (2.0 * (j + 0.5) / nodes - 1.0)
-            c = w[k, 2] + beta[k] * w[k, 1] * math.tan(u)
-            d = abs(beta[k] * w[k, 0] / math.cos(u))  # the sign of d mirrors v: the range is symmetric
+            c = w[k, 2] + beta[k] * w[k, 1] * tan_u[j]
+            d = abs(beta[k] * w[k, 0] * sec_u[j])  # the sign of d mirrors v: the range is symmetric
             if d <= 1e-300:
                 total += 2.0 * half * max(c, 0.0)
                 continue

@@ -146,8 +146,13 @@ class SurfaceModel(Model):
         return SurfaceTexture(self)
 
     def projected_areas(self, wi: np.ndarray, wo: np.ndarray, p: dict) -> tuple[np.ndarray, np.ndarray]:
-        """A~(wi), A~(wo) (N,) of the tile (decision 2)."""
-        return projected_area(wi, self.shares, p), projected_area(wo, self.shares, p)
+        """A~(wi), A~(wo) (N,) of the tile (decision 2), computed once per distinct direction."""
+        return tuple(self._area_once(w, p) for w in (wi, wo))
+
+    def _area_once(self, w: np.ndarray, p: dict) -> np.ndarray:
+        if len(w) > 1 and np.all(w == w[:1]):  # one direction for all (a directional light)
+            return np.broadcast_to(projected_area(w[:1], self.shares, p), (len(w),))
+        return projected_area(w, self.shares, p)
 
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
                    warn: bool = True) -> dict[str, np.ndarray]:
