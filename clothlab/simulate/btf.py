@@ -79,7 +79,10 @@ def _texture_source(model, params, coefficients, channels, origin, *, path=None,
     if not model.has_texture:
         raise InputError(f"{origin}: model kind {model.kind!r} has no texture model", path=path, field=field)
     missing = [name for name in LAYOUT_PARAMETERS if name not in model.params]
-    if missing and "hwidth" in model.params:
+    # a point texture model declaring none of them (kind surface: segment sizes from the weave) takes the
+    # layout without ratio and hwidth (texture_params)
+    layout_free = len(missing) == len(LAYOUT_PARAMETERS) and not model.texture_filters
+    if missing and not layout_free:
         raise InputError(f"{origin}: the texture layout (segment ratio, hwidth of eq. 12) needs the parameters "
                          f"{', '.join(LAYOUT_PARAMETERS)}; model kind {model.kind!r} declares no "
                          f"{', '.join(missing)}", path=path, field=field)
