@@ -527,3 +527,17 @@ def test_fit_cli_runs_kind_surface(tmp_path):
     fit = json.loads((tmp_path / "surface-twill-clean" / "fit.json").read_text())
     assert fit["model"]["kind"] == "surface" and set(fit["coefficients"]) == {"kd_warp", "kd_weft", "ks_warp",
                                                                               "ks_weft"}
+
+
+def test_shared_directions_equal_per_point_directions():
+    """(1, 3) directions shared by all points give the same values as the same directions repeated per point."""
+    model = build_model("surface", get_pattern("satin-5x5"))
+    texture = model.texture()
+    assert texture.shared_directions and not hasattr(texture, "micro_normals")
+    rng = np.random.default_rng(10)
+    u, v = rng.uniform(-2, 3, 500), rng.uniform(-2, 3, 500)
+    wi, wo = unit([[0.4, -0.3, 0.7]]), unit([[-0.1, 0.5, 0.6]])
+    shared = texture.components(u, v, wi, wo, {"warp.beta": 1.7})
+    repeated = texture.components(u, v, np.repeat(wi, 500, 0), np.repeat(wo, 500, 0), {"warp.beta": 1.7})
+    for name in model.component_names:
+        np.testing.assert_array_equal(shared[name], repeated[name])

@@ -7,6 +7,8 @@ the gap and give 0.  The value is the point BRDF T(p) of :mod:`clothlab.models.s
 it already carries eq. 4's projected-area factor and the tile's Smith visibility, so eq. 3 over any
 footprint (box kernel) is the plain mean of T over the footprint, and its mean over one tile is
 :meth:`SurfaceModel.components`.  A point of a warp segment has zero weft components and vice versa.
+So a footprint aggregation must not weight these values by micro normals again: the texture declares
+``shared_directions`` but no ``micro_normals`` (the texture interface's optional members).
 """
 
 from __future__ import annotations
@@ -25,6 +27,9 @@ class SurfaceTexture:
     """The texture model of a :class:`~clothlab.models.surface.model.SurfaceModel` (no noise, no filtering)."""
 
     kind = "surface-texture"
+    #: ``components`` takes (1, 3) directions shared by every point (the footprint aggregation's fast path);
+    #: there is deliberately no ``micro_normals``: the values already carry eqs. 3-5's weights (module docstring)
+    shared_directions = True
 
     def __init__(self, model):
         self.model = model
