@@ -90,6 +90,9 @@ def run(args) -> int:
                     "ks_warp": channel_values(args.ks_warp or "0.1", "--ks-warp", n),
                     "ks_weft": channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
     model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes), **options)
+    for name in model.component_names:  # per-yarn diffuse components (kind surface) take --kd
+        if name.startswith("diffuse_"):
+            coefficients.setdefault("kd_" + name.split("_", 1)[1], coefficients["kd"])
     noise = NoiseModel(args.noise_mult, args.noise_add, args.seed)
     m = simulate(model, params, coefficients, channels=channels, noise=noise,
                  provenance={"sample_name": f"{weave.name} (SIMULATED)"})

@@ -210,6 +210,15 @@ class _Validator:
             except ConfigError:
                 raise at.error(f"unknown preset {preset!r}{suggest(preset, PRESET_NAMES)}; "
                                f"known presets: {', '.join(PRESET_NAMES)}") from None
+        if text.lower().startswith("pattern:"):  # a generated pattern (clothlab.weave.patterns)
+            from clothlab.weave.patterns import PATTERN_NAMES, PATTERN_PREFIX, get_pattern
+
+            name = text[len(PATTERN_PREFIX):].strip()
+            try:
+                return PATTERN_PREFIX + get_pattern(name).name
+            except ConfigError:
+                raise at.error(f"unknown pattern {name!r}{suggest(name, PATTERN_NAMES)}; "
+                               f"known patterns: {', '.join(PATTERN_NAMES)}") from None
         resolved = self.resolve(text, at)
         if not self.is_there(resolved, need_file=True):
             raise at.error(f"weave file not found: {resolved} (from {text!r}, relative to {self.base_dir}); "

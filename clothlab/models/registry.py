@@ -16,6 +16,7 @@ MODEL_KINDS = {
     "kang": ("clothlab.models.kang.model", "KangModel"),
     "lambert": ("clothlab.models.baselines.lambert", "LambertModel"),
     "oren-nayar": ("clothlab.models.baselines.oren_nayar", "OrenNayarModel"),
+    "surface": ("clothlab.models.surface.model", "SurfaceModel"),
 }
 DEFAULT_KIND = "irawan"
 

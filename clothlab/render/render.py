@@ -118,13 +118,13 @@ def _light(light, position):
 def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> dict:
     shaded_pixels = np.unique(samples.pixel)
     n = max(shaded_pixels.size, 1)
-    if shader == "im-lod":
+    if shader in ("im-lod", "surface-lod"):
         b = lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1)
         texture_pixels = np.unique(samples.pixel[b < 1.0]).size
         reflectance_only = n - np.unique(samples.pixel[b < 1.0]).size if shaded_pixels.size else 0
         blend_pixels = np.unique(samples.pixel[(b > 0.0) & (b < 1.0)]).size
     else:
-        uses_texture = shader in ("im-texture", "kang-texture", "kang-lod")
+        uses_texture = shader in ("im-texture", "kang-texture", "kang-lod", "surface-texture")
         texture_pixels = shaded_pixels.size if uses_texture else 0
         reflectance_only = shaded_pixels.size - texture_pixels
         blend_pixels = 0

@@ -22,6 +22,12 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      the pure texture range (render_benchmark).  With one sample per pixel this is the
                      plain blend.
 - ``kang-texture``   Kang's point shader with full yarn detail (footprint None, alpha = 0 of eq. 5).
+- ``surface-lod``    the fabric surface model (Chen, Wang & Wang 2024, sec. 3.1; ``kind: surface``) with the
+                     same LoD blend as ``im-lod``: its texture model (point evaluation) where the pixel
+                     resolves yarns, its tile average (eq. 3 over one tile) beyond, the smoothstep between.
+                     The model is the scene's fit when ``fabric.fit`` is of kind surface, else kind surface
+                     with its defaults for the scene's weave and kd_warp = kd_weft = kd, ks_* as given.
+- ``surface-texture`` the surface model's texture model at every sample.
 - ``kang-lod``       Kang's point shader with the pixel footprint: the eq. 5 mip blend, and Algorithm 1
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
                      = camera distance / fabric.kang.view_distance_mm.
@@ -53,7 +59,7 @@ from clothlab.models.components import combine
 from clothlab.render.scene import Fabric, Lod
 from clothlab.weave.model import YARN_KINDS
 
-SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture")
+SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture", "surface-lod", "surface-texture")
 #: finite stand-in for an infinite footprint (grazing differentials) handed to the Kang shader
 MAX_FOOTPRINT = 1e6
 
@@ -156,6 +162,28 @@ class FabricModels:
             self._kang = (model.texture(), params,
                           _broadcast(coefficients, len(self.channels), "fabric.kang.coefficients"))
         return self._kang
+
+
+def surface_models(fabric: FabricModels) -> FabricModels:
+    """The scene's fabric as the surface model (``surface-*`` shaders, module docstring), built once."""
+    cached = getattr(fabric, "_surface", None)
+    if cached is not None:
+        return cached
+    if fabric.reflectance.kind == "surface":
+        surface = fabric
+    else:
+        from clothlab.models.registry import build_model
+
+        model = build_model("surface", fabric.weave)
+        kd = fabric.coefficients.get("kd", np.zeros(len(fabric.channels)))
+        coefficients = {"kd_warp": kd, "kd_weft": kd, **{k: v for k, v in fabric.coefficients.items()
+                                                          if k.startswith("ks_")}}
+        texture = model.texture(seed=fabric.spec.seed)
+        need = tuple(name for name in texture.component_names if _needed(name, coefficients, fabric.weave))
+        surface = FabricModels(fabric.spec, fabric.weave, model, texture, model.default_parameters(), coefficients,
+                               fabric.channels, need)
+    fabric._surface = surface
+    return surface
 
 
 def _broadcast(coefficients: dict, n: int, where: str) -> dict:
@@ -311,4 +339,8 @@ def shade(shader: str, fabric: FabricModels, samples: Samples, lod: Lod, counter
         return reflectance_values(fabric, samples, counter)
     if shader in ("kang-lod", "kang-texture"):
         return kang_values(fabric, samples, counter, lod=shader == "kang-lod")
+    if shader == "surface-lod":
+        return im_lod_values(surface_models(fabric), samples, counter, lod)
+    if shader == "surface-texture":
+        return texture_values(surface_models(fabric), samples, counter)
     raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")

@@ -79,7 +79,10 @@ def _texture_source(model, params, coefficients, channels, origin, *, path=None,
     if not model.has_texture:
         raise InputError(f"{origin}: model kind {model.kind!r} has no texture model", path=path, field=field)
     missing = [name for name in LAYOUT_PARAMETERS if name not in model.params]
-    if missing:
+    # a point texture model declaring none of them (kind surface: segment sizes from the weave) takes the
+    # layout without ratio and hwidth (texture_params)
+    layout_free = len(missing) == len(LAYOUT_PARAMETERS) and not model.texture_filters
+    if missing and not layout_free:
         raise InputError(f"{origin}: the texture layout (segment ratio, hwidth of eq. 12) needs the parameters "
                          f"{', '.join(LAYOUT_PARAMETERS)}; model kind {model.kind!r} declares no "
                          f"{', '.join(missing)}", path=path, field=field)
@@ -173,6 +176,11 @@ def fabric_coordinates(u, v, rotation: float, centre, weave) -> tuple[np.ndarray
 def texture_params(params: dict, *, ratio: float = 1.0, hwidth: float | None = None) -> dict:
     """``params`` with the segment ratio scale and hwidth of a :class:`TextureLayout` applied."""
     out = dict(params)
+    if "warp.l" not in params:  # a model whose segment sizes are the weave's (kind surface)
+        if ratio != 1.0 or hwidth is not None:
+            raise InputError("the texture layout's ratio and hwidth need a model with the parameters "
+                             f"{', '.join(LAYOUT_PARAMETERS)}", field="ratio" if ratio != 1.0 else "hwidth")
+        return out
     root = float(np.sqrt(ratio))
     for kind in ("warp", "weft"):
         out[f"{kind}.l"] = params[f"{kind}.l"] * root
@@ -224,7 +232,7 @@ def simulate_btf(source, out_dir, *, directions=None, n_directions: int = 16, si
     centre = image_centre(layout.offset, repeats)
     p = texture_params(src.params, ratio=layout.ratio, hwidth=layout.hwidth)
     provenance = {"texture": {
-        "source": src.origin, "weave": src.weave.name, **layout.to_dict(), "hwidth": p["hwidth"],
+        "source": src.origin, "weave": src.weave.name, **layout.to_dict(), "hwidth": p.get("hwidth"),
         "rotation_centre_tiles": list(centre), "fineness": float(src.weave.fineness),
         "model": src.model.kind, **src.model.settings(),
         "params": src.params, "coefficients": {k: np.asarray(v).tolist() for k, v in src.coefficients.items()},
@@ -293,6 +301,15 @@ def with_coefficients(src: TextureSource, *, kd=None, ks_warp=None, ks_weft=None
             coefficients[name], origin[name] = np.broadcast_to(value, (n,)).copy(), "source"
         else:
             coefficients[name], origin[name] = np.full(n, DEFAULT_COEFFICIENT), "default"
+    for component in src.model.component_names:  # per-yarn diffuse (kind surface): the source's, else kd
+        name = "kd_" + component.split("_", 1)[1] if component.startswith("diffuse_") else None
+        if name is not None:
+            if kd is None and name in own:
+                value = np.atleast_1d(np.asarray(own[name], dtype=np.float64))
+                coefficients[name] = np.broadcast_to(value, (n,)).copy()
+                origin[name] = "source"
+            else:
+                coefficients[name], origin[name] = coefficients["kd"], origin["kd"]
     return replace(src, coefficients=coefficients, channels=names), origin
 
 

@@ -53,7 +53,8 @@ def get_preset(name: str) -> Weave:
 def resolve_weave(spec: str, base_dir) -> Weave:
     """The weave named by fabric.yaml's ``weave:`` field.
 
-    ``spec`` is ``preset:<name>`` or a path to a ``.wv`` file, relative to ``base_dir`` (the directory of
+    ``spec`` is ``preset:<name>``, ``pattern:<name>`` (:mod:`clothlab.weave.patterns`) or a
+    path to a ``.wv`` file, relative to ``base_dir`` (the directory of
     fabric.yaml) unless absolute.  An unknown preset or a missing file raises :class:`ConfigError` naming
     it; errors inside the file raise :class:`~clothlab.errors.InputError` naming file, line and field.
     """
@@ -63,6 +64,10 @@ def resolve_weave(spec: str, base_dir) -> Weave:
     spec = spec.strip()
     if spec.lower().startswith(PRESET_PREFIX):
         return get_preset(spec[len(PRESET_PREFIX):].strip())
+    if spec.lower().startswith("pattern:"):  # generated patterns (Chen, Wang & Wang 2024, Table 2)
+        from clothlab.weave.patterns import PATTERN_PREFIX, get_pattern
+
+        return get_pattern(spec[len(PATTERN_PREFIX):].strip())
     path = Path(spec).expanduser()
     if not path.is_absolute():
         path = Path(base_dir) / path
