@@ -15,8 +15,8 @@ import numpy as np
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
 from clothlab.models.irawan.phase import phase_function
-from clothlab.models.irawan.quadrature import RULES
-from clothlab.models.irawan.yarn import yarn_integral
+from clothlab.models.irawan.quadrature import RULES, interval_rule
+from clothlab.models.irawan.yarn import staple_path, yarn_integral
 from clothlab.weave.model import YARN_KINDS
 
 PSI_FILAMENT_THRESHOLD = 1e-3  # radians
@@ -115,3 +115,87 @@ def _specular_albedo_cached(key, samples):
         values = yarn_specular(wi, wo, params, kind, quadrature)
     # E[f] under cosine-weighted sampling of both directions times pi^2, divided by pi.
     return float(np.pi * values.mean())
+
+
+# ------------------------------------------------------------------ many parameter sets at once
+
+
+@dataclass(frozen=True, eq=False)
+class YarnTerms:
+    """What of I_j depends on the directions alone, for one segment type: the yarn-frame directions and, for
+    the filament path, the moments of :func:`clothlab.models.irawan.kernels.filament_moments` (None for the
+    ``adaptive`` rule, whose node count depends on the values)."""
+
+    wi: np.ndarray  # (N, 3) yarn frame
+    wo: np.ndarray
+    filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
+
+
+def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
+    """The parameter-free part of I_j at fabric-frame directions (N, 3) (computed once per direction set)."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.quadrature import unit_rule
+
+    lw = np.ascontiguousarray(to_yarn_frame(wi, kind), dtype=np.float64)
+    lo = np.ascontiguousarray(to_yarn_frame(wo, kind), dtype=np.float64)
+    rule, n = quadrature.rule, int(quadrature.nodes)
+    moments = None
+    if rule in ("trapezoid", "gauss"):
+        nodes, weights = interval_rule(rule, n, -0.5 * np.pi, 0.5 * np.pi)
+        moments = kernels.filament_moments(lw, lo, nodes[None, :], weights[None, :], False)
+    elif rule == "support":
+        t, wt = unit_rule("gauss", n)
+        moments = kernels.filament_moments(lw, lo, t[None, :], wt[None, :], True)
+    return YarnTerms(lw, lo, moments)
+
+
+def _filament_from_moments(moments, umax, kappa, w, l, delta) -> np.ndarray:
+    """(J, N) filament I_j (eq. 2 via eqs. 4, 6, 8, 9) from the moments, for J parameter sets given as (J, 1)
+    arrays (radians, lengths): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or fully faded."""
+    from clothlab.models.irawan.kernels import spine_radius
+
+    spine_radius = spine_radius.py_func  # the same formula in numpy, broadcast over (J, N)
+    ok, u, inv, s0, s1 = moments
+    abs_u = np.abs(u)[None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.clip((abs_u - (1.0 - delta) * umax) / (delta * umax), 0.0, 1.0)
+    fade = np.where(delta > 0.0, 1.0 - x * x * (3.0 - 2.0 * x), 1.0)  # eq. 9: 1 - s(x)
+    lit = ok[None, :] & (abs_u < umax) & (fade > 0.0)
+    a = 0.5 * w
+    radius = spine_radius(u[None, :], umax, kappa, w, l)  # sec. 5.4, at eq. 4's u
+    value = inv[None, :] * fade * (a * radius * s0[None, :] + a * a * s1[None, :])  # eq. 2 (eq. 6 numerator x 8)
+    return np.where(lit, value, 0.0)
+
+
+def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature) -> np.ndarray:
+    """I_j (eq. 10 without f_c) for J parameter sets at once: (J, N).
+
+    ``geometry`` (J, 6) holds each set's psi, umax (deg), kappa, w, l and delta (:func:`yarn_geometry_key`
+    order).  The path per set is :func:`clothlab.models.irawan.yarn.staple_path`'s; filament sets use the
+    moments (equal to :func:`yarn_integral_fabric` to rounding), staple sets under a fixed rule one compiled
+    call for all of them (bit-identical), the rest :func:`clothlab.models.irawan.yarn.yarn_integral` per set."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.quadrature import unit_rule
+
+    geometry = np.atleast_2d(np.asarray(geometry, dtype=np.float64))
+    psi, umax = np.deg2rad(geometry[:, 0]), np.deg2rad(geometry[:, 1])
+    kappa, w, l, delta = geometry[:, 2], geometry[:, 3], geometry[:, 4], geometry[:, 5]
+    rule, n = quadrature.rule, int(quadrature.nodes)
+    out = np.zeros((len(geometry), len(terms.wi)))
+    staple = np.array([staple_path(p, u, rule, n, PSI_FILAMENT_THRESHOLD) for p, u in zip(psi, umax, strict=True)],
+                      dtype=bool)
+    fil = np.flatnonzero(~staple)
+    if fil.size and terms.filament is not None:
+        c = (slice(None) if fil.size == len(out) else fil, None)
+        out[fil] = _filament_from_moments(terms.filament, umax[c], kappa[c], w[c], l[c], delta[c])
+        fil = fil[:0]
+    sta = np.flatnonzero(staple)
+    if sta.size and rule in ("trapezoid", "gauss"):
+        t, wt = unit_rule(rule, n)
+        cols = [np.ascontiguousarray(x[sta]) for x in (psi, umax, kappa, w, l)]
+        out[sta] = kernels.staple_quadrature_sets(terms.wi, terms.wo, t, wt, *cols)
+        sta = sta[:0]
+    for j in np.concatenate([fil, sta]):
+        out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
+                               delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD)
+    return out

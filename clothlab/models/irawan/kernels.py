@@ -446,3 +446,117 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta):
         radius = spine_radius(uu, umax[n], kappa, w, l)
         value[n] = filament_integrand(wix, ci0, wox, cr0, math.sin(v[n]), math.cos(v[n]), a, radius) * scale
     return value, upos
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Many parameter sets at once (the posterior evaluates every walker of an ensemble half in one call).
+
+
+@njit(cache=True)
+def filament_moments(wi, wo, nodes, weights, on_arc):
+    """The parameter-free part of eq. 2 for each direction pair n (yarn frame), as (ok, u, inv, s0, s1).
+
+    For a filament yarn eq. 4 fixes u per direction, so the clamped cosines of eq. 8 and the lit arc depend on
+    the directions alone; Algorithm 2's sum is then  inv (a R(u) s0 + a^2 s1) fade(u)  with
+    s0 = sum_k w_k A(v_k), s1 = sum_k w_k cos(v_k) A(v_k) (eq. 6 numerator a (R + a cos v) times eq. 8) and
+    inv = 1 / (|wi + wo| |(t x h)_x|).  ok is False where the integrand vanishes whatever the parameters
+    (back-facing, degenerate h); the cuts |u| < umax and the fade of eq. 9 are applied by the caller.
+    ``nodes`` / ``weights`` (1, K) as in :func:`filament_quadrature` (``on_arc``: unit nodes on the lit arc)."""
+    n_dir = wi.shape[0]
+    n_nodes = nodes.shape[1]
+    ok = np.zeros(n_dir, dtype=np.bool_)
+    u_out = np.zeros(n_dir)
+    inv = np.zeros(n_dir)
+    s0 = np.zeros(n_dir)
+    s1 = np.zeros(n_dir)
+    for n in range(n_dir):
+        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
+        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
+        hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+            continue
+        u = specular_u(hy, hz)  # eq. 4
+        cross = tangent_cross_h_x(hy, hz)  # eq. 6
+        if cross <= 0.0:
+            continue
+        su = math.sin(u)
+        cu = math.cos(u)
+        ci0 = spine_normal_cosine(wiy, wiz, su, cu)
+        cr0 = spine_normal_cosine(woy, woz, su, cu)
+        lo, span = -0.5 * math.pi, 1.0
+        if on_arc:
+            lo_i, hi_i = lit_arc(wix, ci0)
+            lo_o, hi_o = lit_arc(wox, cr0)
+            lo = max(lo_i, lo_o)
+            span = min(hi_i, hi_o) - lo
+        acc0 = 0.0
+        acc1 = 0.0
+        for k in range(n_nodes if span > 0.0 else 0):
+            wk = weights[0, k]
+            if wk == 0.0:
+                continue
+            v = lo + span * nodes[0, k] if on_arc else nodes[0, k]
+            cv = math.cos(v)
+            sv = math.sin(v)
+            ci = normal_cosine(wix, ci0, sv, cv)
+            cr = normal_cosine(wox, cr0, sv, cv)
+            if ci <= 0.0 or cr <= 0.0:
+                continue
+            g = wk * seeliger(ci, cr)  # eq. 8
+            acc0 += g
+            acc1 += g * cv
+        if on_arc:
+            acc0 *= span
+            acc1 *= span
+        ok[n] = True
+        u_out[n] = u
+        inv[n] = 1.0 / (length * cross)
+        s0[n] = acc0
+        s1[n] = acc1
+    return ok, u_out, inv, s0, s1
+
+
+@njit(cache=True)
+def staple_quadrature_sets(wi, wo, unit_nodes, unit_weights, psi, umax, kappa, w, l):
+    """:func:`staple_quadrature` with the fixed rule ``unit_nodes`` / ``unit_weights`` (K,) on [0, 1] mapped
+    onto [-umax_j, umax_j] for each parameter set j: (J, N) sums (eq. 1 without f_c).  The nodes and weights are
+    formed exactly as :func:`clothlab.models.irawan.quadrature.interval_rule` forms them, so row j equals
+    :func:`staple_quadrature` at set j bit for bit."""
+    n_sets = psi.shape[0]
+    n_dir = wi.shape[0]
+    n_nodes = unit_nodes.shape[0]
+    out = np.zeros((n_sets, n_dir))
+    hx = np.empty(n_dir)
+    hy = np.empty(n_dir)
+    hz = np.empty(n_dir)
+    front = np.zeros(n_dir, dtype=np.bool_)
+    for n in range(n_dir):
+        hx[n], hy[n], hz[n], length = half_vector(wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2])
+        front[n] = wi[n, 2] > 0.0 and wo[n, 2] > 0.0 and length > 0.0
+    su = np.empty(n_nodes)
+    cu = np.empty(n_nodes)
+    radius = np.empty(n_nodes)
+    wts = np.empty(n_nodes)
+    for j in range(n_sets):
+        lo, hi = -umax[j], umax[j]
+        cot_psi = math.cos(psi[j]) / math.sin(psi[j])
+        abs_sin_psi = abs(math.sin(psi[j]))
+        a = 0.5 * w[j]
+        for k in range(n_nodes):
+            node = lo + (hi - lo) * unit_nodes[k]
+            wts[k] = (hi - lo) * unit_weights[k]
+            su[k] = math.sin(node)
+            cu[k] = math.cos(node)
+            radius[k] = spine_radius(node, umax[j], kappa[j], w[j], l[j])
+        for n in range(n_dir):
+            if not front[n]:
+                continue
+            acc = 0.0
+            for k in range(n_nodes):
+                if wts[k] == 0.0:
+                    continue
+                acc += wts[k] * staple_integrand(wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2], hx[n],
+                                                 hy[n], hz[n], su[k], cu[k], radius[k], cot_psi, abs_sin_psi,
+                                                 a)[0]  # eq. 1
+            out[j, n] = acc
+    return out

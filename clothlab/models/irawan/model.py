@@ -62,16 +62,19 @@ from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the 
     GEOMETRY_KEYS,
     PSI_FILAMENT_THRESHOLD,
     Quadrature,
+    YarnTerms,
     _albedo_directions,
     _specular_albedo_cached,
     geometry_warnings,
     specular_albedo,
     yarn_geometry_key,
     yarn_integral_fabric,
+    yarn_integrals,
     yarn_specular,
+    yarn_terms,
 )
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, apply_parameters, weave_parameters
-from clothlab.models.irawan.phase import phase_function
+from clothlab.models.irawan.phase import von_mises
 from clothlab.weave.model import YARN_KINDS, Weave
 
 
@@ -124,23 +127,40 @@ class IrawanModel(Model):
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
-        self._memo: dict = {}  # (kind, shape, geometry, quadrature) -> (wi copy, wo copy, I_j); see _integral
+        self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._terms; see _integrals
+        self._terms: dict = {}  # kind -> (wi copy, wo copy, YarnTerms): the parameter-free part of I_j
 
-    def _integral(self, wi, wo, p, kind):
-        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta reuses it.
-
-        An entry is used only if the directions' *contents* equal the copies it keeps (not their identity),
-        so directions changed in place, or new arrays at a reused address, never return a stale integral."""
-        key = (kind, wi.shape, yarn_geometry_key(p, kind), self.quadrature)
-        hit = self._memo.get(key)
-        if hit is not None and np.array_equal(hit[0], wi) and np.array_equal(hit[1], wo):
+    def _yarn_terms(self, wi, wo, kind) -> YarnTerms:
+        """The parameter-free part of I_j at (wi, wo), kept for the last direction set.  It is used only if
+        the directions' *contents* equal the copies it keeps (not their identity), so directions changed in
+        place, or new arrays at a reused address, never return stale values (nor a stale memo)."""
+        hit = self._terms.get(kind)
+        if hit is not None and hit[0].shape == wi.shape and np.array_equal(hit[0], wi) and np.array_equal(hit[1], wo):
             return hit[2]
-        value = yarn_integral_fabric(wi, wo, p, kind, self.quadrature)
-        self._memo.pop(key, None)
-        if len(self._memo) >= 8:
-            self._memo.pop(next(iter(self._memo)))
-        self._memo[key] = (wi.copy(), wo.copy(), value)
-        return value
+        terms = yarn_terms(wi, wo, kind, self.quadrature)
+        self._terms[kind] = (wi.copy(), wo.copy(), terms)
+        for key in [k for k in self._memo if k[0] == kind]:
+            del self._memo[key]
+        return terms
+
+    def _integrals(self, wi, wo, resolved: list[dict], kind) -> np.ndarray:
+        """I_j (J, N) for J resolved parameter sets; each set's I_j is remembered (the last few geometries at
+        these directions), so a fit varying only alpha / beta computes it once."""
+        terms = self._yarn_terms(wi, wo, kind)
+        keys = [(kind, yarn_geometry_key(p, kind)) for p in resolved]
+        out = np.empty((len(resolved), len(wi)))
+        todo = [j for j, key in enumerate(keys) if key not in self._memo]
+        for j, key in enumerate(keys):
+            if key in self._memo:
+                out[j] = self._memo[key]
+        if todo:
+            out[todo] = yarn_integrals(terms, np.array([keys[j][1] for j in todo]), self.quadrature)
+            for j in todo[-8:]:
+                self._memo.pop(keys[j], None)
+                if len(self._memo) >= 16:
+                    self._memo.pop(next(iter(self._memo)))
+                self._memo[keys[j]] = out[j].copy()
+        return out
 
     def default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
@@ -155,34 +175,49 @@ class IrawanModel(Model):
         ``need``: the component names wanted (others are not computed).
         Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0 (reflection only).
         """
-        p = self.resolve(params)
+        many = self.components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
+        return {name: value[0] for name, value in many.items()}
+
+    def components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
+                        warn: bool = True) -> dict[str, np.ndarray]:
+        """:meth:`components` for J parameter sets at once: each component (J, N).
+
+        The parameter-free parts (yarn frames, the filament moments, -wi.wo) are computed once for all sets,
+        the staple sums of all sets in one compiled call (:func:`.integrals.yarn_integrals`)."""
+        resolved = [self.resolve(p) for p in params_list]
         wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
-        phase = None
         need = COMPONENTS if need is None else tuple(need)
         if warn:
-            for message in geometry_warnings(p, self.weave.name):
-                warnings.warn(message, GeometryWarning, stacklevel=2)
+            for p in resolved:
+                for message in geometry_warnings(p, self.weave.name):
+                    warnings.warn(message, GeometryWarning, stacklevel=3)
         out = {}
         front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         if "diffuse" in need:
-            out["diffuse"] = np.where(front, 1.0 / np.pi, 0.0)
+            out["diffuse"] = np.broadcast_to(np.where(front, 1.0 / np.pi, 0.0), (len(resolved), len(wi))).copy()
+        phase = None
         for kind in YARN_KINDS:
             name = f"specular_{kind}"
             if name not in need:
                 continue
-            if phase is None:
-                phase = phase_function(wi, wo, p["alpha"], p["beta"])
-            value = phase * self._integral(wi, wo, p, kind)
+            if phase is None:  # eq. 7, as phase_function computes it, for every set
+                cos_x = -np.einsum("...k,...k->...", wi, wo)
+                alpha = np.array([p["alpha"] for p in resolved])[:, None]
+                beta = np.array([p["beta"] for p in resolved])[:, None]
+                phase = alpha + von_mises(cos_x[None, :], beta)
+            value = phase * self._integrals(wi, wo, resolved, kind)
             if normalised:
-                albedo = specular_albedo(p, kind, self.quadrature)
-                if albedo > 0.0:
-                    value = value / albedo
-                else:  # e.g. a filament with umax -> 0: the highlight has no extent; say so, never a silent 0
-                    value = np.zeros_like(value)
-                    if warn:
-                        warnings.warn(f"{self.weave.name} {kind}: the specular albedo is 0 (umax = "
-                                      f"{p[f'{kind}.umax']:g} deg, psi = {p[f'{kind}.psi']:g} deg), so the "
-                                      f"normalised specular_{kind} is 0 everywhere", GeometryWarning, stacklevel=2)
+                for j, p in enumerate(resolved):
+                    albedo = specular_albedo(p, kind, self.quadrature)
+                    if albedo > 0.0:
+                        value[j] = value[j] / albedo
+                    else:  # e.g. a filament with umax -> 0: the highlight has no extent; say so, never a silent 0
+                        value[j] = 0.0
+                        if warn:
+                            warnings.warn(f"{self.weave.name} {kind}: the specular albedo is 0 (umax = "
+                                          f"{p[f'{kind}.umax']:g} deg, psi = {p[f'{kind}.psi']:g} deg), so the "
+                                          f"normalised specular_{kind} is 0 everywhere", GeometryWarning,
+                                          stacklevel=3)
             out[name] = value
         return out
