@@ -92,10 +92,17 @@ class FitProblem:
     # ------------------------------------------------------------------ evaluation
     def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
         """(N, k) matrix of the model components at ``params``."""
+        return self.designs([params], normalised=normalised)[0]
+
+    def designs(self, params_list, *, normalised: bool = False, wi=None, wo=None) -> np.ndarray:
+        """(J, N, k) design matrices at J parameter dicts, in one model call (``Model.components_many``); at the
+        measured directions unless ``wi``, ``wo`` are given."""
+        wi = self.wi if wi is None else np.ascontiguousarray(wi, dtype=np.float64)
+        wo = self.wo if wo is None else np.ascontiguousarray(wo, dtype=np.float64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GeometryWarning)
-            comps = self.model.components(self.wi, self.wo, params, normalised=normalised, warn=False)
-        return np.stack([comps[name] for name in self.component_names], axis=1)
+            comps = self.model.components_many(wi, wo, params_list, normalised=normalised, warn=False)
+        return np.stack([comps[name] for name in self.component_names], axis=2)
 
     def solve(self, params: dict, *, normalised: bool = False) -> Solution:
         """Coefficients by weighted NNLS, prediction and objective at ``params``."""

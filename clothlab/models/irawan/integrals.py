@@ -149,24 +149,6 @@ def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
     return YarnTerms(lw, lo, moments)
 
 
-def _filament_from_moments(moments, umax, kappa, w, l, delta) -> np.ndarray:
-    """(J, N) filament I_j (eq. 2 via eqs. 4, 6, 8, 9) from the moments, for J parameter sets given as (J, 1)
-    arrays (radians, lengths): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or fully faded."""
-    from clothlab.models.irawan.kernels import spine_radius
-
-    spine_radius = spine_radius.py_func  # the same formula in numpy, broadcast over (J, N)
-    ok, u, inv, s0, s1 = moments
-    abs_u = np.abs(u)[None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = np.clip((abs_u - (1.0 - delta) * umax) / (delta * umax), 0.0, 1.0)
-    fade = np.where(delta > 0.0, 1.0 - x * x * (3.0 - 2.0 * x), 1.0)  # eq. 9: 1 - s(x)
-    lit = ok[None, :] & (abs_u < umax) & (fade > 0.0)
-    a = 0.5 * w
-    radius = spine_radius(u[None, :], umax, kappa, w, l)  # sec. 5.4, at eq. 4's u
-    value = inv[None, :] * fade * (a * radius * s0[None, :] + a * a * s1[None, :])  # eq. 2 (eq. 6 numerator x 8)
-    return np.where(lit, value, 0.0)
-
-
 def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature) -> np.ndarray:
     """I_j (eq. 10 without f_c) for J parameter sets at once: (J, N).
 
@@ -186,8 +168,8 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
                       dtype=bool)
     fil = np.flatnonzero(~staple)
     if fil.size and terms.filament is not None:
-        c = (slice(None) if fil.size == len(out) else fil, None)
-        out[fil] = _filament_from_moments(terms.filament, umax[c], kappa[c], w[c], l[c], delta[c])
+        cols = [np.ascontiguousarray(x[fil]) for x in (umax, kappa, w, l, delta)]
+        out[fil] = kernels.filament_from_moments(*terms.filament, *cols)
         fil = fil[:0]
     sta = np.flatnonzero(staple)
     if sta.size and rule in ("trapezoid", "gauss"):

@@ -42,6 +42,22 @@ def half_length(w, l, umax):
 
 
 @njit(cache=True, inline="always")
+def spine_radius_factors(umax, kappa, w, l):
+    """(scale, q) of R(u) = scale / (cos^2 u + q sin^2 u)^(3/2): scale = max(L, 0) sqrt(cot^2 umax + q),
+    q = r_hat |r_hat| (sec. 5.4); the part of :func:`spine_radius` that does not depend on u."""
+    r_hat = axis_ratio(kappa, umax)
+    q = r_hat * np.abs(r_hat)
+    cot = 1.0 / np.tan(umax)
+    return np.maximum(half_length(w, l, umax), 0.0) * np.sqrt(np.maximum(cot * cot + q, 0.0)), q
+
+
+@njit(cache=True, inline="always")
+def spine_radius_at(c, s, scale, q):
+    """R(u) from cos u, sin u and :func:`spine_radius_factors` (sec. 5.4)."""
+    return scale / (c * c + q * s * s) ** 1.5  # sec. 5.4: R(u)
+
+
+@njit(cache=True, inline="always")
 def spine_radius(u, umax, kappa, w, l):
     """R(u) = L sqrt(cot^2 umax + q) / (cos^2 u + q sin^2 u)^(3/2), q = r_hat |r_hat| (sec. 5.4).
 
@@ -49,14 +65,9 @@ def spine_radius(u, umax, kappa, w, l):
     :mod:`clothlab.models.irawan.spine`).  L < 0 (segment does not fit, sec. 5.3) is clamped to 0; u is
     clamped to [-umax, umax].
     """
-    r_hat = axis_ratio(kappa, umax)
-    q = r_hat * np.abs(r_hat)
-    cot = 1.0 / np.tan(umax)
-    scale = np.maximum(half_length(w, l, umax), 0.0) * np.sqrt(np.maximum(cot * cot + q, 0.0))
+    scale, q = spine_radius_factors(umax, kappa, w, l)
     u = np.minimum(np.maximum(u, -umax), umax)
-    c = np.cos(u)
-    s = np.sin(u)
-    return scale / (c * c + q * s * s) ** 1.5  # sec. 5.4: R(u)
+    return spine_radius_at(np.cos(u), np.sin(u), scale, q)
 
 
 # ------------------------------------------------------------------- the specular condition (sec. 6.3)
@@ -559,4 +570,27 @@ def staple_quadrature_sets(wi, wo, unit_nodes, unit_weights, psi, umax, kappa, w
                                                  hy[n], hz[n], su[k], cu[k], radius[k], cot_psi, abs_sin_psi,
                                                  a)[0]  # eq. 1
             out[j, n] = acc
+    return out
+
+
+@njit(cache=True)
+def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta):
+    """(J, N) filament I_j (eq. 2) from the moments of :func:`filament_moments` for J parameter sets (umax in
+    radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of eq. 9 is 0."""
+    n_sets = umax.shape[0]
+    n_dir = u.shape[0]
+    out = np.zeros((n_sets, n_dir))
+    cu = np.cos(u)
+    su = np.sin(u)
+    for j in range(n_sets):
+        a = 0.5 * w[j]
+        scale, q = spine_radius_factors(umax[j], kappa[j], w[j], l[j])  # sec. 5.4
+        for n in range(n_dir):
+            if not ok[n] or abs(u[n]) >= umax[j]:
+                continue
+            fade = filament_fade(u[n], umax[j], delta[j])  # eq. 9
+            if fade <= 0.0:
+                continue
+            radius = spine_radius_at(cu[n], su[n], scale, q)  # R(u), |u| < umax
+            out[j, n] = inv[n] * fade * (a * radius * s0[n] + a * a * s1[n])  # eq. 2 (eq. 6 numerator x eq. 8)
     return out

@@ -144,23 +144,19 @@ class IrawanModel(Model):
         return terms
 
     def _integrals(self, wi, wo, resolved: list[dict], kind) -> np.ndarray:
-        """I_j (J, N) for J resolved parameter sets; each set's I_j is remembered (the last few geometries at
-        these directions), so a fit varying only alpha / beta computes it once."""
+        """I_j (J, N) for J resolved parameter sets.  One set's I_j is remembered (the last few geometries at
+        these directions), so a fit varying only alpha / beta computes it once; batches are not memoised."""
         terms = self._yarn_terms(wi, wo, kind)
-        keys = [(kind, yarn_geometry_key(p, kind)) for p in resolved]
-        out = np.empty((len(resolved), len(wi)))
-        todo = [j for j, key in enumerate(keys) if key not in self._memo]
-        for j, key in enumerate(keys):
-            if key in self._memo:
-                out[j] = self._memo[key]
-        if todo:
-            out[todo] = yarn_integrals(terms, np.array([keys[j][1] for j in todo]), self.quadrature)
-            for j in todo[-8:]:
-                self._memo.pop(keys[j], None)
-                if len(self._memo) >= 16:
-                    self._memo.pop(next(iter(self._memo)))
-                self._memo[keys[j]] = out[j].copy()
-        return out
+        if len(resolved) != 1:
+            return yarn_integrals(terms, np.array([yarn_geometry_key(p, kind) for p in resolved]), self.quadrature)
+        key = (kind, yarn_geometry_key(resolved[0], kind))
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = yarn_integrals(terms, np.array([key[1]]), self.quadrature)[0]
+            if len(self._memo) >= 8:
+                self._memo.pop(next(iter(self._memo)))
+            self._memo[key] = hit
+        return hit[None, :]
 
     def default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
