@@ -122,7 +122,7 @@ def nnls_small(A, y, w=None) -> tuple[np.ndarray, np.ndarray]:
     if A.shape[2] == 1:
         designs, which = A[None, :, :, 0], np.zeros(n_channels, dtype=np.int64)
     else:
-        designs, which = A.transpose(2, 0, 1), np.arange(n_channels, dtype=np.int64)
+        designs, which = A.transpose(2, 0, 1), np.arange(n_channels, dtype=np.int64)  # (C, N, k)
     coef, score = _solve(designs, which, np.arange(n_channels, dtype=np.int64), y, w)
     residual_norm = np.sqrt(score)
     coef = coef.T
@@ -157,7 +157,9 @@ def _solve(designs, which, channel, y, w):
     coef (P, k) (NaN for non-finite input) and sums of squares (P,)."""
     from clothlab.fit import nnls_kernels
 
-    coef, score, status = nnls_kernels.normal_equations_nnls(designs, which, channel, y, w, _CHECK_RTOL)
+    coef, score, status = nnls_kernels.normal_equations_nnls(
+        np.ascontiguousarray(designs.transpose(0, 2, 1)), which, channel, np.ascontiguousarray(y.T),
+        np.ascontiguousarray(w.T), _CHECK_RTOL)
     retry = np.flatnonzero(status == 1)
     for p in retry:  # rare: an ill-conditioned support or cancellation in the quadratic score
         c = channel[p]

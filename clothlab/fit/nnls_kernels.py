@@ -48,14 +48,37 @@ def _support_solve(G, b, idx, m, L, x):
     return True
 
 
+@njit(cache=True, fastmath=True)
+def _dot3(a, b, c):
+    """sum_n a[n] b[n] c[n] (contiguous rows; the summation order is the compiler's)."""
+    acc = 0.0
+    for n in range(a.shape[0]):
+        acc += a[n] * b[n] * c[n]
+    return acc
+
+
+@njit(cache=True, fastmath=True)
+def _weighted_residual(cols, x, y, w):
+    """sum_n (w[n] (sum_i cols[i, n] x[i] - y[n]))^2."""
+    acc = 0.0
+    k = cols.shape[0]
+    for n in range(y.shape[0]):
+        r = -y[n]
+        for i in range(k):
+            r += cols[i, n] * x[i]
+        r *= w[n]
+        acc += r * r
+    return acc
+
+
 @njit(cache=True)
 def normal_equations_nnls(designs, which, channel, y, w, check_rtol):
-    """Problems p: A = designs[which[p]] (N, k), y[:, channel[p]], w[:, channel[p]] (w[:, 0] if w has one
-    column).  Returns coef (P, k), sums of squares ||w (A coef - y)||^2 recomputed from the rows (P,), status
-    (P,) int8: 0 ok, 1 check failed (re-solve), 2 non-finite input."""
+    """Problems p: columns designs[which[p]] (k, N), data y[channel[p]] (N,), weights w[channel[p]] (or
+    w[0] if w has one row); designs (J, k, N), y (C, N), w (C or 1, N), all C-contiguous.  Returns coef (P, k),
+    sums of squares ||w (A coef - y)||^2 recomputed from the rows (P,), status (P,) int8: 0 ok, 1 check
+    failed (re-solve), 2 non-finite input."""
     n_problems = which.shape[0]
-    n_rows = designs.shape[1]
-    k = designs.shape[2]
+    k = designs.shape[1]
     coef = np.zeros((n_problems, k))
     score = np.zeros(n_problems)
     status = np.zeros(n_problems, dtype=np.int8)
@@ -66,25 +89,20 @@ def normal_equations_nnls(designs, which, channel, y, w, check_rtol):
     x = np.empty(k)
     idx = np.empty(k, dtype=np.int64)
     best = np.empty(k)
-    shared_w = w.shape[1] == 1
+    shared_w = w.shape[0] == 1
+    w2 = w * w
+    ones = np.ones(y.shape[1])
     for p in range(n_problems):
-        A = designs[which[p]]
+        cols = designs[which[p]]
         c = channel[p]
         cw = 0 if shared_w else c
-        G[:, :] = 0.0
-        b[:] = 0.0
-        total = 0.0
-        for n in range(n_rows):
-            ww = w[n, cw] * w[n, cw]
-            wy = ww * y[n, c]
-            total += wy * y[n, c]
-            for i in range(k):
-                an = A[n, i]
-                b[i] += an * wy
-                wa = an * ww
-                for j in range(i, k):
-                    G[i, j] += wa * A[n, j]
-        finite = math.isfinite(total)
+        yc, wc, w2c = y[c], w[cw], w2[cw]
+        total = _dot3(yc, yc, w2c)
+        for i in range(k):
+            b[i] = _dot3(cols[i], yc, w2c)
+            for j in range(i, k):
+                G[i, j] = _dot3(cols[i], cols[j], w2c)
+        finite = math.isfinite(total) and math.isfinite(_dot3(wc, wc, ones))
         for i in range(k):
             finite = finite and math.isfinite(b[i])
             for j in range(i, k):
@@ -127,15 +145,9 @@ def normal_equations_nnls(designs, which, channel, y, w, check_rtol):
                 best[:] = 0.0
                 for i in range(m):
                     best[idx[i]] = x[i] * scale[idx[i]]
-        honest = 0.0
-        for n in range(n_rows):
-            r = -y[n, c]
-            for i in range(k):
-                r += A[n, i] * best[i]
-            r *= w[n, cw]
-            honest += r * r
+        honest = _weighted_residual(cols, best, yc, wc)
         coef[p] = best
         score[p] = honest
-        if abs(honest - max(best_score, 0.0)) > check_rtol * total:
+        if not abs(honest - max(best_score, 0.0)) <= check_rtol * total:
             status[p] = 1
     return coef, score, status

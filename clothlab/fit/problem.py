@@ -89,6 +89,15 @@ class FitProblem:
             params[spec.name] = float(np.exp(value) if spec.transform == "log" else value)
         return params
 
+    def from_unit_many(self, X) -> list[dict]:
+        """:meth:`from_unit` for each row of ``X`` (J, k), in one array operation."""
+        X = np.clip(np.atleast_2d(np.asarray(X, dtype=np.float64)), 0.0, 1.0)
+        lo, hi = self._t(self.lower), self._t(self.upper)
+        t = lo + X * (hi - lo)
+        log = np.array([s.transform == "log" for s in self.specs], dtype=bool)
+        t[:, log] = np.exp(t[:, log])
+        return [{**self.start, **dict(zip(self.free, row, strict=True))} for row in t.tolist()]
+
     # ------------------------------------------------------------------ evaluation
     def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
         """(N, k) matrix of the model components at ``params``."""

@@ -92,7 +92,7 @@ class _Likelihood:
         inside = np.flatnonzero(np.all((X >= 0.0) & (X <= 1.0), axis=1))
         if inside.size == 0:
             return out
-        params = [self.problem.from_unit(X[i, :self.k]) for i in inside]
+        params = self.problem.from_unit_many(X[inside, :self.k])
         designs = self.problem.designs(params)  # (m, N, k), one model call for all walkers
         coef, residual_norm = nnls_sets(designs, self.y, self.weights)  # (m, k, C), (m, C)
         if self.noise == "gaussian-sigma":  # the weights are 1 / sigma: the NNLS residual is the chi-square

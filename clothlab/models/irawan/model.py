@@ -53,7 +53,7 @@ import warnings
 
 import numpy as np
 
-from clothlab.errors import ConfigError, GeometryWarning
+from clothlab.errors import ClothlabError, ConfigError, GeometryWarning
 from clothlab.models.base import Model
 from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the model's public names)
     ALBEDO_SAMPLES,
@@ -159,7 +159,25 @@ class IrawanModel(Model):
         return hit[None, :]
 
     def default_parameters(self) -> dict[str, float]:
-        return weave_parameters(self.weave)
+        if getattr(self, "_defaults", None) is None or self._defaults[0] is not self.weave:
+            self._defaults = (self.weave, weave_parameters(self.weave))
+        return dict(self._defaults[1])
+
+    def _resolve_many(self, params_list) -> list[dict]:
+        """:meth:`resolve` of each dict; when all name the same parameters, each parameter's range is checked
+        once on the smallest and largest value (the ranges are intervals), else dict by dict."""
+        keys = list(params_list[0] or {}) if params_list else []
+        try:
+            if len(params_list) < 2 or any(list(p or {}) != keys for p in params_list):
+                raise ValueError
+            values = np.array([[p[k] for k in keys] for p in params_list], dtype=np.float64)
+            for name, column in zip(keys, values.T, strict=True):
+                self.params[name].check(column.min())
+                self.params[name].check(column.max())
+        except (ValueError, TypeError, ClothlabError):
+            return [self.resolve(p) for p in params_list]
+        defaults = self.default_parameters()
+        return [{**defaults, **dict(zip(keys, row, strict=True))} for row in values.tolist()]
 
     def with_parameters(self, params: dict) -> Weave:
         return apply_parameters(self.weave, self.resolve(params))
@@ -180,7 +198,7 @@ class IrawanModel(Model):
 
         The parameter-free parts (yarn frames, the filament moments, -wi.wo) are computed once for all sets,
         the staple sums of all sets in one compiled call (:func:`.integrals.yarn_integrals`)."""
-        resolved = [self.resolve(p) for p in params_list]
+        resolved = self._resolve_many(params_list)
         wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
         need = COMPONENTS if need is None else tuple(need)
