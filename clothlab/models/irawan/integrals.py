@@ -126,6 +126,7 @@ class YarnTerms:
     the filament path, the moments of :func:`clothlab.models.irawan.kernels.filament_moments` (None for the
     ``adaptive`` rule, whose node count depends on the values)."""
 
+    kind: str  # the segment type (warp / weft)
     wi: np.ndarray  # (N, 3) yarn frame
     wo: np.ndarray
     filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
@@ -146,7 +147,7 @@ def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
     elif rule == "support":
         t, wt = unit_rule("gauss", n)
         moments = kernels.filament_moments(lw, lo, t[None, :], wt[None, :], True)
-    return YarnTerms(lw, lo, moments)
+    return YarnTerms(kind, lw, lo, moments)
 
 
 def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature) -> np.ndarray:
