@@ -122,8 +122,15 @@ class FitProblem:
         return Solution(params, coef, prediction, float(value))
 
     def __call__(self, x) -> float:
+        """The objective F at unit coordinates ``x``.  For the ``relative`` metric the NNLS weights are
+        1 / measured, so its residual norms already give F = sum ||w (A c - y)||^2 / (N C) (no prediction is
+        formed); the other metrics go through :meth:`solve`."""
         self.evaluations += 1
-        return self.solve(self.from_unit(x)).objective
+        params = self.from_unit(x)
+        if self.metric != "relative":
+            return self.solve(params).objective
+        _, residual_norm = nnls_small(self.design(params), self.y, self.weights)
+        return float(np.sum(residual_norm**2) / self.y.size)
 
 
 def build_problem(config, measurement=None) -> FitProblem:

@@ -161,24 +161,25 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
     from clothlab.models.irawan.quadrature import unit_rule
 
     geometry = np.atleast_2d(np.asarray(geometry, dtype=np.float64))
-    psi, umax = np.deg2rad(geometry[:, 0]), np.deg2rad(geometry[:, 1])
-    kappa, w, l, delta = geometry[:, 2], geometry[:, 3], geometry[:, 4], geometry[:, 5]
+    cols = np.ascontiguousarray(geometry.T)  # rows: psi, umax, kappa, w, l, delta
+    cols[:2] = np.deg2rad(cols[:2])
+    psi, umax, kappa, w, l, delta = cols
     rule, n = quadrature.rule, int(quadrature.nodes)
-    out = np.zeros((len(geometry), len(terms.wi)))
-    staple = np.array([staple_path(p, u, rule, n, PSI_FILAMENT_THRESHOLD) for p, u in zip(psi, umax, strict=True)],
-                      dtype=bool)
-    fil = np.flatnonzero(~staple)
-    if fil.size and terms.filament is not None:
-        cols = [np.ascontiguousarray(x[fil]) for x in (umax, kappa, w, l, delta)]
-        out[fil] = kernels.filament_from_moments(*terms.filament, *cols)
-        fil = fil[:0]
-    sta = np.flatnonzero(staple)
-    if sta.size and rule in ("trapezoid", "gauss"):
-        t, wt = unit_rule(rule, n)
-        cols = [np.ascontiguousarray(x[sta]) for x in (psi, umax, kappa, w, l)]
-        out[sta] = kernels.staple_quadrature_sets(terms.wi, terms.wo, t, wt, *cols)
-        sta = sta[:0]
-    for j in np.concatenate([fil, sta]):
-        out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
-                               delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD)
+    staple = [staple_path(p, u, rule, n, PSI_FILAMENT_THRESHOLD) for p, u in zip(psi.tolist(), umax.tolist(),
+                                                                                   strict=True)]
+    fixed = rule in ("trapezoid", "gauss")
+    if not any(staple) and terms.filament is not None:
+        return kernels.filament_from_moments(*terms.filament, umax, kappa, w, l, delta)
+    if all(staple) and fixed:
+        return kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n), psi, umax, kappa, w, l)
+    out = np.empty((len(geometry), len(terms.wi)))
+    for j, on_staple in enumerate(staple):  # mixed paths, or a rule without a batched form
+        if not on_staple and terms.filament is not None:
+            out[j] = kernels.filament_from_moments(*terms.filament, *cols[[1, 2, 3, 4, 5], j:j + 1])[0]
+        elif on_staple and fixed:
+            out[j] = kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n),
+                                                    *cols[:5, j:j + 1])[0]
+        else:
+            out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
+                                   delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD)
     return out

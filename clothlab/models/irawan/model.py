@@ -127,21 +127,30 @@ class IrawanModel(Model):
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
-        self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._terms; see _integrals
-        self._terms: dict = {}  # kind -> (wi copy, wo copy, YarnTerms): the parameter-free part of I_j
+        self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._at; see _integrals
+        self._directions: dict | None = None  # the parameter-free quantities of the last directions; see _at
+
+    def _at(self, wi, wo) -> dict:
+        """What does not depend on the parameters at (wi, wo): -wi.wo (eq. 7), the front-facing mask and, per
+        segment type, :class:`.integrals.YarnTerms` (made when first needed); kept for the last direction set.
+        It is used only if the directions' *contents* equal the copies it keeps (not their identity), so
+        directions changed in place, or new arrays at a reused address, never return stale values (nor a
+        stale memo)."""
+        d = self._directions
+        if d is not None and d["wi"].shape == wi.shape and np.array_equal(d["wi"], wi) and \
+                np.array_equal(d["wo"], wo):
+            return d
+        self._memo.clear()
+        self._directions = {"wi": wi.copy(), "wo": wo.copy(), "cos_x": -np.einsum("...k,...k->...", wi, wo),
+                            "front": (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0), "terms": {}}
+        return self._directions
 
     def _yarn_terms(self, wi, wo, kind) -> YarnTerms:
-        """The parameter-free part of I_j at (wi, wo), kept for the last direction set.  It is used only if
-        the directions' *contents* equal the copies it keeps (not their identity), so directions changed in
-        place, or new arrays at a reused address, never return stale values (nor a stale memo)."""
-        hit = self._terms.get(kind)
-        if hit is not None and hit[0].shape == wi.shape and np.array_equal(hit[0], wi) and np.array_equal(hit[1], wo):
-            return hit[2]
-        terms = yarn_terms(wi, wo, kind, self.quadrature)
-        self._terms[kind] = (wi.copy(), wo.copy(), terms)
-        for key in [k for k in self._memo if k[0] == kind]:
-            del self._memo[key]
-        return terms
+        """The parameter-free part of I_j at (wi, wo) (:meth:`_at`)."""
+        terms = self._at(wi, wo)["terms"]
+        if kind not in terms:
+            terms[kind] = yarn_terms(wi, wo, kind, self.quadrature)
+        return terms[kind]
 
     def _integrals(self, wi, wo, resolved: list[dict], kind) -> np.ndarray:
         """I_j (J, N) for J resolved parameter sets.  One set's I_j is remembered (the last few geometries at
@@ -207,19 +216,18 @@ class IrawanModel(Model):
                 for message in geometry_warnings(p, self.weave.name):
                     warnings.warn(message, GeometryWarning, stacklevel=3)
         out = {}
-        front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+        at = self._at(wi, wo)
         if "diffuse" in need:
-            out["diffuse"] = np.broadcast_to(np.where(front, 1.0 / np.pi, 0.0), (len(resolved), len(wi))).copy()
+            out["diffuse"] = np.repeat(np.where(at["front"], 1.0 / np.pi, 0.0)[None, :], len(resolved), axis=0)
         phase = None
         for kind in YARN_KINDS:
             name = f"specular_{kind}"
             if name not in need:
                 continue
             if phase is None:  # eq. 7, as phase_function computes it, for every set
-                cos_x = -np.einsum("...k,...k->...", wi, wo)
                 alpha = np.array([p["alpha"] for p in resolved])[:, None]
                 beta = np.array([p["beta"] for p in resolved])[:, None]
-                phase = alpha + von_mises(cos_x[None, :], beta)
+                phase = alpha + von_mises(at["cos_x"][None, :], beta)
             value = phase * self._integrals(wi, wo, resolved, kind)
             if normalised:
                 for j, p in enumerate(resolved):
