@@ -175,10 +175,17 @@ def incidence_plane_coordinates(theta_i, phi_i, theta_o: float, phi_o: float):
 
 
 def _use_log_y(ax, values) -> None:
+    """Log y when every finite value is positive; beyond three decades without minor ticks (a wide log range
+    has dozens of unlabelled minor ticks per axis, most of a figure's drawing time)."""
+    from matplotlib.ticker import NullLocator
+
     values = np.asarray(values, dtype=np.float64)
     values = values[np.isfinite(values)]
     if values.size and (values > 0).all():
         ax.set_yscale("log")
+        if values.max() > 1e3 * values.min():
+            for shared in ax.get_shared_y_axes().get_siblings(ax):
+                shared.yaxis.set_minor_locator(NullLocator())
 
 
 def plot_incidence_slices(predictions: dict, slices: dict | None, *, tolerance: float = PLANE_TOLERANCE_DEG,
