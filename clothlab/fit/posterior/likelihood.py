@@ -10,7 +10,8 @@ Likelihood (per value n, channel c; model m = sum_k c_k[c] component_k(theta)[n]
   log L = -sum [ log(m / y)^2 / (2 s^2) + log s ]  (m floored as in :data:`clothlab.fit.metrics.LOG_FLOOR`).
 
 The linear coefficients are profiled out: re-solved by weighted NNLS at every point (weights 1 / sigma, or
-1 / y for the log-normal case; :func:`clothlab.fit.nnls.nnls_sets`).
+1 / y for the log-normal case; :func:`clothlab.fit.nnls.nnls_sets`), all walkers of a call at once; with
+sigma the NNLS residual norms are the chi-square itself.
 """
 
 from __future__ import annotations
