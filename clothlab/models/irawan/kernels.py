@@ -481,10 +481,9 @@ def filament_moments(wi, wo, nodes, weights, on_arc):
     s0 = np.zeros(n_dir)
     s1 = np.zeros(n_dir)
     for n in range(n_dir):
-        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
-        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
+        wix, wiy, wiz, wox, woy, woz = wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2]
         hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
-        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+        if not (wiz > 0.0 and woz > 0.0 and length > 0.0):  # back-facing or degenerate h: 0
             continue
         u = specular_u(hy, hz)  # eq. 4
         cross = tangent_cross_h_x(hy, hz)  # eq. 6
