@@ -207,3 +207,37 @@ def test_config_accepts_an_empty_free_list(tmp_path):
     path.write_text("\n".join(lines).replace("path: noisy.csv",
                                              f"path: {MEASUREMENTS / 'polyester-lining' / 'noisy.csv'}") + "\n")
     assert load(path).fit.free == ()
+
+
+def test_relative_objective_from_the_nnls_residuals_equals_the_metric_path():
+    """The relative-metric objective taken from the NNLS residual norms equals mean(((m - y) / y)^2) of the
+    prediction (the scalar path: per-set quadrature loops, QR NNLS, metric residuals), at random points."""
+    from clothlab.studies.scalar_path import scalar_objective
+
+    problem = build_problem(load_config(ROOT / "measurements" / "cotton-denim" / "fabric.yaml"))
+    rng = np.random.default_rng(2)
+    values = []
+    for x in rng.uniform(size=(4, len(problem.free))):
+        value = problem(x)
+        assert value == pytest.approx(scalar_objective(problem, x), rel=1e-12)
+        assert value == pytest.approx(problem.solve(problem.from_unit(x)).objective, rel=1e-12)
+        values.append(value)
+    assert len(set(values)) == 4
+
+
+def test_bench_before_after_figures_side_by_side():
+    """The fit section's before/after figures (objective per evaluation, one short fit by each path) and the
+    posterior section's log-probability paths on the same walkers, with agreeing values."""
+    from clothlab.studies import full_fit
+    from clothlab.studies.data import StudyData
+    from clothlab.studies.posterior import likelihood_paths
+
+    b = full_fit.before_after(True, data=StudyData(ROOT), repeats=5, max_evals=60)
+    assert b["objective_s"]["scalar"] > 0 and b["objective_s"]["batched"] > 0 and b["objective_ratio"] > 0
+    assert b["fits"]["scalar"]["evaluations"] > 0 and math.isfinite(b["fits"]["batched"]["objective"])
+    assert "ratio" in full_fit._before_after_lines(b)[0]
+    problem = build_problem(load_config(ROOT / "measurements" / "polyester-lining" / "fabric.yaml"))
+    x = problem.to_unit(problem.start)
+    paths = likelihood_paths(problem, np.clip(x + 1e-3 * np.random.default_rng(0).standard_normal((20, 6)), 0, 1),
+                             repeats=1)
+    assert paths["walkers"] == 20 and paths["max_relative_difference"] < 1e-12 and paths["ratio"] > 0

@@ -243,13 +243,13 @@ def test_memo_reuses_the_integral_when_only_the_phase_changes(monkeypatch):
     import clothlab.models.irawan.model as im
 
     calls = []
-    original = im.yarn_integral_fabric
+    original = im.yarn_integrals
 
     def counting(*args, **kwargs):
-        calls.append(args[3])
+        calls.append(args[0].kind)
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(im, "yarn_integral_fabric", counting)
+    monkeypatch.setattr(im, "yarn_integrals", counting)
     model, p = preset_params("cotton-denim")
     wi, wo = random_pairs(50, rng=np.random.default_rng(7))
     first = model.components(wi, wo, p, normalised=False, warn=False)

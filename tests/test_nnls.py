@@ -125,3 +125,45 @@ def test_fast_enough_for_an_objective():
             nnls_small(A, y, w)
         runs.append((time.process_time() - start) / 50)
     assert min(runs) < 2e-3  # measured ~0.3 ms; generous for loaded CI machines
+
+
+def test_sets_match_scipy_per_set_and_channel():
+    """nnls_sets (J designs shared by the channels) against scipy.optimize.nnls problem by problem."""
+    from clothlab.fit.nnls import nnls_sets
+
+    rng = np.random.default_rng(9)
+    designs = rng.uniform(size=(5, 120, 3))
+    designs[2, :, 1] = 0.0  # a zero column
+    designs[3, :, 2] = 3.0 * designs[3, :, 0]  # dependent columns
+    y = rng.uniform(0.05, 1.0, size=(120, 3))
+    w = 1.0 / y
+    coef, residual_norm = nnls_sets(designs, y, w)
+    assert coef.shape == (5, 3, 3) and residual_norm.shape == (5, 3)
+    for j in range(5):
+        for c in range(3):
+            x_ref, r_ref = nnls(designs[j] * w[:, c, None], y[:, c] * w[:, c])
+            f = _objective(designs[j], y[:, c], w[:, c], coef[j, :, c])
+            assert np.all(coef[j, :, c] >= 0)
+            assert f == pytest.approx(r_ref**2, rel=1e-10)
+            assert residual_norm[j, c] ** 2 == pytest.approx(f, rel=1e-12)
+
+
+def test_careful_path_when_the_check_fails(monkeypatch):
+    """Every problem re-solved by the QR path (the fast path's check forced to fail) gives the same optimum;
+    and a nearly collinear design (cosine 1 - 1e-12) still matches scipy."""
+    import clothlab.fit.nnls as nn
+
+    rng = np.random.default_rng(10)
+    A = rng.uniform(size=(300, 3))
+    y = A @ np.array([0.3, 0.0, 1.2]) + 0.01 * rng.normal(size=300)
+    fast, fast_r = nn.nnls_small(A, y)
+    monkeypatch.setattr(nn, "_CHECK_RTOL", -1.0)
+    careful, careful_r = nn.nnls_small(A, y)
+    np.testing.assert_allclose(careful, fast, rtol=1e-9, atol=1e-12)
+    assert careful_r == pytest.approx(fast_r, rel=1e-9)
+    monkeypatch.undo()
+    B = A.copy()
+    B[:, 1] = B[:, 0] * (1.0 + 1e-6 * rng.normal(size=300))
+    coef, r = nn.nnls_small(B, y)
+    _, r_ref = nnls(B, y)
+    assert r == pytest.approx(r_ref, rel=1e-8)

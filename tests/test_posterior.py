@@ -75,6 +75,51 @@ def test_gaussian_log_likelihood_matches_an_independent_computation():
     assert like(outside)[0] == -np.inf
 
 
+def _scalar_log_likelihood(problem, params, noise_s=None):
+    """The log-likelihood of one walker computed on its own: the design from the one-set quadrature loop
+    (yarn_specular), scipy's NNLS per channel, the literal Gaussian / log-normal sum."""
+    from clothlab.models.irawan.model import yarn_specular
+
+    p = problem.model.resolve(params)
+    wi, wo = problem.wi, problem.wo
+    front = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    A = np.stack([np.where(front, 1.0 / np.pi, 0.0)] + [yarn_specular(wi, wo, p, kind, problem.model.quadrature)
+                                                        for kind in ("warp", "weft")], axis=1)
+    y, sigma = problem.y, problem.measurement.sigma
+    total = 0.0
+    for c in range(y.shape[1]):
+        w = 1.0 / (sigma[:, c] if noise_s is None else y[:, c])
+        coef, _ = nnls(A * w[:, None], y[:, c] * w)
+        if noise_s is None:
+            total -= 0.5 * np.sum(((y[:, c] - A @ coef) * w) ** 2)
+        else:
+            r = np.log(np.maximum(A @ coef, 1e-6 * y[:, c]) / y[:, c])
+            total -= 0.5 * np.sum(r**2) / noise_s**2 + r.size * np.log(noise_s)
+    return total
+
+
+@pytest.mark.parametrize("fabric, free", [("polyester-lining", ("warp.umax", "weft.kappa", "beta")),
+                                          ("cotton-denim", ("warp.psi", "weft.umax", "alpha"))])
+@pytest.mark.parametrize("drop_sigma", [False, True])
+def test_batched_likelihood_equals_the_scalar_path(fabric, free, drop_sigma):
+    """All walkers in one call (one model call, one NNLS call) give each walker's log-likelihood computed on
+    its own (per-set quadrature loop, scipy NNLS, literal sum) to 1e-12 relative."""
+    from clothlab.fit.metrics import LOG_FLOOR
+
+    assert LOG_FLOOR == 1e-6  # the floor written into _scalar_log_likelihood
+    problem, truth = _problem(fabric, free, every=5, drop_sigma=drop_sigma)
+    like = _Likelihood(problem)
+    rng = np.random.default_rng(11)
+    X = np.clip(np.append(problem.to_unit(truth), 0.4)[None, :like.ndim]
+                + 0.05 * rng.standard_normal((6, like.ndim)), 0.0, 1.0)
+    got = like(X)
+    for x, value in zip(X, got, strict=True):
+        s = like.noise_scale(x[-1]) if drop_sigma else None
+        expected = _scalar_log_likelihood(problem, problem.from_unit(x[:like.k]), s)
+        assert value == pytest.approx(expected, rel=1e-12)
+    assert len(set(got.tolist())) == len(got)  # distinct walkers, distinct values (the test can fail)
+
+
 def test_lognormal_likelihood_and_noise_scale():
     """Without sigma the noise scale s is sampled; its posterior median is the rms log residual (its MLE)."""
     problem, truth = _problem(drop_sigma=True)

@@ -89,13 +89,29 @@ class FitProblem:
             params[spec.name] = float(np.exp(value) if spec.transform == "log" else value)
         return params
 
+    def from_unit_many(self, X) -> list[dict]:
+        """:meth:`from_unit` for each row of ``X`` (J, k), in one array operation."""
+        X = np.clip(np.atleast_2d(np.asarray(X, dtype=np.float64)), 0.0, 1.0)
+        lo, hi = self._t(self.lower), self._t(self.upper)
+        t = lo + X * (hi - lo)
+        log = np.array([s.transform == "log" for s in self.specs], dtype=bool)
+        t[:, log] = np.exp(t[:, log])
+        return [{**self.start, **dict(zip(self.free, row, strict=True))} for row in t.tolist()]
+
     # ------------------------------------------------------------------ evaluation
     def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
         """(N, k) matrix of the model components at ``params``."""
+        return self.designs([params], normalised=normalised)[0]
+
+    def designs(self, params_list, *, normalised: bool = False, wi=None, wo=None) -> np.ndarray:
+        """(J, N, k) design matrices at J parameter dicts, in one model call (``Model.components_many``); at the
+        measured directions unless ``wi``, ``wo`` are given."""
+        wi = self.wi if wi is None else np.ascontiguousarray(wi, dtype=np.float64)
+        wo = self.wo if wo is None else np.ascontiguousarray(wo, dtype=np.float64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GeometryWarning)
-            comps = self.model.components(self.wi, self.wo, params, normalised=normalised, warn=False)
-        return np.stack([comps[name] for name in self.component_names], axis=1)
+            comps = self.model.components_many(wi, wo, params_list, normalised=normalised, warn=False)
+        return np.stack([comps[name] for name in self.component_names], axis=2)
 
     def solve(self, params: dict, *, normalised: bool = False) -> Solution:
         """Coefficients by weighted NNLS, prediction and objective at ``params``."""
@@ -106,8 +122,15 @@ class FitProblem:
         return Solution(params, coef, prediction, float(value))
 
     def __call__(self, x) -> float:
+        """The objective F at unit coordinates ``x``.  For the ``relative`` metric the NNLS weights are
+        1 / measured, so its residual norms already give F = sum ||w (A c - y)||^2 / (N C) (no prediction is
+        formed); the other metrics go through :meth:`solve`."""
         self.evaluations += 1
-        return self.solve(self.from_unit(x)).objective
+        params = self.from_unit(x)
+        if self.metric != "relative":
+            return self.solve(params).objective
+        _, residual_norm = nnls_small(self.design(params), self.y, self.weights)
+        return float(np.sum(residual_norm**2) / self.y.size)
 
 
 def build_problem(config, measurement=None) -> FitProblem:

@@ -22,6 +22,7 @@ member                   meaning
 ``default_parameters``   every declared parameter's value for this weave (a fit's start)
 ``resolve``              the defaults overridden by given values, validated against the declarations
 ``components``           the components (1/sr, each (N,)) at fabric-frame directions wi, wo (N, 3)
+``components_many``      the components for J parameter sets at once, each (J, N) (a loop by default)
 ``evaluate``             f_r (N, C): the components times their coefficients
 ``settings``             what a fit directory records about this model (quadrature or options)
 ``describe_settings``    those recorded settings in a few words, for reports (class method)
@@ -116,6 +117,13 @@ class Model(abc.ABC):
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
                    warn: bool = True) -> dict[str, np.ndarray]:
         """Components (1/sr, each (N,)) at fabric-frame directions wi, wo (N, 3); ``need`` limits which."""
+
+    def components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
+                        warn: bool = True) -> dict[str, np.ndarray]:
+        """:meth:`components` for J parameter sets, each component (J, N); models override it when they can
+        share work between the sets (the posterior evaluates a whole ensemble half at once)."""
+        rows = [self.components(wi, wo, p, need=need, normalised=normalised, warn=warn) for p in params_list]
+        return {name: np.stack([r[name] for r in rows]) for name in rows[0]} if rows else {}
 
     def evaluate(self, wi, wo, coefficients: dict, params: dict | None = None) -> np.ndarray:
         """f_r (N, C) = sum_k coefficients[k] * component_k."""

@@ -44,7 +44,7 @@ ERROR_AGREEMENT_RTOL = 1e-3
 
 def save_figure(fig, path) -> None:
     """Save a figure as PNG at :data:`PNG_DPI` and release its memory."""
-    fig.savefig(path, dpi=PNG_DPI)
+    fig.savefig(path, dpi=PNG_DPI, pil_kwargs={"compress_level": 1})
     fig.clear()
 
 

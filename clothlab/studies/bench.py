@@ -46,7 +46,7 @@ SECTIONS = (
             "IM model pairs/s vs a quad loop; IM kernels before/after when present"),
     Section("texture", "clothlab.studies.texture_speed", "512 x 512 texture-model evaluation time vs 1 s"),
     Section("accuracy", "clothlab.studies.quadrature_accuracy", "quadrature rules vs scipy quad, per yarn"),
-    Section("fit", "clothlab.studies.full_fit", "one full fit's optimisation wall time vs 20 s"),
+    Section("fit", "clothlab.studies.full_fit", "one full fit vs 3 s; objective and fit before/after"),
     Section("tradeoff", "clothlab.studies.quadrature_tradeoff", "model error vs run time per rule, Pareto front"),
     Section("fit_algorithms", "clothlab.studies.nlopt_algorithms", "objective vs time for every nlopt algorithm"),
     Section("models", "clothlab.studies.im_vs_kang", "IM vs Kang speed and the saved fits' errors"),

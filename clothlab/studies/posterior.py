@@ -9,6 +9,7 @@ directory, or None for the example measurements regenerated into a temporary dir
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -106,15 +107,67 @@ def coverage_study(fabrics=COVERAGE_FABRICS, *, data: StudyData | None = None, w
                          "optimizer": dict(optimizer or {})}}
 
 
+def likelihood_paths(problem, unit_points: np.ndarray, *, repeats: int = 3) -> dict:
+    """The batched log-probability (one call per ensemble half, as emcee's ``vectorize=True`` calls it) against
+    the scalar path (walker by walker, :mod:`clothlab.studies.scalar_path`) on the same walkers, in one run:
+    seconds per walker of each (best of ``repeats``, CPU time), their ratio and the largest relative difference
+    of the values."""
+    from clothlab.fit.posterior.likelihood import _Likelihood
+    from clothlab.studies.scalar_path import scalar_log_prob
+
+    like = _Likelihood(problem)
+    X = np.atleast_2d(unit_points)
+    halves = [X[i:i + 16] for i in range(0, len(X), 16)]
+    batched, scalar = float("inf"), float("inf")
+    for _ in range(repeats):  # alternated, so a load change hits both
+        t = time.process_time()
+        got = np.concatenate([like(h) for h in halves])
+        batched = min(batched, time.process_time() - t)
+        t = time.process_time()
+        ref = np.concatenate([scalar_log_prob(like, h) for h in halves])
+        scalar = min(scalar, time.process_time() - t)
+    return {"walkers": len(X), "batched_s_per_walker": batched / len(X), "scalar_s_per_walker": scalar / len(X),
+            "ratio": scalar / batched, "max_relative_difference": float(np.max(np.abs(got - ref) / np.abs(ref)))}
+
+
 def run(context) -> dict:
     """Bench section ``posterior``: :func:`posterior_benchmark` of the noisy polyester-lining set, limit
-    10 minutes (the quick run caps it at 1 minute and will usually report 'not converged')."""
-    return posterior_benchmark("polyester-lining", max_minutes=1.0 if context.quick else 10.0, data=context.data,
-                               progress=False)
+    10 minutes (the quick run caps it at 1 minute and will usually report 'not converged'); then the scalar and
+    the batched log-probability on 64 walkers of the fit's neighbourhood, side by side, with the scalar path's
+    posterior time estimated from its cost per walker (steps x walkers x seconds per walker)."""
+    import os
+
+    from clothlab.fit.runner import run_fit
+
+    with study_data(context.data) as d:
+        fit = run_fit(optimisation_only(d.load_config("polyester-lining"), max_evals=300, starts=1))
+    rng = np.random.default_rng(0)
+    x = fit.problem.to_unit(fit.params)
+    points = np.clip(x[None] + 1e-3 * rng.standard_normal((64, len(x))), 0.0, 1.0)
+    paths = likelihood_paths(fit.problem, points, repeats=1 if context.quick else 3)
+    t, c = time.perf_counter(), time.process_time()
+    result = posterior_benchmark("polyester-lining", max_minutes=1.0 if context.quick else 10.0, data=context.data,
+                                 progress=False)
+    result["posterior_cpu_s"] = time.process_time() - c
+    result["load_average_1min"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+    result["paths"] = paths
+    result["scalar_posterior_estimate_s"] = result["steps"] * result["walkers"] * paths["scalar_s_per_walker"]
+    result["benchmark_wall_s"] = time.perf_counter() - t
+    return result
 
 
 def lines(p: dict) -> list[str]:
-    return [f"== posterior ({p['fabric']}, {len(p['free'])} free, {p['walkers']} walkers) ==",
-            f"  {p['steps']} steps in {p['posterior_wall_time_s']:.0f} s; converged by the tau rule: "
-            f"{p['converged']} (within {p['limit_minutes']:g} min: {p['within_limit']}); "
-            f"max tau {max(p['tau'].values()):.0f}; not determined: {p['not_determined'] or 'none'}"]
+    paths = p.get("paths")
+    out = [f"== posterior ({p['fabric']}, {len(p['free'])} free, {p['walkers']} walkers) ==",
+           f"  {p['steps']} steps in {p['posterior_wall_time_s']:.0f} s wall"
+           + (f", {p['posterior_cpu_s']:.0f} s CPU (load average {p['load_average_1min']:.1f})"
+              if p.get("posterior_cpu_s") is not None and p.get("load_average_1min") is not None else "")
+           + f"; converged by the tau rule: {p['converged']} (within {p['limit_minutes']:g} min: "
+           f"{p['within_limit']}); max tau {max(p['tau'].values()):.0f}; not determined: "
+           f"{p['not_determined'] or 'none'}"]
+    if paths:
+        out.append(f"  log-probability per walker (CPU): scalar path {1e3 * paths['scalar_s_per_walker']:.3f} ms, "
+                   f"batched {1e3 * paths['batched_s_per_walker']:.3f} ms, ratio {paths['ratio']:.1f}x "
+                   f"(values agree to {paths['max_relative_difference']:.1e} relative); the scalar path would "
+                   f"take ~{p['scalar_posterior_estimate_s']:.0f} s CPU for these {p['steps']} steps")
+    return out

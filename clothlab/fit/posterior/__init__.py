@@ -13,11 +13,17 @@ Likelihood (per value n, channel c; model m = sum_k c_k[c] component_k(theta)[n]
 
 **The linear coefficients (kd, ks per channel and yarn type) are profiled out, not sampled**: at every
 posterior point they are re-solved by weighted NNLS (weights 1 / sigma, or 1 / y for the log-normal case,
-:func:`clothlab.fit.nnls.nnls_small`; Irawan & Marschner 2012, sec. 8 fit them linearly too).  The chain
+:func:`clothlab.fit.nnls.nnls_sets`; Irawan & Marschner 2012, sec. 8 fit them linearly too).  The chain
 therefore samples the profile likelihood of the non-linear parameters: intervals are conditional on the best
 coefficients at each point, which neglects the (small, with thousands of values per coefficient) extra width
 that marginalising the coefficients would add, and a coefficient pinned at 0 by the non-negativity constraint
 contributes no width.
+
+Evaluation: emcee calls the log-probability once per ensemble half (``vectorize=True``) with all its walkers;
+the model is evaluated for all of them in one call (:meth:`clothlab.models.base.Model.components_many`: for IM
+the parameter-free parts once per direction set, the staple sums of all walkers in one compiled loop) and the
+coefficients of all walkers and channels in one compiled NNLS call.  The chain is the one the walker-by-walker
+path gives (same coordinates; log-probabilities equal to ~1e-14 relative).
 
 Convergence (emcee docs, "Autocorrelation analysis"): sample in chunks of ``check_every`` steps;
 after each, the integrated autocorrelation time tau of every coordinate (``emcee.autocorr.integrated_time``,

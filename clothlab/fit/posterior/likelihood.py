@@ -10,18 +10,17 @@ Likelihood (per value n, channel c; model m = sum_k c_k[c] component_k(theta)[n]
   log L = -sum [ log(m / y)^2 / (2 s^2) + log s ]  (m floored as in :data:`clothlab.fit.metrics.LOG_FLOOR`).
 
 The linear coefficients are profiled out: re-solved by weighted NNLS at every point (weights 1 / sigma, or
-1 / y for the log-normal case; :func:`clothlab.fit.nnls.nnls_small`).
+1 / y for the log-normal case; :func:`clothlab.fit.nnls.nnls_sets`), all walkers of a call at once; with
+sigma the NNLS residual norms are the chi-square itself.
 """
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
-from clothlab.errors import GeometryWarning, InputError
+from clothlab.errors import InputError
 from clothlab.fit.metrics import LOG_FLOOR, linear_weights
-from clothlab.fit.nnls import nnls_small
+from clothlab.fit.nnls import nnls_sets
 
 NOISE_NAME = "noise.s"
 NOISE_UNIT = "1 (std. dev. of log(model / measured))"
@@ -81,14 +80,11 @@ class _Likelihood:
         """Profiled coefficients (k, m, C) for m parameter dicts (weighted NNLS on the measurement, one call for
         all of them) and the model (m, N', C) at (wi, wo) (the measurement's directions by default)."""
         problem = self.problem
-        designs = np.stack([problem.design(p) for p in params_list], axis=2)  # (N, k, m)
-        n_sets, n_channels = designs.shape[2], self.y.shape[1]
-        coef, _ = nnls_small(np.repeat(designs, n_channels, axis=2), np.tile(self.y, (1, n_sets)),
-                             np.tile(self.weights, (1, n_sets)))
-        coef = coef.reshape(coef.shape[0], n_sets, n_channels)
+        designs = problem.designs(params_list)  # (m, N, k), one model call for all sets
+        coef, _ = nnls_sets(designs, self.y, self.weights)  # (m, k, C)
         if wi is not None:
-            designs = np.stack([_design_at(problem, p, wi, wo) for p in params_list], axis=2)
-        return coef, np.einsum("nkm,kmc->mnc", designs, coef)
+            designs = problem.designs(params_list, wi=wi, wo=wo)
+        return coef.transpose(1, 0, 2), np.matmul(designs, coef)
 
     def __call__(self, X) -> np.ndarray:
         """log posterior (up to a constant) at unit coordinates X (W, ndim); -inf outside the box."""
@@ -97,25 +93,16 @@ class _Likelihood:
         inside = np.flatnonzero(np.all((X >= 0.0) & (X <= 1.0), axis=1))
         if inside.size == 0:
             return out
-        params = [self.problem.from_unit(X[i, :self.k]) for i in inside]
-        _, model = self.solve_many(params)  # (m, N, C)
-        if self.noise == "gaussian-sigma":
-            r = (self.y[None] - model) * self.weights[None]
-            loglike = -0.5 * np.einsum("mnc,mnc->m", r, r)
+        params = self.problem.from_unit_many(X[inside, :self.k])
+        designs = self.problem.designs(params)  # (m, N, k), one model call for all walkers
+        coef, residual_norm = nnls_sets(designs, self.y, self.weights)  # (m, k, C), (m, C)
+        if self.noise == "gaussian-sigma":  # the weights are 1 / sigma: the NNLS residual is the chi-square
+            loglike = -0.5 * np.sum(residual_norm**2, axis=1)
         else:
+            model = np.matmul(designs, coef)  # (m, N, C)
             s = self.noise_scale(X[inside, self.k])
             with np.errstate(invalid="ignore"):
                 r = np.log(np.maximum(model, LOG_FLOOR * self.y[None]) / self.y[None])
             loglike = -0.5 * np.einsum("mnc,mnc->m", r, r) / s**2 - self.y.size * np.log(s)
         out[inside] = np.where(np.isfinite(loglike), loglike, -np.inf)
         return out
-
-
-def _design_at(problem, params, wi, wo) -> np.ndarray:
-    """(N', k) model components of ``problem`` at other directions (un-normalised, like FitProblem.design)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", GeometryWarning)
-        comps = problem.model.components(np.ascontiguousarray(wi, dtype=np.float64),
-                                         np.ascontiguousarray(wo, dtype=np.float64), params, normalised=False,
-                                         warn=False)
-    return np.stack([comps[name] for name in problem.component_names], axis=1)

@@ -15,8 +15,8 @@ import numpy as np
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
 from clothlab.models.irawan.phase import phase_function
-from clothlab.models.irawan.quadrature import RULES
-from clothlab.models.irawan.yarn import yarn_integral
+from clothlab.models.irawan.quadrature import RULES, interval_rule
+from clothlab.models.irawan.yarn import staple_path, yarn_integral
 from clothlab.weave.model import YARN_KINDS
 
 PSI_FILAMENT_THRESHOLD = 1e-3  # radians
@@ -115,3 +115,71 @@ def _specular_albedo_cached(key, samples):
         values = yarn_specular(wi, wo, params, kind, quadrature)
     # E[f] under cosine-weighted sampling of both directions times pi^2, divided by pi.
     return float(np.pi * values.mean())
+
+
+# ------------------------------------------------------------------ many parameter sets at once
+
+
+@dataclass(frozen=True, eq=False)
+class YarnTerms:
+    """What of I_j depends on the directions alone, for one segment type: the yarn-frame directions and, for
+    the filament path, the moments of :func:`clothlab.models.irawan.kernels.filament_moments` (None for the
+    ``adaptive`` rule, whose node count depends on the values)."""
+
+    kind: str  # the segment type (warp / weft)
+    wi: np.ndarray  # (N, 3) yarn frame
+    wo: np.ndarray
+    filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
+
+
+def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
+    """The parameter-free part of I_j at fabric-frame directions (N, 3) (computed once per direction set)."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.quadrature import unit_rule
+
+    lw = np.ascontiguousarray(to_yarn_frame(wi, kind), dtype=np.float64)
+    lo = np.ascontiguousarray(to_yarn_frame(wo, kind), dtype=np.float64)
+    rule, n = quadrature.rule, int(quadrature.nodes)
+    moments = None
+    if rule in ("trapezoid", "gauss"):
+        nodes, weights = interval_rule(rule, n, -0.5 * np.pi, 0.5 * np.pi)
+        moments = kernels.filament_moments(lw, lo, nodes[None, :], weights[None, :], False)
+    elif rule == "support":
+        t, wt = unit_rule("gauss", n)
+        moments = kernels.filament_moments(lw, lo, t[None, :], wt[None, :], True)
+    return YarnTerms(kind, lw, lo, moments)
+
+
+def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature) -> np.ndarray:
+    """I_j (eq. 10 without f_c) for J parameter sets at once: (J, N).
+
+    ``geometry`` (J, 6) holds each set's psi, umax (deg), kappa, w, l and delta (:func:`yarn_geometry_key`
+    order).  The path per set is :func:`clothlab.models.irawan.yarn.staple_path`'s; filament sets use the
+    moments (equal to :func:`yarn_integral_fabric` to rounding), staple sets under a fixed rule one compiled
+    call for all of them (bit-identical), the rest :func:`clothlab.models.irawan.yarn.yarn_integral` per set."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.quadrature import unit_rule
+
+    geometry = np.atleast_2d(np.asarray(geometry, dtype=np.float64))
+    cols = np.ascontiguousarray(geometry.T)  # rows: psi, umax, kappa, w, l, delta
+    cols[:2] = np.deg2rad(cols[:2])
+    psi, umax, kappa, w, l, delta = cols
+    rule, n = quadrature.rule, int(quadrature.nodes)
+    staple = [staple_path(p, u, rule, n, PSI_FILAMENT_THRESHOLD) for p, u in zip(psi.tolist(), umax.tolist(),
+                                                                                   strict=True)]
+    fixed = rule in ("trapezoid", "gauss")
+    if not any(staple) and terms.filament is not None:
+        return kernels.filament_from_moments(*terms.filament, umax, kappa, w, l, delta)
+    if all(staple) and fixed:
+        return kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n), psi, umax, kappa, w, l)
+    out = np.empty((len(geometry), len(terms.wi)))
+    for j, on_staple in enumerate(staple):  # mixed paths, or a rule without a batched form
+        if not on_staple and terms.filament is not None:
+            out[j] = kernels.filament_from_moments(*terms.filament, *cols[[1, 2, 3, 4, 5], j:j + 1])[0]
+        elif on_staple and fixed:
+            out[j] = kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n),
+                                                    *cols[:5, j:j + 1])[0]
+        else:
+            out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
+                                   delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD)
+    return out

@@ -53,7 +53,7 @@ import warnings
 
 import numpy as np
 
-from clothlab.errors import ConfigError, GeometryWarning
+from clothlab.errors import ClothlabError, ConfigError, GeometryWarning
 from clothlab.models.base import Model
 from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the model's public names)
     ALBEDO_SAMPLES,
@@ -62,16 +62,19 @@ from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the 
     GEOMETRY_KEYS,
     PSI_FILAMENT_THRESHOLD,
     Quadrature,
+    YarnTerms,
     _albedo_directions,
     _specular_albedo_cached,
     geometry_warnings,
     specular_albedo,
     yarn_geometry_key,
     yarn_integral_fabric,
+    yarn_integrals,
     yarn_specular,
+    yarn_terms,
 )
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, apply_parameters, weave_parameters
-from clothlab.models.irawan.phase import phase_function
+from clothlab.models.irawan.phase import von_mises
 from clothlab.weave.model import YARN_KINDS, Weave
 
 
@@ -124,26 +127,66 @@ class IrawanModel(Model):
     def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
-        self._memo: dict = {}  # (kind, shape, geometry, quadrature) -> (wi copy, wo copy, I_j); see _integral
+        self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._at; see _integrals
+        self._directions: dict | None = None  # the parameter-free quantities of the last directions; see _at
 
-    def _integral(self, wi, wo, p, kind):
-        """I_j, remembered for the last few (directions, geometry): a fit varying only alpha / beta reuses it.
+    def _at(self, wi, wo) -> dict:
+        """What does not depend on the parameters at (wi, wo): -wi.wo (eq. 7), the front-facing mask and, per
+        segment type, :class:`.integrals.YarnTerms` (made when first needed); kept for the last direction set.
+        It is used only if the directions' *contents* equal the copies it keeps (not their identity), so
+        directions changed in place, or new arrays at a reused address, never return stale values (nor a
+        stale memo)."""
+        d = self._directions
+        if d is not None and d["wi"].shape == wi.shape and np.array_equal(d["wi"], wi) and \
+                np.array_equal(d["wo"], wo):
+            return d
+        self._memo.clear()
+        self._directions = {"wi": wi.copy(), "wo": wo.copy(), "cos_x": -np.einsum("...k,...k->...", wi, wo),
+                            "front": (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0), "terms": {}}
+        return self._directions
 
-        An entry is used only if the directions' *contents* equal the copies it keeps (not their identity),
-        so directions changed in place, or new arrays at a reused address, never return a stale integral."""
-        key = (kind, wi.shape, yarn_geometry_key(p, kind), self.quadrature)
+    def _yarn_terms(self, wi, wo, kind) -> YarnTerms:
+        """The parameter-free part of I_j at (wi, wo) (:meth:`_at`)."""
+        terms = self._at(wi, wo)["terms"]
+        if kind not in terms:
+            terms[kind] = yarn_terms(wi, wo, kind, self.quadrature)
+        return terms[kind]
+
+    def _integrals(self, wi, wo, resolved: list[dict], kind) -> np.ndarray:
+        """I_j (J, N) for J resolved parameter sets.  One set's I_j is remembered (the last few geometries at
+        these directions), so a fit varying only alpha / beta computes it once; batches are not memoised."""
+        terms = self._yarn_terms(wi, wo, kind)
+        if len(resolved) != 1:
+            return yarn_integrals(terms, np.array([yarn_geometry_key(p, kind) for p in resolved]), self.quadrature)
+        key = (kind, yarn_geometry_key(resolved[0], kind))
         hit = self._memo.get(key)
-        if hit is not None and np.array_equal(hit[0], wi) and np.array_equal(hit[1], wo):
-            return hit[2]
-        value = yarn_integral_fabric(wi, wo, p, kind, self.quadrature)
-        self._memo.pop(key, None)
-        if len(self._memo) >= 8:
-            self._memo.pop(next(iter(self._memo)))
-        self._memo[key] = (wi.copy(), wo.copy(), value)
-        return value
+        if hit is None:
+            hit = yarn_integrals(terms, np.array([key[1]]), self.quadrature)[0]
+            if len(self._memo) >= 8:
+                self._memo.pop(next(iter(self._memo)))
+            self._memo[key] = hit
+        return hit[None, :]
 
     def default_parameters(self) -> dict[str, float]:
-        return weave_parameters(self.weave)
+        if getattr(self, "_defaults", None) is None or self._defaults[0] is not self.weave:
+            self._defaults = (self.weave, weave_parameters(self.weave))
+        return dict(self._defaults[1])
+
+    def _resolve_many(self, params_list) -> list[dict]:
+        """:meth:`resolve` of each dict; when all name the same parameters, each parameter's range is checked
+        once on the smallest and largest value (the ranges are intervals), else dict by dict."""
+        keys = list(params_list[0] or {}) if params_list else []
+        try:
+            if len(params_list) < 2 or any(list(p or {}) != keys for p in params_list):
+                raise ValueError
+            values = np.array([[p[k] for k in keys] for p in params_list], dtype=np.float64)
+            for name, column in zip(keys, values.T, strict=True):
+                self.params[name].check(column.min())
+                self.params[name].check(column.max())
+        except (ValueError, TypeError, ClothlabError):
+            return [self.resolve(p) for p in params_list]
+        defaults = self.default_parameters()
+        return [{**defaults, **dict(zip(keys, row, strict=True))} for row in values.tolist()]
 
     def with_parameters(self, params: dict) -> Weave:
         return apply_parameters(self.weave, self.resolve(params))
@@ -155,34 +198,48 @@ class IrawanModel(Model):
         ``need``: the component names wanted (others are not computed).
         Back-facing pairs (wi_z <= 0 or wo_z <= 0) give 0 (reflection only).
         """
-        p = self.resolve(params)
+        many = self.components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
+        return {name: value[0] for name, value in many.items()}
+
+    def components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
+                        warn: bool = True) -> dict[str, np.ndarray]:
+        """:meth:`components` for J parameter sets at once: each component (J, N).
+
+        The parameter-free parts (yarn frames, the filament moments, -wi.wo) are computed once for all sets,
+        the staple sums of all sets in one compiled call (:func:`.integrals.yarn_integrals`)."""
+        resolved = self._resolve_many(params_list)
         wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
-        phase = None
         need = COMPONENTS if need is None else tuple(need)
         if warn:
-            for message in geometry_warnings(p, self.weave.name):
-                warnings.warn(message, GeometryWarning, stacklevel=2)
+            for p in resolved:
+                for message in geometry_warnings(p, self.weave.name):
+                    warnings.warn(message, GeometryWarning, stacklevel=3)
         out = {}
-        front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
+        at = self._at(wi, wo)
         if "diffuse" in need:
-            out["diffuse"] = np.where(front, 1.0 / np.pi, 0.0)
+            out["diffuse"] = np.repeat(np.where(at["front"], 1.0 / np.pi, 0.0)[None, :], len(resolved), axis=0)
+        phase = None
         for kind in YARN_KINDS:
             name = f"specular_{kind}"
             if name not in need:
                 continue
-            if phase is None:
-                phase = phase_function(wi, wo, p["alpha"], p["beta"])
-            value = phase * self._integral(wi, wo, p, kind)
+            if phase is None:  # eq. 7, as phase_function computes it, for every set
+                alpha = np.array([p["alpha"] for p in resolved])[:, None]
+                beta = np.array([p["beta"] for p in resolved])[:, None]
+                phase = alpha + von_mises(at["cos_x"][None, :], beta)
+            value = phase * self._integrals(wi, wo, resolved, kind)
             if normalised:
-                albedo = specular_albedo(p, kind, self.quadrature)
-                if albedo > 0.0:
-                    value = value / albedo
-                else:  # e.g. a filament with umax -> 0: the highlight has no extent; say so, never a silent 0
-                    value = np.zeros_like(value)
-                    if warn:
-                        warnings.warn(f"{self.weave.name} {kind}: the specular albedo is 0 (umax = "
-                                      f"{p[f'{kind}.umax']:g} deg, psi = {p[f'{kind}.psi']:g} deg), so the "
-                                      f"normalised specular_{kind} is 0 everywhere", GeometryWarning, stacklevel=2)
+                for j, p in enumerate(resolved):
+                    albedo = specular_albedo(p, kind, self.quadrature)
+                    if albedo > 0.0:
+                        value[j] = value[j] / albedo
+                    else:  # e.g. a filament with umax -> 0: the highlight has no extent; say so, never a silent 0
+                        value[j] = 0.0
+                        if warn:
+                            warnings.warn(f"{self.weave.name} {kind}: the specular albedo is 0 (umax = "
+                                          f"{p[f'{kind}.umax']:g} deg, psi = {p[f'{kind}.psi']:g} deg), so the "
+                                          f"normalised specular_{kind} is 0 everywhere", GeometryWarning,
+                                          stacklevel=3)
             out[name] = value
         return out
