@@ -84,22 +84,23 @@ def normalised_parameters(params: dict, table: ParamTable, names) -> np.ndarray:
 def pattern_descriptor(weave, order: int = PATTERN_ORDER, resolution: int = PATTERN_RESOLUTION) -> np.ndarray:
     """Low-frequency Fourier coefficients of the tile's warp (+1) / weft (-1) indicator (module docstring).
 
-    Sampled at ``resolution``^2 cell-centred points of one tile; returns the real and imaginary parts of
-    the DFT / resolution^2 for k_v = 0, 0 < k_u <= order and 0 < k_v <= order, |k_u| <= order, after
-    the real DC term: 1 + 2 (order + order (2 order + 1)) values."""
+    Sampled at cell-aligned points of one tile (``resolution`` or a little more points per axis, a whole
+    number per weave cell, so the DC term is exactly the cell balance); returns the real and imaginary parts of
+    the normalised DFT for k_v = 0, 0 < k_u <= order and 0 < k_v <= order, |k_u| <= order, after the real DC
+    term: 1 + 2 (order + order (2 order + 1)) values."""
     from clothlab.weave.lookup import locate_segments
 
-    centres = (np.arange(resolution) + 0.5) / resolution
-    u, v = np.meshgrid(centres, centres, indexing="ij")
+    n_u, n_v = (cells * -(-resolution // cells) for cells in (weave.tile_width, weave.tile_height))
+    u, v = np.meshgrid((np.arange(n_u) + 0.5) / n_u, (np.arange(n_v) + 0.5) / n_v, indexing="ij")
     seg, _, _ = locate_segments(weave, u, v)
     weft = np.array([s.kind == "weft" for s in weave.segments])[seg]
-    coeffs = np.fft.fft2(np.where(weft, -1.0, 1.0)) / resolution ** 2
+    coeffs = np.fft.fft2(np.where(weft, -1.0, 1.0)) / (n_u * n_v)
     values = [coeffs[0, 0].real]
     for ku in range(1, order + 1):
         values += [coeffs[ku, 0].real, coeffs[ku, 0].imag]
     for kv in range(1, order + 1):
         for ku in range(-order, order + 1):
-            c = coeffs[ku % resolution, kv]
+            c = coeffs[ku % n_u, kv]
             values += [c.real, c.imag]
     return np.array(values)
 

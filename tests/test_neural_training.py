@@ -1,0 +1,152 @@
+"""Training data, encodings, training, serialisation and the ``train-surrogate`` command of the numpy
+surrogate (Chen, Wang & Wang 2024, sec. 4-5, Table 2)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from clothlab.errors import InputError
+from clothlab.models.registry import build_model
+from clothlab.neural.data import MIN_SIZE, MIN_Z, DataSpec, assemble, chunk_queries, generate, heldout_cells
+from clothlab.neural.encodings import (
+    material_vector,
+    normalised_parameters,
+    one_blob,
+    pattern_descriptor,
+    size_coordinate,
+)
+from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+from clothlab.neural.serialise import load_surrogate, save_surrogate
+from clothlab.neural.training import TrainSpec, train
+from clothlab.weave.presets import get_preset
+
+FABRIC = "silk-shantung"
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model("irawan", get_preset(FABRIC))
+
+
+def test_one_blob_is_the_gaussian_kernel_at_the_bin_centres_and_wraps():
+    t = np.array([0.3, 0.99])
+    centres = (np.arange(8) + 0.5) / 8
+    np.testing.assert_allclose(one_blob(t)[0], np.exp(-0.5 * ((0.3 - centres) * 8) ** 2))
+    np.testing.assert_allclose(one_blob(np.array([0.99]), periodic=True), one_blob(np.array([-0.01]), periodic=True))
+    assert one_blob(np.array([0.99]), periodic=True)[0, 0] > one_blob(np.array([0.99]))[0, 0]
+    assert size_coordinate(0.0) == 0.0 and size_coordinate(5.0) == pytest.approx(1.0)
+
+
+def test_normalised_parameters_map_the_fit_bounds_to_0_and_1(model):
+    table = model.params
+    lo = {n: table[n].bounds[0] for n in table.names()}
+    hi = {n: table[n].bounds[1] for n in table.names()}
+    np.testing.assert_allclose(normalised_parameters(lo, table, table.names()), 0.0, atol=1e-12)
+    np.testing.assert_allclose(normalised_parameters(hi, table, table.names()), 1.0)
+    lo_b, hi_b = table["beta"].bounds  # log-declared: the geometric midpoint is 0.5
+    assert normalised_parameters({"beta": np.sqrt(lo_b * hi_b)}, table, ["beta"])[0] == pytest.approx(0.5)
+
+
+def test_pattern_descriptor_dc_term_is_the_warp_weft_balance():
+    for name in ("silk-shantung", "polyester-lining", "cotton-denim"):
+        weave = get_preset(name)
+        d = pattern_descriptor(weave)
+        assert d[0] == pytest.approx(weave.cell_share("warp") - weave.cell_share("weft"), abs=1e-12)
+        assert d.size == 1 + 2 * (2 + 2 * 5)
+
+
+def test_chunks_follow_table_2_and_are_independent_and_reproducible():
+    spec = DataSpec(pairs=8, seed=3)
+    a = chunk_queries(spec, 1, 5)
+    np.testing.assert_array_equal(a, chunk_queries(spec, 1, 5))
+    assert not np.array_equal(a[:, 1:], chunk_queries(spec, 1, 6)[:, 1:])
+    assert a.shape[0] == spec.rows_per_chunk() == 2 * 10 * 8
+    cell = (5 % 8, 5 // 8)  # the centre lies in its grid cell
+    assert cell[0] / 8 <= a[0, 1] < (cell[0] + 1) / 8 and cell[1] / 8 <= a[0, 2] < (cell[1] + 1) / 8
+    sizes = np.unique(a[:, 3])
+    assert np.sum(sizes < 1.0) == 10 and np.sum(sizes > 1.0) == 10 and sizes.min() >= MIN_SIZE and sizes.max() < 5
+    for wi in (a[:, 4:7], a[:, 7:10]):
+        np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1.0)
+        assert np.all(wi[:, 2] >= MIN_Z)
+    frac = heldout_cells(DataSpec(heldout_pairs=0.1)).mean()
+    assert 0.07 < frac < 0.13
+
+
+def test_generation_resumes_to_the_same_data_and_is_memory_mapped(tmp_path, model):
+    spec = DataSpec(centres=2, sizes=2, pairs=4)
+    labels = [ModelLabels(model)]
+    calls = iter(range(100))
+    assert generate(tmp_path / "a", spec, labels, stop=lambda: next(calls) >= 2) == 2
+    assert generate(tmp_path / "a", spec, labels) == 2
+    generate(tmp_path / "b", spec, labels)
+    a, sha_a = assemble(tmp_path / "a", spec, 1, 3)
+    b, sha_b = assemble(tmp_path / "b", spec, 1, 3)
+    assert isinstance(a, np.memmap) and sha_a == sha_b
+    np.testing.assert_array_equal(a, b)
+    q = a[:, :11]
+    comps = model.components(q[:, 4:7], q[:, 7:10])
+    np.testing.assert_allclose(a[:, 12], comps["specular_warp"])
+
+
+def test_monte_carlo_labels_of_whole_tiles_approach_the_reflectance_model(model):
+    """A box of 2 x 2 tiles averages the texture exactly over whole tiles: the reflectance model (the
+    texture model's tile-average identity), up to the MC error of the estimate."""
+    texture = model.texture()
+    n = 6
+    wi = np.tile([0.3, 0.2, np.sqrt(1 - 0.13)], (n, 1))
+    wo = np.tile([-0.25, -0.1, np.sqrt(1 - 0.0725)], (n, 1))
+    centre = np.random.default_rng(0).random((n, 2))
+    mc = TextureMonteCarloLabels(texture, samples=4096)(wi, wo, centre, np.full(n, 2.0))
+    ref = ModelLabels(model)(wi, wo, centre, np.full(n, 2.0))
+    np.testing.assert_allclose(mc.mean(axis=0), ref[0], rtol=0.05)
+
+
+def _tiny_run(model, steps=150):
+    spec = DataSpec(centres=2, sizes=3, pairs=64, heldout_pairs=0.2)
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        generate(Path(tmp), spec, [ModelLabels(model)])
+        data, _ = assemble(Path(tmp), spec, 1, 3)
+        data = np.array(data)
+    materials = material_vector(model.weave, model.default_parameters(), model.params, model.params.names())[None]
+    spec = TrainSpec(width=16, spatial=8, enc_width=16, latent=8, batch=256, steps=steps, lr=1e-2, log_every=10)
+    return data, train(data, model.component_names, materials, spec)
+
+
+def test_tiny_training_reduces_the_loss_and_saved_weights_agree(tmp_path, model):
+    data, result = _tiny_run(model)
+    first, last = result.curve[0]["loss"], np.mean([c["loss"] for c in result.curve[-3:]])
+    assert last < 0.3 * first
+    assert result.metrics["rows"]["heldout_pairs"] > 0
+    path = save_surrogate(result.surrogate, tmp_path / "s", data_hash="abc", metrics=result.metrics)
+    loaded, sidecar = load_surrogate(path)
+    assert sidecar["data_sha256"] == "abc" and sidecar["components"] == list(model.component_names)
+    q = data[:50]
+    np.testing.assert_array_equal(loaded.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10]),
+                                  result.surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10]))
+    sidecar["architecture"]["width"] = 17
+    path.with_suffix(".json").write_text(json.dumps(sidecar))
+    with pytest.raises(InputError, match="architecture"):
+        load_surrogate(path)
+
+
+def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, capsys):
+    from clothlab.cli.main import main
+
+    out = tmp_path / "run"
+    args = ["train-surrogate", f"preset:{FABRIC}", "-o", str(out), "--budget", "0.05", "--labels", "model",
+            "--pairs", "4", "--width", "8", "--spatial", "8", "-q"]
+    assert main(args) == 0
+    for name in ("surrogate.npz", "surrogate.json", "training.json", "loss.png", "heldout.png", "checkpoint.npz"):
+        assert (out / name).is_file(), name
+    first = json.loads((out / "training.json").read_text())["metrics"]["steps"]
+    capsys.readouterr()
+    assert main(args) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main([*args[:5], "0.1", *args[6:], "--resume"]) == 0
+    assert json.loads((out / "training.json").read_text())["metrics"]["steps"] > first
