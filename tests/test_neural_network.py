@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from clothlab.neural.inference import DecoderPlan
 from clothlab.neural.layers import LEAK, Residual
 from clothlab.neural.losses import column_weights, decode_outputs, encode_targets, is_specular, loss_and_gradient
 from clothlab.neural.network import Architecture, SurrogateNetwork
@@ -69,9 +70,11 @@ def test_fast_inference_path_equals_the_training_forward():
     material, index, spatial, angular, _ = _batch(rng, n=50, m=1)
     full = net.forward(material, np.zeros(50, dtype=int), spatial, angular)
     bias = net.fusion_bias(net.encode(material))[0]
-    fast = net.decode_fast(bias, spatial.astype(np.float32), angular.astype(np.float32))
-    assert full.dtype == fast.dtype == np.float32
-    np.testing.assert_allclose(fast, full, rtol=1e-5, atol=1e-5)
+    plan = DecoderPlan(net, bias)
+    for rows in (slice(0, 50), slice(0, 7), slice(10, 50)):  # buffers resized and reused
+        fast = plan(spatial[rows].astype(np.float32), angular[rows].astype(np.float32))
+        assert full.dtype == fast.dtype == np.float32
+        np.testing.assert_allclose(fast, full[rows], rtol=1e-5, atol=1e-5)
 
 
 def test_adam_first_steps_match_the_written_out_update():

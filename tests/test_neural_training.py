@@ -139,7 +139,7 @@ def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, 
     from clothlab.cli.main import main
 
     out = tmp_path / "run"
-    args = ["train-surrogate", f"preset:{FABRIC}", "-o", str(out), "--budget", "0.05", "--labels", "model",
+    args = ["train-surrogate", f"preset:{FABRIC}", "-o", str(out), "--budget", "0.02", "--labels", "model",
             "--pairs", "4", "--width", "8", "--spatial", "8", "-q"]
     assert main(args) == 0
     for name in ("surrogate.npz", "surrogate.json", "training.json", "loss.png", "heldout.png", "checkpoint.npz"):
@@ -148,5 +148,5 @@ def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, 
     capsys.readouterr()
     assert main(args) == 2
     assert "--resume" in capsys.readouterr().err
-    assert main([*args[:5], "0.1", *args[6:], "--resume"]) == 0
+    assert main([*args[:5], "0.04", *args[6:], "--resume"]) == 0
     assert json.loads((out / "training.json").read_text())["metrics"]["steps"] > first

@@ -84,7 +84,7 @@ def run(args) -> int:
 
     if args.output is None:
         raise ConfigError("give the output directory with -o DIR", field="-o")
-    for name, value, lo in (("--budget", args.budget, 0.05), ("--samples", args.samples, 1),
+    for name, value, lo in (("--budget", args.budget, 0.01), ("--samples", args.samples, 1),
                             ("--pairs", args.pairs, 1), ("--width", args.width, 4), ("--spatial", args.spatial, 4)):
         if not value >= lo:
             raise ConfigError(f"expected a number >= {lo}, got {value}", field=name)

@@ -7,8 +7,9 @@
 
 The encoder runs once per material (the M rows of ``material``); each query row names its material by
 ``index``.  At inference the latent part of the first fusion layer (z W_z + b) is a per-material constant
-(:meth:`SurrogateNetwork.fusion_bias`), so a query costs only the decoder.  The paper does not state the
-decoder widths; ``width`` / ``spatial`` are chosen by measurement (docs/neural.md).
+(:meth:`SurrogateNetwork.fusion_bias`), so a query costs only the decoder
+(:class:`clothlab.neural.inference.DecoderPlan`).  The paper does not state the decoder widths; ``width`` /
+``spatial`` are chosen by measurement (docs/neural.md).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from clothlab.neural.layers import Dense, DenseAct, Residual, leaky_relu
+from clothlab.neural.layers import Dense, DenseAct, Residual
 
 
 @dataclass(frozen=True)
@@ -134,12 +135,3 @@ class SurrogateNetwork:
         """z W_z + b of the first fusion layer (M, width): the per-material part of every query."""
         p = self.layers["fuse1"].params
         return np.asarray(z, dtype=self.dtype) @ p["W"][:self.arch.latent] + p["b"]
-
-    def decode_fast(self, bias: np.ndarray, spatial: np.ndarray, angular: np.ndarray) -> np.ndarray:
-        """Outputs for queries of one material whose :meth:`fusion_bias` row is ``bias`` (width,): the
-        inference path (no cache; equals :meth:`forward`)."""
-        L = self.layers
-        w_s = L["fuse1"].params["W"][self.arch.latent:]
-        feature = L["fuse2"].forward(leaky_relu(spatial @ w_s + bias))
-        x = L["ang1"].forward(np.concatenate([feature, angular], axis=1))
-        return L["ang5"].forward(L["ang4"].forward(L["ang_res"].forward(x)))

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from clothlab.neural.encodings import direction_features, spatial_features
+from clothlab.neural.inference import DecoderPlan
 from clothlab.neural.losses import K_SPECULAR, decode_outputs, is_specular
 from clothlab.neural.network import SurrogateNetwork
 
@@ -33,6 +34,7 @@ class Surrogate:
     def __post_init__(self):
         self._specular = is_specular(self.component_names)
         self._bias = None
+        self._plans = {}
 
     @property
     def half_vector(self) -> bool:
@@ -42,7 +44,12 @@ class Surrogate:
         """(M, width) per-material constant of the first fusion layer (computed once)."""
         if self._bias is None:
             self._bias = self.network.fusion_bias(self.network.encode(self.materials))
+            self._plans = {}
         return self._bias
+
+    def reset(self) -> None:
+        """Forget the cached latents and inference plans (after the weights changed)."""
+        self._bias, self._plans = None, {}
 
     def features(self, centre, size, wi, wo) -> tuple[np.ndarray, np.ndarray]:
         """float32 spatial and direction features of queries."""
@@ -53,11 +60,14 @@ class Surrogate:
     def outputs(self, spatial: np.ndarray, angular: np.ndarray, material: int = 0, chunk: int = CHUNK):
         """Raw network outputs (N, C) of prepared features, chunk by chunk."""
         bias = self.fusion_biases()[material]
+        plan = self._plans.get(material)
+        if plan is None:
+            plan = self._plans[material] = DecoderPlan(self.network, bias)
         n = spatial.shape[0]
         out = np.empty((n, len(self.component_names)), dtype=self.network.dtype)
         for start in range(0, n, chunk):
             stop = min(n, start + chunk)
-            out[start:stop] = self.network.decode_fast(bias, spatial[start:stop], angular[start:stop])
+            out[start:stop] = plan(spatial[start:stop], angular[start:stop])
         return out
 
     def query(self, centre, size, wi, wo, material: int = 0, chunk: int = CHUNK) -> np.ndarray:

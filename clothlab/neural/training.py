@@ -155,7 +155,7 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
     cpu = time.process_time() - start
     if checkpoint is not None:
         _save_checkpoint(Path(checkpoint), surrogate, optimizer, step, cpu, curve)
-    surrogate._bias = None
+    surrogate.reset()
     metrics = {"steps": step, "cpu_s": cpu, "rows": {k: int(v.size) for k, v in split.items()},
                "train_sample": errors_by_size(surrogate, data, train_rows[:: max(1, train_rows.size // 50000)])}
     for key in ("heldout_pairs", "heldout_materials"):

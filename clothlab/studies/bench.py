@@ -54,6 +54,7 @@ SECTIONS = (
     Section("coverage", "clothlab.studies.coverage", "95 % posterior interval coverage over six sets"),
     Section("btf", "clothlab.studies.btf_memory", "BTF stack streaming: images/s and peak memory"),
     Section("render", "clothlab.studies.render_lod", "receding plane: LoD render cost and error by distance"),
+    Section("neural", "clothlab.studies.neural", "neural surrogate decoder queries/s at three widths"),
 )
 SECTION_NAMES: tuple[str, ...] = tuple(s.name for s in SECTIONS)
 

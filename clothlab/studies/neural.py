@@ -1,0 +1,97 @@
+"""Bench section ``neural``: inference speed of the numpy surrogate's decoder (Chen, Wang & Wang 2024,
+sec. 4.2-4.3: only the decoder runs per query) at the chosen width and one narrower and one wider, measured
+side by side in one run, against the target of :data:`TARGET_QPS` queries per second on this machine.
+
+Each width is timed in worker processes started with one BLAS thread each (OPENBLAS/OMP/MKL_NUM_THREADS=1:
+many small matrix products stall with threaded BLAS under load), float32, queries in chunks of
+:data:`CHUNK` rows: one worker alone, then one worker per core concurrently.  Queries/s is the total
+queries over the slowest worker's wall time; queries per CPU-second divides by the CPU time the workers
+used.  The weights are random: the cost does not depend on their values.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+TARGET_QPS = 1.0e6
+CHUNK = 2048
+WIDTHS = ((32, 16), (64, 32), (128, 64))  # (decoder width, spatial feature width); 64 / 32 is the default
+CHOSEN = (64, 32)
+
+
+def _worker(args) -> tuple[float, float]:
+    """(wall s, CPU s) of ``repeats`` passes over ``n`` queries at one width (best of the passes)."""
+    import time
+
+    from clothlab.neural.network import Architecture, SurrogateNetwork
+    from clothlab.neural.surrogate import Surrogate
+
+    width, spatial, n, repeats = args
+    arch = Architecture(n_material=39, n_spatial=24, n_angular=8, n_out=3, width=width, spatial=spatial)
+    rng = np.random.default_rng(0)
+    surrogate = Surrogate(SurrogateNetwork(arch), ("diffuse", "specular_warp", "specular_weft"),
+                          rng.random((1, 39)))
+    features = rng.random((n, 24)).astype(np.float32), rng.standard_normal((n, 8)).astype(np.float32)
+    surrogate.outputs(features[0][:CHUNK], features[1][:CHUNK])  # warm-up
+    best = (np.inf, np.inf)
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        surrogate.outputs(*features, chunk=CHUNK)
+        best = min(best, (time.perf_counter() - wall, time.process_time() - cpu))
+    return best
+
+
+def _pool(processes: int):
+    """A spawn pool whose workers start with one BLAS thread (the variables are read at numpy import)."""
+    import multiprocessing
+
+    names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    saved = {k: os.environ.get(k) for k in names}
+    os.environ.update({k: "1" for k in names})
+    try:
+        return multiprocessing.get_context("spawn").Pool(processes)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def neural_speed(quick: bool) -> dict:
+    """Queries/s and queries per CPU-second per width, one worker and one worker per core."""
+    from clothlab.neural.network import Architecture
+
+    cores = max(1, min(os.cpu_count() or 1, 2 if quick else os.cpu_count() or 1))
+    n, repeats = (65536, 3) if quick else (262144, 5)
+    rows = []
+    with _pool(cores) as pool:
+        pool.map(_worker, [(8, 8, CHUNK, 1)] * cores)  # start the workers (imports) before timing
+        for width, spatial in WIDTHS:
+            one = pool.apply(_worker, ((width, spatial, n, repeats),))
+            many = pool.map(_worker, [(width, spatial, n, repeats)] * cores)
+            arch = Architecture(39, 24, 8, 3, width=width, spatial=spatial)
+            qps = cores * n / max(w for w, _ in many)
+            rows.append({"width": width, "spatial": spatial, "kflop_per_query": arch.decoder_flops() / 1e3,
+                         "qps_one_worker": n / one[0], "qps_per_cpu_s_one_worker": n / max(one[1], 1e-9),
+                         "workers": cores, "qps": qps, "qps_per_cpu_s": cores * n / max(sum(c for _, c in many), 1e-9),
+                         "chosen": (width, spatial) == CHOSEN, "meets_target": qps >= TARGET_QPS})
+    return {"queries": n, "chunk": CHUNK, "target_qps": TARGET_QPS, "widths": rows}
+
+
+def run(context) -> dict:
+    return neural_speed(context.quick)
+
+
+def lines(f: dict) -> list[str]:
+    out = [f"== neural surrogate: decoder inference, float32, {f['chunk']}-row chunks, 1 BLAS thread per worker "
+           f"({f['queries']:,} queries per worker) ==",
+           "  width/spatial  kFLOP/query   1 worker q/s   q/CPU-s   workers   all q/s   q/CPU-s   target 1 M/s"]
+    for r in f["widths"]:
+        out.append(f"  {r['width']:>5}/{r['spatial']:<6}{'*' if r['chosen'] else ' '} {r['kflop_per_query']:>10.1f} "
+                   f"{r['qps_one_worker']:>14,.0f} {r['qps_per_cpu_s_one_worker']:>9,.0f} {r['workers']:>9} "
+                   f"{r['qps']:>9,.0f} {r['qps_per_cpu_s']:>9,.0f}   {'met' if r['meets_target'] else 'NOT met'}")
+    out.append("  * the default width")
+    return out
