@@ -60,12 +60,14 @@ def _pool(processes: int):
                 os.environ[k] = v
 
 
-def neural_speed(quick: bool) -> dict:
-    """Queries/s and queries per CPU-second per width, one worker and one worker per core."""
+def neural_speed(quick: bool, queries: int | None = None, repeats: int | None = None) -> dict:
+    """Queries/s and queries per CPU-second per width, one worker and one worker per core (``queries`` per
+    worker and timing ``repeats`` override the run size)."""
     from clothlab.neural.network import Architecture
 
-    cores = max(1, min(os.cpu_count() or 1, 2 if quick else os.cpu_count() or 1))
-    n, repeats = (65536, 3) if quick else (262144, 5)
+    cores = max(1, os.cpu_count() or 1)
+    n = queries or (65536 if quick else 262144)
+    repeats = repeats or (3 if quick else 5)
     rows = []
     with _pool(cores) as pool:
         pool.map(_worker, [(8, 8, CHUNK, 1)] * cores)  # start the workers (imports) before timing
