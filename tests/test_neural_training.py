@@ -150,3 +150,37 @@ def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, 
     assert "--resume" in capsys.readouterr().err
     assert main([*args[:5], "0.04", *args[6:], "--resume"]) == 0
     assert json.loads((out / "training.json").read_text())["metrics"]["steps"] > first
+
+
+# ------------------------------------------------------------------------------------------- kind: neural
+
+
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory, model):
+    _, result = _tiny_run(model, steps=60)
+    result.surrogate.encoding.update(parameters=model.params.names(), params=model.default_parameters())
+    return save_surrogate(result.surrogate, tmp_path_factory.mktemp("neural") / "s")
+
+
+def test_neural_kind_answers_through_the_surrogate(weights, model):
+    from clothlab.errors import ConfigError
+    from clothlab.models.neural.model import FAR_SIZE
+
+    neural = build_model("neural", model.weave, weights=str(weights))
+    surrogate, _ = load_surrogate(weights)
+    rng = np.random.default_rng(5)
+    wi = np.column_stack([rng.uniform(-0.5, 0.5, (7, 2)), np.full(7, 0.7)])
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo = wi * [-1, -1, 1]
+    far = surrogate.query(np.full((7, 2), 0.5), np.full(7, FAR_SIZE), wi, wo)
+    comps = neural.components(wi, wo)
+    np.testing.assert_array_equal(np.column_stack([comps[n] for n in neural.component_names]), far)
+    u, v = rng.random(7), rng.random(7)
+    tex = neural.texture().components(u, v, wi, wo, footprint=0.3)
+    near = surrogate.query(np.column_stack([u, v]), np.full(7, 0.3), wi, wo)
+    np.testing.assert_array_equal(tex["specular_warp"], near[:, 1])
+    other = neural.components(wi, wo, {"alpha": 0.3})  # another material: through the encoder
+    assert not np.allclose(other["specular_warp"], comps["specular_warp"])
+    np.testing.assert_array_equal(neural.components(wi, wo, {"alpha": 0.3})["specular_warp"], other["specular_warp"])
+    with pytest.raises(ConfigError, match="model.options.weights"):
+        build_model("neural", model.weave)

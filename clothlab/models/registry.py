@@ -16,6 +16,7 @@ MODEL_KINDS = {
     "kang": ("clothlab.models.kang.model", "KangModel"),
     "lambert": ("clothlab.models.baselines.lambert", "LambertModel"),
     "oren-nayar": ("clothlab.models.baselines.oren_nayar", "OrenNayarModel"),
+    "neural": ("clothlab.models.neural.model", "NeuralModel"),
 }
 DEFAULT_KIND = "irawan"
 
