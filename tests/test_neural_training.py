@@ -183,4 +183,24 @@ def test_neural_kind_answers_through_the_surrogate(weights, model):
     assert not np.allclose(other["specular_warp"], comps["specular_warp"])
     np.testing.assert_array_equal(neural.components(wi, wo, {"alpha": 0.3})["specular_warp"], other["specular_warp"])
     with pytest.raises(ConfigError, match="model.options.weights"):
-        build_model("neural", model.weave)
+        build_model("neural", get_preset("cotton-denim"))
+
+
+def test_whole_tile_split_is_exact_for_whole_tiles_and_agrees_with_plain_mc(model):
+    """A box of side s = n + f: the n x n whole-tile part is the reflectance model (the tile-average
+    identity), the rest sampled; at s = 2 the estimate is the reflectance model exactly, at s = 1.5 it agrees
+    with a dense-grid average of the box written out here."""
+    texture = model.texture()
+    split = TextureMonteCarloLabels(texture, samples=64, tile_average=ModelLabels(model))
+    wi = np.array([[0.3, 0.2, np.sqrt(1 - 0.13)]])
+    wo = np.array([[-0.25, -0.1, np.sqrt(1 - 0.0725)]])
+    centre = np.array([[0.37, 0.61]])
+    np.testing.assert_allclose(split(wi, wo, centre, np.array([2.0])), ModelLabels(model)(wi, wo, centre, [2.0]),
+                               rtol=1e-12)
+    g = (np.arange(600) + 0.5) / 600 * 1.5
+    u, v = np.meshgrid(centre[0, 0] - 0.75 + g, centre[0, 1] - 0.75 + g)
+    dense = texture.components(u.ravel(), v.ravel(), wi, wo, noise=False)
+    grid = np.array([dense[n].mean() for n in model.component_names])
+    estimates = np.array([TextureMonteCarloLabels(texture, samples=256, seed=s, tile_average=ModelLabels(model))(
+        wi, wo, centre, np.array([1.5]))[0] for s in range(8)])
+    np.testing.assert_allclose(estimates.mean(axis=0), grid, rtol=0.03)

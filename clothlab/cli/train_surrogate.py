@@ -23,7 +23,8 @@ def add_parser(sub):
     p.add_argument("--budget", type=float, default=5.0, help="CPU-minutes for labelling and training (default 5)")
     p.add_argument("--resume", action="store_true", help="continue a run in DIR (its data and checkpoint)")
     p.add_argument("--labels", choices=LABELS, default="auto",
-                   help="label source: sat/mc footprint estimator, mc (stratified MC of the texture model), "
+                   help="label source: sat/mc footprint estimator, mc (stratified MC of the texture model over the "
+                        "part of the footprint that is not whole tiles), "
                         "model (the reflectance model, footprint-independent); auto = sat when available, else mc")
     p.add_argument("--samples", type=int, default=64, help="MC samples per query for mc labels (default 64)")
     p.add_argument("--pairs", type=int, default=64, help="direction pairs per footprint (default 64)")
@@ -70,7 +71,8 @@ def _labels(choice: str, model, params: dict, samples: int, seed: int):
                                   "use --labels mc", field="--labels") from None
         else:
             return FootprintLabels(footprint_components, texture, params, method="sat")
-    return TextureMonteCarloLabels(texture, params, samples=samples, seed=seed)
+    return TextureMonteCarloLabels(texture, params, samples=max(2, samples), seed=seed,
+                                   tile_average=ModelLabels(model, params))
 
 
 def run(args) -> int:

@@ -8,7 +8,8 @@ queries of the Irawan-Marschner texture model.  As a model:
 * :meth:`NeuralModel.texture` is a filtering texture model (``texture_filters``): the query centre is the
   texture point (u, v) and the footprint size is ``footprint`` (tiles; :data:`MIN_FOOTPRINT` when None).
 
-Options: ``weights`` (the ``.npz`` written by ``clothlab train-surrogate``; required).  Parameters are those
+Options: ``weights`` (the ``.npz`` written by ``clothlab train-surrogate``; default: the shipped weights of
+the weave's preset, :data:`SHIPPED`, where there are some).  Parameters are those
 of the target model (the Irawan-Marschner table); a parameter set other than the trained one goes through
 the encoder (a fast approximation, exact only near the trained materials).  Components as the target's:
 ``diffuse``, ``specular_warp``, ``specular_weft`` (1/sr), coefficients linear as always.
@@ -16,7 +17,7 @@ the encoder (a fast approximation, exact only near the trained materials).  Comp
 ==========  =================================================================================
 option      meaning
 ==========  =================================================================================
-weights     path of the surrogate ``.npz`` (its ``.json`` sidecar beside it)
+weights     path of the surrogate ``.npz`` (its ``.json`` sidecar beside it); default shipped
 ==========  =================================================================================
 """
 
@@ -33,6 +34,8 @@ from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
 from clothlab.neural.encodings import material_vector
 from clothlab.neural.serialise import load_surrogate
 
+SHIPPED = Path(__file__).parent / "data"
+"""Shipped per-fabric weights, ``<preset>.npz`` + ``.json`` (docs/neural.md says how they were trained)."""
 FAR_SIZE = 4.5  # tiles
 MIN_FOOTPRINT = 0.01  # tiles
 
@@ -51,8 +54,12 @@ class NeuralModel(Model):
     def __init__(self, weave, *, weights: str | None = None):
         super().__init__(weave, weights=weights)
         if not weights:
-            raise ConfigError("kind 'neural' needs model.options.weights: the surrogate .npz written by "
-                              "clothlab train-surrogate", field="model.options.weights")
+            weights = SHIPPED / f"{weave.name}.npz"
+            if not weights.exists():
+                shipped = ", ".join(sorted(p.stem for p in SHIPPED.glob("*.npz"))) or "none"
+                raise ConfigError(f"no shipped surrogate for weave {weave.name!r} (shipped: {shipped}); give "
+                                  "model.options.weights: a .npz written by clothlab train-surrogate",
+                                  field="model.options.weights")
         self.surrogate, self.sidecar = load_surrogate(Path(weights))
         if tuple(self.surrogate.component_names) != COMPONENTS:
             raise ConfigError(f"{weights}: components {self.surrogate.component_names}, expected {COMPONENTS} "
