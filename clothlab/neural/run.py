@@ -38,6 +38,7 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
     label_s = time.process_time() - start
     LOG.info(f"{written} chunks labelled ({data.shape[0]:,} queries in all) in {label_s:.1f} CPU-s")
     spec = replace(train_spec, budget_s=max(1.0, budget_s - label_s)) if train_spec.steps is None else train_spec
+    encoding = {**(encoding or {}), "data_spec": data_spec.to_dict()}  # the held-out cells follow from it
     result = train(data, names, materials, spec, encoding=encoding, heldout_materials=heldout_materials,
                    checkpoint=directory / "checkpoint.npz", resume=resume)
     result.metrics["label_cpu_s"] = label_s
