@@ -158,7 +158,8 @@ def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, 
 @pytest.fixture(scope="module")
 def weights(tmp_path_factory, model):
     _, result = _tiny_run(model, steps=60)
-    result.surrogate.encoding.update(parameters=model.params.names(), params=model.default_parameters())
+    result.surrogate.encoding.update(parameters=model.params.names(), params=model.default_parameters(),
+                                     weave=model.weave.name, data_spec=DataSpec(centres=2, sizes=3).to_dict())
     return save_surrogate(result.surrogate, tmp_path_factory.mktemp("neural") / "s")
 
 
@@ -204,3 +205,20 @@ def test_whole_tile_split_is_exact_for_whole_tiles_and_agrees_with_plain_mc(mode
     estimates = np.array([TextureMonteCarloLabels(texture, samples=256, seed=s, tile_average=ModelLabels(model))(
         wi, wo, centre, np.array([1.5]))[0] for s in range(8)])
     np.testing.assert_allclose(estimates.mean(axis=0), grid, rtol=0.03)
+
+
+def test_equal_time_comparison_with_monte_carlo(weights, monkeypatch):
+    """The bench's surrogate-vs-MC table: MC error falls with its sample count, times grow with it, and the
+    equal-time row is the first MC row at least as slow as the surrogate."""
+    import clothlab.models.neural.model as neural_model
+    from clothlab.studies import neural
+
+    monkeypatch.setattr(neural_model, "SHIPPED", weights.parent)
+    f = neural.surrogate_vs_mc(True, fabric=weights.stem, queries=40)
+    rows = {r["method"]: r for r in f["rows"]}
+    assert f["queries"] > 10 and set(rows) == {"surrogate", *(f"MC {k}" for k in neural.MC_SAMPLES)}
+    assert rows["MC 256"]["size >= 0.12"] < 0.2 * rows["MC 1"]["size >= 0.12"]
+    assert rows["MC 256"]["us_per_query"] > rows["MC 1"]["us_per_query"]
+    slower = [r for r in f["rows"][1:] if r["us_per_query"] >= rows["surrogate"]["us_per_query"]]
+    assert f["equal_time_mc"] == (slower[0] if slower else f["rows"][-1])["method"]
+    assert "equal time" in "\n".join(neural.lines({"chunk": 1, "queries": 1, "widths": [], "versus_mc": f}))

@@ -7,6 +7,13 @@ many small matrix products stall with threaded BLAS under load), float32, querie
 :data:`CHUNK` rows: one worker alone, then one worker per core concurrently.  Queries/s is the total
 queries over the slowest worker's wall time; queries per CPU-second divides by the CPU time the workers
 used.  The weights are random: the cost does not depend on their values.
+
+With a shipped per-fabric network (:data:`clothlab.models.neural.model.SHIPPED`), the section also sets it
+against Monte-Carlo footprint integration at equal time (the issue's "MSE vs time" table): held-out
+direction pairs of its training data spec, footprints >= 0.12 tile; the reference is the whole-tile-split
+MC estimate with :data:`REFERENCE_SAMPLES` samples (:class:`clothlab.neural.labels.TextureMonteCarloLabels`);
+the MC estimates are plain stratified box averages of k = 1, 2, 4, ..., 256 texture samples (what a renderer
+does); MSE of f = the sum of the components, seconds per query measured in this process.
 """
 
 from __future__ import annotations
@@ -83,8 +90,58 @@ def neural_speed(quick: bool, queries: int | None = None, repeats: int | None = 
     return {"queries": n, "chunk": CHUNK, "target_qps": TARGET_QPS, "widths": rows}
 
 
+REFERENCE_SAMPLES = 4096
+MC_SAMPLES = (1, 2, 4, 8, 16, 32, 64, 128, 256)
+SHIPPED_FABRIC = "silk-shantung"
+
+
+def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | None = None) -> dict:
+    """MSE and seconds per query of the shipped surrogate and of k-sample MC, by footprint group."""
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.models.registry import build_model
+    from clothlab.neural.data import DataSpec, chunk_queries
+    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+    from clothlab.neural.serialise import load_surrogate
+    from clothlab.studies.timing import best_time
+    from clothlab.weave.presets import get_preset
+
+    path = SHIPPED / f"{fabric}.npz"
+    if not path.exists():
+        return {"skipped": f"no shipped surrogate for {fabric}"}
+    surrogate, sidecar = load_surrogate(path)
+    enc = sidecar["encoding"]
+    model = build_model("irawan", get_preset(enc["weave"]))
+    params, texture = enc["params"], model.texture()
+    spec = DataSpec(**enc.get("data_spec", {}))
+    q = np.concatenate([chunk_queries(spec, 0, c) for c in range(spec.chunks_per_material())])
+    q = q[(q[:, 10] > 0.5) & (q[:, 3] >= 0.12)]
+    n = queries or (200 if quick else 1000)
+    q = q[np.sort(np.random.default_rng(11).choice(len(q), min(n, len(q)), replace=False))]
+    args = (q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3])
+    ref = TextureMonteCarloLabels(texture, params, samples=REFERENCE_SAMPLES // (4 if quick else 1), seed=12345,
+                                  tile_average=ModelLabels(model, params))(*args).sum(axis=1)
+    groups = {"size >= 0.12": q[:, 3] >= 0.12, "size >= 1": q[:, 3] >= 1.0}
+
+    def row(name, fn, samples=None):
+        value = fn().sum(axis=1)
+        seconds = best_time(fn, 1 if quick else 3, min_sample_s=0.0) / len(q)
+        return {"method": name, "samples": samples, "us_per_query": 1e6 * seconds,
+                **{g: float(np.mean(np.square(value[sel] - ref[sel]))) for g, sel in groups.items()}}
+
+    rows = [row("surrogate", lambda: surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10]))]
+    for k in MC_SAMPLES:
+        rows.append(row(f"MC {k}", lambda k=k: TextureMonteCarloLabels(texture, params, samples=k, seed=7)(*args), k))
+    sur = rows[0]
+    equal = next((r for r in rows[1:] if r["us_per_query"] >= sur["us_per_query"]), rows[-1])
+    ratios = {g: equal[g] / max(sur[g], 1e-300) for g in groups}
+    mc16 = next(r for r in rows if r["samples"] == 16)
+    return {"fabric": fabric, "queries": int(len(q)), "reference_samples": REFERENCE_SAMPLES // (4 if quick else 1),
+            "rows": rows, "equal_time_mc": equal["method"], "mse_ratio_equal_time": ratios,
+            "mse_ratio_mc16_size_ge_1": mc16["size >= 1"] / max(sur["size >= 1"], 1e-300)}
+
+
 def run(context) -> dict:
-    return neural_speed(context.quick)
+    return {**neural_speed(context.quick), "versus_mc": surrogate_vs_mc(context.quick)}
 
 
 def lines(f: dict) -> list[str]:
@@ -96,4 +153,18 @@ def lines(f: dict) -> list[str]:
                    f"{r['qps_one_worker']:>14,.0f} {r['qps_per_cpu_s_one_worker']:>9,.0f} {r['workers']:>9} "
                    f"{r['qps']:>9,.0f} {r['qps_per_cpu_s']:>9,.0f}   {'met' if r['meets_target'] else 'NOT met'}")
     out.append("  * the default width")
+    v = f.get("versus_mc") or {}
+    if "rows" in v:
+        out.append(f"  {v['fabric']}: shipped surrogate vs MC footprint integration, {v['queries']} held-out queries, "
+                   f"reference MC {v['reference_samples']} (whole-tile split); MSE of f")
+        out.append("    method        us/query   MSE size>=0.12   MSE size>=1")
+        for r in v["rows"]:
+            out.append(f"    {r['method']:<12}{r['us_per_query']:>9.2f}   {r['size >= 0.12']:>14.4g}"
+                       f"   {r['size >= 1']:>11.4g}")
+        ratio = v["mse_ratio_equal_time"]
+        out.append(f"    equal time ({v['equal_time_mc']}): MC MSE / surrogate MSE = {ratio['size >= 0.12']:.1f} "
+                   f"(>= 0.12 tile), {ratio['size >= 1']:.1f} (>= 1 tile); MC 16 / surrogate at >= 1 tile = "
+                   f"{v['mse_ratio_mc16_size_ge_1']:.1f}")
+    elif v:
+        out.append(f"  surrogate vs MC: {v['skipped']}")
     return out
