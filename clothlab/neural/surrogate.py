@@ -57,12 +57,20 @@ class Surrogate:
         return (spatial_features(np.atleast_2d(centre), np.atleast_1d(size)).astype(dt),
                 direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector).astype(dt))
 
-    def outputs(self, spatial: np.ndarray, angular: np.ndarray, material: int = 0, chunk: int = CHUNK):
-        """Raw network outputs (N, C) of prepared features, chunk by chunk."""
-        bias = self.fusion_biases()[material]
-        plan = self._plans.get(material)
+    def _plan(self, material) -> DecoderPlan:
+        """The decoder plan of material row ``material`` (int, cached) or of an encoder input vector (new)."""
+        if not isinstance(material, int | np.integer):
+            vector = np.asarray(material, dtype=np.float64).reshape(1, -1)
+            return DecoderPlan(self.network, self.network.fusion_bias(self.network.encode(vector))[0])
+        plan = self._plans.get(int(material))
         if plan is None:
-            plan = self._plans[material] = DecoderPlan(self.network, bias)
+            plan = self._plans[int(material)] = DecoderPlan(self.network, self.fusion_biases()[material])
+        return plan
+
+    def outputs(self, spatial: np.ndarray, angular: np.ndarray, material=0, chunk: int = CHUNK):
+        """Raw network outputs (N, C) of prepared features, chunk by chunk; ``material``: a trained
+        material's row, or an encoder input vector (n_material,) of another material."""
+        plan = self._plan(material)
         n = spatial.shape[0]
         out = np.empty((n, len(self.component_names)), dtype=self.network.dtype)
         for start in range(0, n, chunk):
@@ -70,7 +78,7 @@ class Surrogate:
             out[start:stop] = plan(spatial[start:stop], angular[start:stop])
         return out
 
-    def query(self, centre, size, wi, wo, material: int = 0, chunk: int = CHUNK) -> np.ndarray:
+    def query(self, centre, size, wi, wo, material=0, chunk: int = CHUNK) -> np.ndarray:
         """(N, C) components (1/sr, float64) of box footprints; back-facing pairs give 0."""
         wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
         spatial, angular = self.features(centre, size, wi, wo)
@@ -79,7 +87,7 @@ class Surrogate:
         front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
         return np.where(front[:, None], values, 0.0)
 
-    def components(self, centre, size, wi, wo, material: int = 0) -> dict[str, np.ndarray]:
+    def components(self, centre, size, wi, wo, material=0) -> dict[str, np.ndarray]:
         """:meth:`query` as a dict of components."""
         values = self.query(centre, size, wi, wo, material)
         return {name: values[:, i] for i, name in enumerate(self.component_names)}

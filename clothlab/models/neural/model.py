@@ -31,7 +31,7 @@ from clothlab.errors import ConfigError
 from clothlab.models.base import Model, as_directions
 from clothlab.models.irawan.integrals import COMPONENTS
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
-from clothlab.neural.encodings import material_vector
+from clothlab.neural.encodings import normalised_parameters, pattern_descriptor
 from clothlab.neural.serialise import load_surrogate
 
 SHIPPED = Path(__file__).parent / "data"
@@ -66,24 +66,18 @@ class NeuralModel(Model):
                               "(an Irawan-Marschner target)", field="model.options.weights")
         self._encoding = self.surrogate.encoding
         self._trained = {k: float(v) for k, v in self._encoding.get("params", {}).items()}
-        self._latents: dict = {}
+        self._pattern = pattern_descriptor(weave, self._encoding.get("pattern_order", 2))  # the encoder's pattern part
 
     def default_parameters(self) -> dict[str, float]:
         return {**weave_parameters(self.weave), **self._trained}
 
-    def _material(self, params: dict | None) -> int:
-        """Index of the material row for ``params`` (the trained one, or a new row through the encoder)."""
+    def _material(self, params: dict | None):
+        """The trained material's row (0) for its own parameters, else the encoder input of ``params``."""
         p = self.resolve(params)
         if all(abs(p[k] - v) <= 1e-12 * max(1.0, abs(v)) for k, v in self._trained.items()):
             return 0
-        key = tuple(sorted(p.items()))
-        if key not in self._latents:
-            names = self._encoding.get("parameters", self.params.names())
-            row = material_vector(self.weave, p, self.params, names, self._encoding.get("pattern_order", 2))
-            self.surrogate.materials = np.vstack([self.surrogate.materials, row])
-            self.surrogate.reset()
-            self._latents[key] = self.surrogate.materials.shape[0] - 1
-        return self._latents[key]
+        names = self._encoding.get("parameters", self.params.names())
+        return np.concatenate([normalised_parameters(p, self.params, names), self._pattern])
 
     def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
         """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles."""
