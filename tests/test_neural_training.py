@@ -150,6 +150,11 @@ def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, 
     assert "--resume" in capsys.readouterr().err
     assert main([*args[:5], "0.04", *args[6:], "--resume"]) == 0
     assert json.loads((out / "training.json").read_text())["metrics"]["steps"] > first
+    capsys.readouterr()
+    assert main([*args, "--resume", "--width", "12"]) == 2  # another architecture: one line, no traceback
+    assert "--width" in capsys.readouterr().err
+    assert main([*args, "--resume", "--pairs", "5"]) == 2
+    assert "--pairs" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------------------------- kind: neural

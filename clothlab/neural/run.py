@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from clothlab.atomic import atomic_write_bytes
+from clothlab.errors import ConfigError
 from clothlab.neural.data import DataSpec, assemble, generate
 from clothlab.neural.serialise import save_surrogate
 from clothlab.neural.training import TrainResult, TrainSpec, train
@@ -30,6 +31,11 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
     input) describe material m.  Returns the result after writing every file of the directory."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
+    manifest = directory / "data" / "data.json"
+    if manifest.exists() and json.loads(manifest.read_text(encoding="utf-8")).get("spec") != data_spec.to_dict():
+        raise ConfigError(f"the data in {directory / 'data'} was sampled with other settings "
+                          f"({json.loads(manifest.read_text(encoding='utf-8')).get('spec')}); resume with the same "
+                          "--pairs and --seed, or start a new directory", path=directory)
     start = time.process_time()
     names = tuple(label_sources[0].component_names)
     written = generate(directory / "data", data_spec, label_sources,

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.atomic import atomic_write_bytes
+from clothlab.errors import InputError
 from clothlab.neural.data import COLUMNS
 from clothlab.neural.encodings import BLOB_BINS, n_direction_features
 from clothlab.neural.losses import column_weights, encode_targets, is_specular, loss_and_gradient
@@ -99,10 +100,14 @@ def _save_checkpoint(path: Path, surrogate, optimizer, step, cpu_s, curve) -> No
 
 
 def _load_checkpoint(path: Path, surrogate, optimizer):
-    with np.load(path, allow_pickle=False) as data:
-        surrogate.network.set_params({k[6:]: data[k] for k in data.files if k.startswith("param/")})
-        optimizer.load_state({k[5:]: data[k] for k in data.files if k.startswith("adam/")})
-        return int(data["step"]), float(data["cpu_s"]), json.loads(bytes(data["curve"]).decode())
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            surrogate.network.set_params({k[6:]: data[k] for k in data.files if k.startswith("param/")})
+            optimizer.load_state({k[5:]: data[k] for k in data.files if k.startswith("adam/")})
+            return int(data["step"]), float(data["cpu_s"]), json.loads(bytes(data["curve"]).decode())
+    except (KeyError, ValueError) as exc:
+        raise InputError(f"checkpoint does not fit this network ({exc}); resume with the same --width and "
+                         "--spatial, or start a new directory", path=path) from None
 
 
 def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, encoding: dict | None = None,
