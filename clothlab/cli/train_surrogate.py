@@ -9,7 +9,7 @@ from pathlib import Path
 from clothlab.cli.options import add_force, add_output
 
 TARGETS = {"im": "irawan", "surface": "surface"}
-LABELS = ("auto", "sat", "mc", "model")
+LABELS = ("mc", "sat", "model")
 
 
 def add_parser(sub):
@@ -22,10 +22,12 @@ def add_parser(sub):
                    help="the model whose footprint averages are learnt (default im: Irawan-Marschner texture)")
     p.add_argument("--budget", type=float, default=5.0, help="CPU-minutes for labelling and training (default 5)")
     p.add_argument("--resume", action="store_true", help="continue a run in DIR (its data and checkpoint)")
-    p.add_argument("--labels", choices=LABELS, default="auto",
-                   help="label source: sat/mc footprint estimator, mc (stratified MC of the texture model over the "
-                        "part of the footprint that is not whole tiles), "
-                        "model (the reflectance model, footprint-independent); auto = sat when available, else mc")
+    p.add_argument("--labels", choices=LABELS, default="mc",
+                   help="label source: mc (default: stratified MC of the texture model over the part of the "
+                        "footprint that is not whole tiles, the rest exact), sat (summed-area tables of "
+                        "clothlab.models.footprint: one table per direction pair, and every query here has its "
+                        "own pair, so slow until chunks share pairs), model (the reflectance model, "
+                        "footprint-independent)")
     p.add_argument("--samples", type=int, default=64, help="MC samples per query for mc labels (default 64)")
     p.add_argument("--pairs", type=int, default=64, help="direction pairs per footprint (default 64)")
     p.add_argument("--width", type=int, default=64, help="decoder width (default 64)")
@@ -62,15 +64,13 @@ def _labels(choice: str, model, params: dict, samples: int, seed: int):
         raise ConfigError(f"model kind {model.kind!r} has no texture model to average over footprints; "
                           "use --labels model", field="--labels")
     texture = model.texture(seed=seed)
-    if choice in ("auto", "sat"):
+    if choice == "sat":
         try:
             from clothlab.models.footprint import footprint_components
         except ImportError:
-            if choice == "sat":
-                raise ConfigError("the footprint estimator (clothlab.models.footprint) is not available; "
-                                  "use --labels mc", field="--labels") from None
-        else:
-            return FootprintLabels(footprint_components, texture, params, method="sat")
+            raise ConfigError("the footprint estimator (clothlab.models.footprint) is not available; "
+                              "use --labels mc", field="--labels") from None
+        return FootprintLabels(footprint_components, texture, params, method="sat")
     return TextureMonteCarloLabels(texture, params, samples=max(2, samples), seed=seed,
                                    tile_average=ModelLabels(model, params))
 
