@@ -10,7 +10,16 @@ import pytest
 
 from clothlab.errors import InputError
 from clothlab.models.registry import build_model
-from clothlab.neural.data import MIN_SIZE, MIN_Z, DataSpec, assemble, chunk_queries, generate, heldout_cells
+from clothlab.neural.data import (
+    MIN_SIZE,
+    MIN_Z,
+    DataSpec,
+    assemble,
+    chunk_queries,
+    generate,
+    heldout_cells,
+    heldout_queries,
+)
 from clothlab.neural.encodings import (
     material_vector,
     normalised_parameters,
@@ -59,24 +68,38 @@ def test_pattern_descriptor_dc_term_is_the_warp_weft_balance():
 
 
 def test_chunks_follow_table_2_and_are_independent_and_reproducible():
-    spec = DataSpec(pairs=8, seed=3)
-    a = chunk_queries(spec, 1, 5)
-    np.testing.assert_array_equal(a, chunk_queries(spec, 1, 5))
-    assert not np.array_equal(a[:, 1:], chunk_queries(spec, 1, 6)[:, 1:])
-    assert a.shape[0] == spec.rows_per_chunk() == 2 * 10 * 8
-    cell = (5 % 8, 5 // 8)  # the centre lies in its grid cell
-    assert cell[0] / 8 <= a[0, 1] < (cell[0] + 1) / 8 and cell[1] / 8 <= a[0, 2] < (cell[1] + 1) / 8
-    sizes = np.unique(a[:, 3])
-    assert np.sum(sizes < 1.0) == 10 and np.sum(sizes > 1.0) == 10 and sizes.min() >= MIN_SIZE and sizes.max() < 5
-    for wi in (a[:, 4:7], a[:, 7:10]):
-        np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1.0)
-        assert np.all(wi[:, 2] >= MIN_Z)
+    spec = DataSpec(pairs=8, pairs_per_chunk=2, seed=3)
+    assert spec.chunks_per_material() == 4
+    a = chunk_queries(spec, 1, 2)
+    np.testing.assert_array_equal(a, chunk_queries(spec, 1, 2))
+    assert not np.array_equal(a[:, 1:], chunk_queries(spec, 1, 3)[:, 1:])
+    assert a.shape[0] == spec.rows_per_chunk() == 2 * 64 * 20
+    pairs = np.unique(a[:, 4:10], axis=0)
+    assert len(pairs) == 2  # every pair meets every footprint of the chunk
+    for pair in pairs:
+        rows = a[np.all(a[:, 4:10] == pair, axis=1)]
+        cells = np.floor(rows[:, 1] * 8) + 8 * np.floor(rows[:, 2] * 8)
+        assert sorted(np.unique(cells)) == list(range(64))  # one centre in each grid cell
+        for cell in range(64):
+            sizes = rows[cells == cell, 3]
+            assert len(np.unique(rows[cells == cell, 1])) == 1
+            assert np.sum(sizes < 1.0) == 10 and np.sum(sizes > 1.0) == 10
+            assert sizes.min() >= MIN_SIZE and sizes.max() < 5
+            assert sorted(np.floor(sizes[sizes > 1.0] * 10 / 4 - 2.5).astype(int)) == list(range(10))  # strata
+    for w in (a[:, 4:7], a[:, 7:10]):
+        np.testing.assert_allclose(np.linalg.norm(w, axis=1), 1.0)
+        assert np.all(w[:, 2] >= MIN_Z)
     frac = heldout_cells(DataSpec(heldout_pairs=0.1)).mean()
     assert 0.07 < frac < 0.13
+    held = heldout_queries(DataSpec(heldout_pairs=0.1), 300, sizes=(0.5, 2.0))
+    cell = lambda w: np.floor((w[:, 0] + 1) * 4) + 8 * np.floor((w[:, 1] + 1) * 4)  # noqa: E731
+    cells = heldout_cells(DataSpec(heldout_pairs=0.1))
+    assert len(held) == 300 and np.all(cells[cell(held[:, 4:7]).astype(int), cell(held[:, 7:10]).astype(int)])
+    assert np.all((held[:, 3] >= 0.5) & (held[:, 3] < 2.0)) and len(np.unique(held[:, 4])) == 300
 
 
 def test_generation_resumes_to_the_same_data_and_is_memory_mapped(tmp_path, model):
-    spec = DataSpec(centres=2, sizes=2, pairs=4)
+    spec = DataSpec(centres=2, sizes=2, pairs=4, pairs_per_chunk=1)
     labels = [ModelLabels(model)]
     calls = iter(range(100))
     assert generate(tmp_path / "a", spec, labels, stop=lambda: next(calls) >= 2) == 2
@@ -105,7 +128,7 @@ def test_monte_carlo_labels_of_whole_tiles_approach_the_reflectance_model(model)
 
 
 def _tiny_run(model, steps=150):
-    spec = DataSpec(centres=2, sizes=3, pairs=64, heldout_pairs=0.2)
+    spec = DataSpec(centres=2, sizes=3, pairs=128, pairs_per_chunk=16, heldout_pairs=0.2)
     import tempfile
     from pathlib import Path
 
@@ -230,10 +253,7 @@ def test_equal_time_comparison_with_monte_carlo(weights, monkeypatch):
 
 
 def _heldout_queries(sidecar, lo, hi, n, seed=0):
-    spec = DataSpec(**sidecar["encoding"]["data_spec"])
-    q = np.concatenate([chunk_queries(spec, 0, c) for c in range(0, spec.chunks_per_material(), 4)])
-    q = q[(q[:, 10] > 0.5) & (q[:, 3] >= lo) & (q[:, 3] < hi)]
-    return q[np.random.default_rng(seed).choice(len(q), n, replace=False)]
+    return heldout_queries(DataSpec(**sidecar["encoding"]["data_spec"]), n, seed, (lo, hi))
 
 
 def test_shipped_weights_agree_with_fresh_labels_and_the_far_view(model):

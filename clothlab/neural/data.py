@@ -1,18 +1,20 @@
 """Training data: footprint queries sampled as Chen, Wang & Wang 2024, sec. 5.1 / Table 2, labelled by a
 label source (:mod:`.labels`), stored chunk by chunk as ``.npy`` files and read back memory-mapped.
 
-Per material, the tile is cut into a ``centres`` x ``centres`` grid (8 x 8 in the paper) and one footprint
-centre is drawn uniformly in each cell; each centre gets ``sizes`` footprint sizes stratified uniformly in
-each range of :data:`SIZE_RANGES` ((0, 1) and (1, 5) tiles, 10 each in the paper; sizes below
-:data:`MIN_SIZE` are raised to it); each footprint gets ``pairs`` direction pairs drawn from the stratified
-``directions`` x ``directions`` grid over (x, y) in (-1, 1)^2 of both wi and wo (8 x 8), z = sqrt(1 - x^2 -
-y^2), reflection only (z >= :data:`MIN_Z` for both).  A fixed, seeded subset (``heldout_pairs``) of the
-(wi cell, wo cell) pairs is never trained on: the held-out direction pairs.
+Per material, ``pairs`` direction pairs are drawn from the stratified ``directions`` x ``directions`` grid
+over (x, y) in (-1, 1)^2 of both wi and wo (8 x 8 in the paper), z = sqrt(1 - x^2 - y^2), reflection only
+(z >= :data:`MIN_Z` for both).  Every pair meets every footprint of its chunk, as in the paper (all pairs
+with every footprint): the tile is cut into a ``centres`` x ``centres`` grid (8 x 8) with one centre drawn
+uniformly in each cell, and each centre gets ``sizes`` footprint sizes stratified uniformly in each range
+of :data:`SIZE_RANGES` ((0, 1) and (1, 5) tiles, 10 each; sizes below :data:`MIN_SIZE` are raised to it).
+A fixed, seeded subset (``heldout_pairs``) of the (wi cell, wo cell) pairs is never trained on: the held-out
+direction pairs.
 
-A *chunk* is one (material, centre cell): ``sizes x len(SIZE_RANGES) x pairs`` rows, generated from its own
-seed ``(seed, material, cell)`` alone, so chunks are independent tasks (any order, any machine) and a run
-resumes by generating only the chunks whose file is missing.  Row columns: :data:`COLUMNS` then the
-label source's components.
+A *chunk* is one (material, group of ``pairs_per_chunk`` direction pairs) with all its footprints
+(``pairs_per_chunk x centres^2 x 2 sizes`` rows), generated from its own seed ``(seed, material, chunk)``
+alone: chunks are independent tasks (any order, any machine), a run resumes by generating only the chunks
+whose file is missing, and a label source that tabulates per direction pair (summed-area tables) builds
+``pairs_per_chunk`` tables per chunk.  Row columns: :data:`COLUMNS` then the label source's components.
 """
 
 from __future__ import annotations
@@ -37,20 +39,25 @@ COLUMNS = ("material", "u", "v", "size", "wi_x", "wi_y", "wi_z", "wo_x", "wo_y",
 
 @dataclass(frozen=True)
 class DataSpec:
-    """How queries are sampled (module docstring); ``heldout_pairs``: fraction of direction-cell pairs."""
+    """How queries are sampled (module docstring); ``pairs`` per material, rounded up to whole chunks;
+    ``heldout_pairs``: fraction of direction-cell pairs held out."""
 
     centres: int = 8
     sizes: int = 10
     directions: int = 8
     pairs: int = 64
+    pairs_per_chunk: int = 4
     heldout_pairs: float = 0.1
     seed: int = 0
 
+    def footprints(self) -> int:
+        return self.centres * self.centres * self.sizes * len(SIZE_RANGES)
+
     def rows_per_chunk(self) -> int:
-        return self.sizes * len(SIZE_RANGES) * self.pairs
+        return self.pairs_per_chunk * self.footprints()
 
     def chunks_per_material(self) -> int:
-        return self.centres * self.centres
+        return -(-self.pairs // self.pairs_per_chunk)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -75,34 +82,54 @@ def _stratified_directions(rng: np.random.Generator, d: int, n: int) -> tuple[np
     return out[:n], cells[:n]
 
 
-def chunk_queries(spec: DataSpec, material: int, cell: int) -> np.ndarray:
-    """The query columns (rows, len(COLUMNS)) of one chunk (labels not yet attached)."""
-    rng = np.random.default_rng([spec.seed, material, cell])
-    c = spec.centres
-    centre = (np.array([cell % c, cell // c]) + rng.random(2)) / c
-    sizes = np.concatenate([lo + (hi - lo) * (np.arange(spec.sizes) + rng.random(spec.sizes)) / spec.sizes
-                            for lo, hi in SIZE_RANGES])
-    sizes = np.maximum(sizes, MIN_SIZE)
-    n = spec.rows_per_chunk()
-    heldout = heldout_cells(spec)
-    wi, cell_i = _stratified_directions(rng, spec.directions, n)
-    wo, cell_o = _stratified_directions(rng, spec.directions, n)
-    rows = np.empty((n, len(COLUMNS)))
+def chunk_queries(spec: DataSpec, material: int, chunk: int) -> np.ndarray:
+    """The query columns (rows, len(COLUMNS)) of one chunk (labels not yet attached), pair by pair."""
+    rng = np.random.default_rng([spec.seed, material, chunk])
+    c, k = spec.centres, spec.pairs_per_chunk
+    cells = np.arange(c * c)
+    centres = (np.stack([cells % c, cells // c], axis=1) + rng.random((c * c, 2))) / c
+    strata = (np.arange(spec.sizes) + rng.random((c * c, len(SIZE_RANGES), spec.sizes))) / spec.sizes
+    sizes = np.concatenate([lo + (hi - lo) * strata[:, i] for i, (lo, hi) in enumerate(SIZE_RANGES)], axis=1)
+    sizes = np.maximum(sizes, MIN_SIZE)  # (c^2, footprints per centre)
+    wi, cell_i = _stratified_directions(rng, spec.directions, k)
+    wo, cell_o = _stratified_directions(rng, spec.directions, k)
+    per_pair = spec.footprints()
+    rows = np.empty((k * per_pair, len(COLUMNS)))
     rows[:, 0] = material
-    rows[:, 1:3] = centre
-    rows[:, 3] = np.repeat(sizes, spec.pairs)
-    rows[:, 4:7], rows[:, 7:10] = wi, wo
-    rows[:, 10] = heldout[cell_i, cell_o]
+    rows[:, 1:3] = np.tile(np.repeat(centres, sizes.shape[1], axis=0), (k, 1))
+    rows[:, 3] = np.tile(sizes.reshape(-1), k)
+    rows[:, 4:7], rows[:, 7:10] = np.repeat(wi, per_pair, axis=0), np.repeat(wo, per_pair, axis=0)
+    rows[:, 10] = np.repeat(heldout_cells(spec)[cell_i, cell_o], per_pair)
     return rows
 
 
-def chunk_path(directory: Path, material: int, cell: int) -> Path:
-    return Path(directory) / f"chunk-{material:04d}-{cell:03d}.npy"
+def heldout_queries(spec: DataSpec, n: int, seed: int = 0, sizes: tuple[float, float] = (MIN_SIZE, 5.0),
+                    material: int = 0) -> np.ndarray:
+    """``n`` evaluation queries (rows of :data:`COLUMNS`), each with its own direction pair from the held-out
+    cells of ``spec``, a uniform centre and a size drawn as Table 2 (a range of :data:`SIZE_RANGES`, then
+    uniform in it) and kept within ``sizes`` (tiles)."""
+    rng = np.random.default_rng([spec.seed, seed, 104729])
+    held = heldout_cells(spec)
+    rows = np.empty((0, len(COLUMNS)))
+    while len(rows) < n:
+        m = 8 * n
+        wi, cell_i = _stratified_directions(rng, spec.directions, m)
+        wo, cell_o = _stratified_directions(rng, spec.directions, m)
+        lo_hi = np.array(SIZE_RANGES)[rng.integers(0, len(SIZE_RANGES), m)]
+        size = np.maximum(lo_hi[:, 0] + (lo_hi[:, 1] - lo_hi[:, 0]) * rng.random(m), MIN_SIZE)
+        keep = held[cell_i, cell_o] & (size >= sizes[0]) & (size < sizes[1])
+        block = np.column_stack([np.full(m, material), rng.random((m, 2)), size, wi, wo, np.ones(m)])[keep]
+        rows = np.concatenate([rows, block])
+    return rows[:n]
 
 
-def generate_chunk(spec: DataSpec, labels, material: int, cell: int) -> np.ndarray:
+def chunk_path(directory: Path, material: int, chunk: int) -> Path:
+    return Path(directory) / f"chunk-{material:04d}-{chunk:04d}.npy"
+
+
+def generate_chunk(spec: DataSpec, labels, material: int, chunk: int) -> np.ndarray:
     """Queries and labels (rows, len(COLUMNS) + C) of one chunk; ``labels``: the material's label source."""
-    q = chunk_queries(spec, material, cell)
+    q = chunk_queries(spec, material, chunk)
     y = labels(q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3])
     return np.concatenate([q, y], axis=1)
 

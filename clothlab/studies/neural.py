@@ -9,11 +9,12 @@ queries over the slowest worker's wall time; queries per CPU-second divides by t
 used.  The weights are random: the cost does not depend on their values.
 
 With a shipped per-fabric network (:data:`clothlab.models.neural.model.SHIPPED`), the section also sets it
-against Monte-Carlo footprint integration at equal time (the issue's "MSE vs time" table): held-out
-direction pairs of its training data spec, footprints >= 0.12 tile; the reference is the whole-tile-split
-MC estimate with :data:`REFERENCE_SAMPLES` samples (:class:`clothlab.neural.labels.TextureMonteCarloLabels`);
-the MC estimates are plain stratified box averages of k = 1, 2, 4, ..., 256 texture samples (what a renderer
-does); MSE of f = the sum of the components, seconds per query measured in this process.
+against Monte-Carlo footprint integration at equal time (the "MSE vs time" table): held-out direction
+pairs of its training data spec (one pair per query), footprints >= 0.12 tile; the reference is the
+whole-tile-split MC estimate with :data:`REFERENCE_SAMPLES` samples
+(:class:`clothlab.neural.labels.TextureMonteCarloLabels`); the MC estimates are plain stratified box
+averages of k = 1, 2, 4, ..., 256 texture samples (what a renderer does); MSE of f = the sum of the
+components, seconds per query measured in this process.
 """
 
 from __future__ import annotations
@@ -99,7 +100,7 @@ def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | No
     """MSE and seconds per query of the shipped surrogate and of k-sample MC, by footprint group."""
     from clothlab.models.neural.model import SHIPPED
     from clothlab.models.registry import build_model
-    from clothlab.neural.data import DataSpec, chunk_queries
+    from clothlab.neural.data import DataSpec, heldout_queries
     from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
     from clothlab.neural.serialise import load_surrogate
     from clothlab.studies.timing import best_time
@@ -112,11 +113,8 @@ def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | No
     enc = sidecar["encoding"]
     model = build_model("irawan", get_preset(enc["weave"]))
     params, texture = enc["params"], model.texture()
-    spec = DataSpec(**enc.get("data_spec", {}))
-    q = np.concatenate([chunk_queries(spec, 0, c) for c in range(spec.chunks_per_material())])
-    q = q[(q[:, 10] > 0.5) & (q[:, 3] >= 0.12)]
-    n = queries or (200 if quick else 1000)
-    q = q[np.sort(np.random.default_rng(11).choice(len(q), min(n, len(q)), replace=False))]
+    q = heldout_queries(DataSpec(**enc.get("data_spec", {})), queries or (200 if quick else 1000), seed=11,
+                        sizes=(0.12, 5.0))
     args = (q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3])
     ref = TextureMonteCarloLabels(texture, params, samples=REFERENCE_SAMPLES // (4 if quick else 1), seed=12345,
                                   tile_average=ModelLabels(model, params))(*args).sum(axis=1)
