@@ -68,24 +68,16 @@ def test_pattern_descriptor_dc_term_is_the_warp_weft_balance():
 
 
 def test_chunks_follow_table_2_and_are_independent_and_reproducible():
-    spec = DataSpec(pairs=8, pairs_per_chunk=2, seed=3)
-    assert spec.chunks_per_material() == 4
-    a = chunk_queries(spec, 1, 2)
-    np.testing.assert_array_equal(a, chunk_queries(spec, 1, 2))
-    assert not np.array_equal(a[:, 1:], chunk_queries(spec, 1, 3)[:, 1:])
-    assert a.shape[0] == spec.rows_per_chunk() == 2 * 64 * 20
-    pairs = np.unique(a[:, 4:10], axis=0)
-    assert len(pairs) == 2  # every pair meets every footprint of the chunk
-    for pair in pairs:
-        rows = a[np.all(a[:, 4:10] == pair, axis=1)]
-        cells = np.floor(rows[:, 1] * 8) + 8 * np.floor(rows[:, 2] * 8)
-        assert sorted(np.unique(cells)) == list(range(64))  # one centre in each grid cell
-        for cell in range(64):
-            sizes = rows[cells == cell, 3]
-            assert len(np.unique(rows[cells == cell, 1])) == 1
-            assert np.sum(sizes < 1.0) == 10 and np.sum(sizes > 1.0) == 10
-            assert sizes.min() >= MIN_SIZE and sizes.max() < 5
-            assert sorted(np.floor(sizes[sizes > 1.0] * 10 / 4 - 2.5).astype(int)) == list(range(10))  # strata
+    spec = DataSpec(pairs=8, seed=3)
+    a = chunk_queries(spec, 1, 5)
+    np.testing.assert_array_equal(a, chunk_queries(spec, 1, 5))
+    assert not np.array_equal(a[:, 1:], chunk_queries(spec, 1, 6)[:, 1:])
+    assert a.shape[0] == spec.rows_per_chunk() == 2 * 10 * 8
+    cell = (5 % 8, 5 // 8)  # the centre lies in its grid cell
+    assert cell[0] / 8 <= a[0, 1] < (cell[0] + 1) / 8 and cell[1] / 8 <= a[0, 2] < (cell[1] + 1) / 8
+    sizes = np.unique(a[:, 3])
+    assert np.sum(sizes < 1.0) == 10 and np.sum(sizes > 1.0) == 10 and sizes.min() >= MIN_SIZE and sizes.max() < 5
+    assert sorted(np.floor(sizes[sizes > 1.0] * 10 / 4 - 2.5).astype(int)) == list(range(10))  # strata
     for w in (a[:, 4:7], a[:, 7:10]):
         np.testing.assert_allclose(np.linalg.norm(w, axis=1), 1.0)
         assert np.all(w[:, 2] >= MIN_Z)
@@ -99,7 +91,7 @@ def test_chunks_follow_table_2_and_are_independent_and_reproducible():
 
 
 def test_generation_resumes_to_the_same_data_and_is_memory_mapped(tmp_path, model):
-    spec = DataSpec(centres=2, sizes=2, pairs=4, pairs_per_chunk=1)
+    spec = DataSpec(centres=2, sizes=2, pairs=4)
     labels = [ModelLabels(model)]
     calls = iter(range(100))
     assert generate(tmp_path / "a", spec, labels, stop=lambda: next(calls) >= 2) == 2
@@ -128,7 +120,7 @@ def test_monte_carlo_labels_of_whole_tiles_approach_the_reflectance_model(model)
 
 
 def _tiny_run(model, steps=150):
-    spec = DataSpec(centres=2, sizes=3, pairs=128, pairs_per_chunk=16, heldout_pairs=0.2)
+    spec = DataSpec(centres=2, sizes=3, pairs=64, heldout_pairs=0.2)
     import tempfile
     from pathlib import Path
 

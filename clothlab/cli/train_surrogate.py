@@ -25,11 +25,10 @@ def add_parser(sub):
     p.add_argument("--labels", choices=LABELS, default="mc",
                    help="label source: mc (default: stratified MC of the texture model over the part of the "
                         "footprint that is not whole tiles, the rest exact), sat (summed-area tables of "
-                        "clothlab.models.footprint: one table per direction pair), model (the reflectance "
-                        "model, footprint-independent)")
+                        "clothlab.models.footprint: one table per direction pair, and each query here has its "
+                        "own, so slow), model (the reflectance model, footprint-independent)")
     p.add_argument("--samples", type=int, default=64, help="MC samples per query for mc labels (default 64)")
-    p.add_argument("--pairs", type=int, default=64,
-                   help="direction pairs per material, each with all 64 x 20 footprints (default 64)")
+    p.add_argument("--pairs", type=int, default=64, help="direction pairs per footprint (default 64)")
     p.add_argument("--width", type=int, default=64, help="decoder width (default 64)")
     p.add_argument("--spatial", type=int, default=32, help="spatial feature width (default 32)")
     p.add_argument("--seed", type=int, default=0, help="data and initialisation seed (default 0)")
