@@ -17,6 +17,7 @@ MODEL_KINDS = {
     "lambert": ("clothlab.models.baselines.lambert", "LambertModel"),
     "oren-nayar": ("clothlab.models.baselines.oren_nayar", "OrenNayarModel"),
     "surface": ("clothlab.models.surface.model", "SurfaceModel"),
+    "neural": ("clothlab.models.neural.model", "NeuralModel"),
 }
 DEFAULT_KIND = "irawan"
 

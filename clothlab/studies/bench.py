@@ -55,6 +55,7 @@ SECTIONS = (
     Section("btf", "clothlab.studies.btf_memory", "BTF stack streaming: images/s and peak memory"),
     Section("render", "clothlab.studies.render_lod", "receding plane: LoD render cost and error by distance"),
     Section("footprint", "clothlab.studies.footprint", "footprint averages: SAT vs MC queries/s and error by size"),
+    Section("neural", "clothlab.studies.neural", "neural surrogate decoder queries/s at three widths"),
 )
 SECTION_NAMES: tuple[str, ...] = tuple(s.name for s in SECTIONS)
 

@@ -1,0 +1,85 @@
+"""One training run in a directory: label the data (:mod:`.data`), train (:mod:`.training`), save the
+surrogate (:mod:`.serialise`) and write the loss curve and held-out errors (JSON + PNG).
+
+Directory layout: ``data/`` (chunks, ``data.npy`` memory-mapped), ``checkpoint.npz`` (resume),
+``surrogate.npz`` + ``surrogate.json``, ``training.json`` (specs, curve, metrics), ``loss.png``,
+``heldout.png``.  The CPU budget (seconds, ``time.process_time``) is shared: labelling stops at
+``label_share`` of it (a partial data set trains; ``resume`` labels the rest), training takes what is left.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from clothlab.atomic import atomic_write_bytes
+from clothlab.errors import ConfigError
+from clothlab.neural.data import DataSpec, assemble, generate
+from clothlab.neural.serialise import save_surrogate
+from clothlab.neural.training import TrainResult, TrainSpec, train
+from clothlab.progress import get_logger
+
+LOG = get_logger("neural.run")
+
+
+def run_training(directory, label_sources, materials, data_spec: DataSpec, train_spec: TrainSpec, *,
+                 budget_s: float, label_share: float = 0.5, heldout_materials=(), encoding: dict | None = None,
+                 resume: bool = False, plots: bool = True) -> TrainResult:
+    """Label and train within ``budget_s`` CPU seconds; ``label_sources[m]`` and ``materials[m]`` (encoder
+    input) describe material m.  Returns the result after writing every file of the directory."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    manifest = directory / "data" / "data.json"
+    if manifest.exists() and json.loads(manifest.read_text(encoding="utf-8")).get("spec") != data_spec.to_dict():
+        raise ConfigError(f"the data in {directory / 'data'} was sampled with other settings "
+                          f"({json.loads(manifest.read_text(encoding='utf-8')).get('spec')}); resume with the same "
+                          "--pairs and --seed, or start a new directory", path=directory)
+    start = time.process_time()
+    names = tuple(label_sources[0].component_names)
+    written = generate(directory / "data", data_spec, label_sources,
+                       stop=lambda: time.process_time() - start > label_share * budget_s)
+    data, sha = assemble(directory / "data", data_spec, len(label_sources), len(names))
+    label_s = time.process_time() - start
+    LOG.info(f"{written} chunks labelled ({data.shape[0]:,} queries in all) in {label_s:.1f} CPU-s")
+    spec = replace(train_spec, budget_s=max(1.0, budget_s - label_s)) if train_spec.steps is None else train_spec
+    encoding = {**(encoding or {}), "data_spec": data_spec.to_dict()}  # the held-out cells follow from it
+    result = train(data, names, materials, spec, encoding=encoding, heldout_materials=heldout_materials,
+                   checkpoint=directory / "checkpoint.npz", resume=resume)
+    result.metrics["label_cpu_s"] = label_s
+    result.metrics["queries"] = int(data.shape[0])
+    save_surrogate(result.surrogate, directory / "surrogate.npz", data_hash=sha, metrics=result.metrics)
+    summary = {"data_spec": data_spec.to_dict(), "train_spec": spec.to_dict(), "data_sha256": sha,
+               "components": list(names), "curve": result.curve, "metrics": result.metrics}
+    atomic_write_bytes(directory / "training.json", (json.dumps(summary, indent=2) + "\n").encode())
+    if plots:
+        write_plots(directory, result)
+    return result
+
+
+def write_plots(directory: Path, result: TrainResult) -> None:
+    """``loss.png`` (training loss vs CPU seconds) and ``heldout.png`` (relative RMSE by footprint size)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5, 3.2))
+    ax = fig.add_subplot()
+    ax.semilogy([c["cpu_s"] for c in result.curve], [c["loss"] for c in result.curve])
+    ax.set(xlabel="CPU seconds", ylabel="training loss (eq. 11)", title="surrogate training")
+    fig.tight_layout()
+    fig.savefig(directory / "loss.png", dpi=110)
+    fig = Figure(figsize=(5, 3.2))
+    ax = fig.add_subplot()
+    for key in ("heldout_pairs", "heldout_materials", "train_sample"):
+        bins = result.metrics.get(key)
+        if bins:
+            centre = [(b["size_lo"] * b["size_hi"]) ** 0.5 for b in bins]
+            ax.loglog(centre, [b["relative_rmse"] for b in bins], marker="o", label=key.replace("_", " "))
+    ax.axhline(0.25, color="grey", lw=0.8, ls="--")
+    ax.set(xlabel="footprint size (tiles)", ylabel="relative RMSE of f", title="error by footprint size")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(directory / "heldout.png", dpi=110)

@@ -1,0 +1,189 @@
+"""Training the surrogate on labelled footprint queries (:mod:`.data`) and its held-out errors.
+
+Adam (:mod:`.optimizer`) on the loss of eqs. 9-11 (:mod:`.losses`) with mini-batches drawn from the
+training rows; the step schedule of sec. 5.2 (x 0.2 at 60 % and 90 % of the run) counts in steps or,
+with a budget, in CPU seconds (``time.process_time``).  Rows are split three ways: training, held-out
+direction pairs (the ``heldout_pair`` column) and held-out materials (every row of the materials named).
+Held-out error by footprint size bin (:data:`SIZE_BINS`, tiles): relative RMSE of f = the sum of the
+components (unit coefficients), sqrt(sum (f_pred - f)^2 / sum f^2), and the MSE.
+A checkpoint (network, Adam moments, step, CPU time, loss curve) makes a run resumable.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.atomic import atomic_write_bytes
+from clothlab.errors import InputError
+from clothlab.neural.data import COLUMNS
+from clothlab.neural.encodings import BLOB_BINS, n_direction_features
+from clothlab.neural.losses import column_weights, encode_targets, is_specular, loss_and_gradient
+from clothlab.neural.network import Architecture, SurrogateNetwork
+from clothlab.neural.optimizer import Adam, step_schedule
+from clothlab.neural.surrogate import Surrogate
+from clothlab.progress import Progress, get_logger
+
+LOG = get_logger("neural.training")
+SIZE_BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)
+N_QUERY = len(COLUMNS)
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    """Network widths, optimiser settings and the run length (``steps`` and / or ``budget_s`` CPU seconds)."""
+
+    width: int = 64
+    spatial: int = 32
+    enc_width: int = 128
+    latent: int = 64
+    half_vector: bool = True
+    batch: int = 4096
+    lr: float = 3e-3
+    weight_decay: float = 1e-6
+    milestones: tuple[float, ...] = (0.6, 0.9)
+    gamma: float = 0.2
+    steps: int | None = None
+    budget_s: float | None = None
+    seed: int = 0
+    log_every: int = 50
+    checkpoint_every: int = 500
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class TrainResult:
+    surrogate: Surrogate
+    curve: list[dict] = field(default_factory=list)  # step, cpu_s, lr, loss (training batch, eq. 11)
+    metrics: dict = field(default_factory=dict)
+
+
+def split_rows(data: np.ndarray, heldout_materials=()) -> dict[str, np.ndarray]:
+    """Row indices: ``train``, ``heldout_pairs`` (trained materials) and ``heldout_materials``."""
+    material = np.asarray(data[:, 0]).astype(np.int64)
+    pair = np.asarray(data[:, 10]) > 0.5
+    unseen = np.isin(material, np.asarray(list(heldout_materials), dtype=np.int64))
+    return {"train": np.flatnonzero(~pair & ~unseen), "heldout_pairs": np.flatnonzero(pair & ~unseen),
+            "heldout_materials": np.flatnonzero(unseen)}
+
+
+def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict) -> Surrogate:
+    arch = Architecture(n_material=materials.shape[1], n_spatial=3 * BLOB_BINS,
+                        n_angular=n_direction_features(spec.half_vector), n_out=len(names),
+                        enc_width=spec.enc_width, latent=spec.latent, width=spec.width, spatial=spec.spatial)
+    return Surrogate(SurrogateNetwork(arch, seed=spec.seed), tuple(names), np.asarray(materials, dtype=np.float64),
+                     {**encoding, "half_vector": spec.half_vector})
+
+
+def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray):
+    q = np.asarray(rows[:, :N_QUERY])
+    spatial, angular = surrogate.features(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10])
+    targets = encode_targets(np.asarray(rows[:, N_QUERY:]), specular).astype(spatial.dtype)
+    return q[:, 0].astype(np.int64), spatial, angular, targets
+
+
+def _save_checkpoint(path: Path, surrogate, optimizer, step, cpu_s, curve) -> None:
+    arrays = {f"param/{k}": v for k, v in surrogate.network.params().items()}
+    arrays |= {f"adam/{k}": v for k, v in optimizer.state().items()}
+    arrays["step"], arrays["cpu_s"] = np.array(step), np.array(cpu_s)
+    arrays["curve"] = np.frombuffer(json.dumps(curve).encode(), dtype=np.uint8)
+    buffer = io.BytesIO()
+    np.savez(buffer, allow_pickle=False, **arrays)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def _load_checkpoint(path: Path, surrogate, optimizer):
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            surrogate.network.set_params({k[6:]: data[k] for k in data.files if k.startswith("param/")})
+            optimizer.load_state({k[5:]: data[k] for k in data.files if k.startswith("adam/")})
+            return int(data["step"]), float(data["cpu_s"]), json.loads(bytes(data["curve"]).decode())
+    except (KeyError, ValueError) as exc:
+        raise InputError(f"checkpoint does not fit this network ({exc}); resume with the same --width and "
+                         "--spatial, or start a new directory", path=path) from None
+
+
+def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, encoding: dict | None = None,
+          heldout_materials=(), checkpoint: Path | None = None, resume: bool = False) -> TrainResult:
+    """Train a surrogate on ``data`` (rows of :data:`clothlab.neural.data.COLUMNS` + components ``names``)
+    for the materials whose encoder inputs are ``materials`` (M, n_material)."""
+    if spec.steps is None and spec.budget_s is None:
+        raise ValueError("give steps or budget_s")
+    surrogate = make_surrogate(spec, materials, names, encoding or {})
+    specular = is_specular(names)
+    weights = column_weights(specular).astype(np.float32)
+    optimizer = Adam(surrogate.network.params(), lr=spec.lr, weight_decay=spec.weight_decay)
+    split = split_rows(data, heldout_materials)
+    train_rows = split["train"]
+    if train_rows.size == 0:
+        raise ValueError("no training rows (every row is held out)")
+    step, cpu_used, curve = 0, 0.0, []
+    if resume and checkpoint is not None and Path(checkpoint).exists():
+        step, cpu_used, curve = _load_checkpoint(Path(checkpoint), surrogate, optimizer)
+        LOG.info(f"resumed at step {step} ({cpu_used:.0f} CPU-s)")
+    rng = np.random.default_rng([spec.seed, step])
+    net = surrogate.network
+    start = time.process_time() - cpu_used
+
+    def fraction() -> float:
+        parts = []
+        if spec.steps is not None:
+            parts.append(step / spec.steps)
+        if spec.budget_s is not None:
+            parts.append((time.process_time() - start) / spec.budget_s)
+        return max(parts)
+
+    total = spec.steps if spec.steps is not None else None
+    with Progress(total, "training the surrogate", unit="step") as bar:
+        bar.update(step)
+        while fraction() < 1.0:
+            pick = np.sort(rng.choice(train_rows, size=min(spec.batch, train_rows.size), replace=False))
+            index, spatial, angular, targets = _batch(surrogate, data[pick], specular)
+            lr = step_schedule(spec.lr, fraction(), spec.milestones, spec.gamma)
+            out = net.forward(surrogate.materials, index, spatial, angular, train=True)
+            loss, d_out = loss_and_gradient(out, targets, weights)
+            net.backward(d_out)
+            optimizer.step(net.grads(), lr)
+            step += 1
+            bar.update(1)
+            if step % spec.log_every == 0 or step == 1:
+                curve.append({"step": step, "cpu_s": time.process_time() - start, "lr": lr, "loss": loss})
+            if checkpoint is not None and step % spec.checkpoint_every == 0:
+                _save_checkpoint(Path(checkpoint), surrogate, optimizer, step, time.process_time() - start, curve)
+    cpu = time.process_time() - start
+    if checkpoint is not None:
+        _save_checkpoint(Path(checkpoint), surrogate, optimizer, step, cpu, curve)
+    surrogate.reset()
+    metrics = {"steps": step, "cpu_s": cpu, "rows": {k: int(v.size) for k, v in split.items()},
+               "train_sample": errors_by_size(surrogate, data, train_rows[:: max(1, train_rows.size // 50000)])}
+    for key in ("heldout_pairs", "heldout_materials"):
+        if split[key].size:
+            metrics[key] = errors_by_size(surrogate, data, split[key])
+    return TrainResult(surrogate, curve, metrics)
+
+
+def errors_by_size(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, bins=SIZE_BINS) -> list[dict]:
+    """Per footprint-size bin: rows, relative RMSE and MSE of f = sum of components (module docstring)."""
+    block = np.asarray(data[np.sort(rows)])
+    q, truth = block[:, :N_QUERY], block[:, N_QUERY:]
+    pred = np.empty_like(truth)
+    for m in np.unique(q[:, 0]).astype(np.int64):
+        sel = q[:, 0] == m
+        pred[sel] = surrogate.query(q[sel, 1:3], q[sel, 3], q[sel, 4:7], q[sel, 7:10], material=int(m))
+    f_pred, f_true = pred.sum(axis=1), truth.sum(axis=1)
+    out = []
+    for lo, hi in zip(bins[:-1], bins[1:], strict=True):
+        sel = (q[:, 3] >= lo) & (q[:, 3] < hi)
+        if not np.any(sel):
+            continue
+        err = np.sum(np.square(f_pred[sel] - f_true[sel]))
+        out.append({"size_lo": lo, "size_hi": hi, "rows": int(sel.sum()), "mse": float(err / sel.sum()),
+                    "relative_rmse": float(np.sqrt(err / max(np.sum(np.square(f_true[sel])), 1e-300)))})
+    return out

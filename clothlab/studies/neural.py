@@ -1,0 +1,168 @@
+"""Bench section ``neural``: inference speed of the numpy surrogate's decoder (Chen, Wang & Wang 2024,
+sec. 4.2-4.3: only the decoder runs per query) at the chosen width and one narrower and one wider, measured
+side by side in one run, against the target of :data:`TARGET_QPS` queries per second on this machine.
+
+Each width is timed in worker processes started with one BLAS thread each (OPENBLAS/OMP/MKL_NUM_THREADS=1:
+many small matrix products stall with threaded BLAS under load), float32, queries in chunks of
+:data:`CHUNK` rows: one worker alone, then one worker per core concurrently.  Queries/s is the total
+queries over the slowest worker's wall time; queries per CPU-second divides by the CPU time the workers
+used.  The weights are random: the cost does not depend on their values.
+
+With a shipped per-fabric network (:data:`clothlab.models.neural.model.SHIPPED`), the section also sets it
+against Monte-Carlo footprint integration at equal time (the "MSE vs time" table): held-out direction
+pairs of its training data spec (one pair per query), footprints >= 0.12 tile; the reference is the
+whole-tile-split MC estimate with :data:`REFERENCE_SAMPLES` samples
+(:class:`clothlab.neural.labels.TextureMonteCarloLabels`); the MC estimates are plain stratified box
+averages of k = 1, 2, 4, ..., 256 texture samples (what a renderer does); MSE of f = the sum of the
+components, seconds per query measured in this process.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+TARGET_QPS = 1.0e6
+CHUNK = 2048
+WIDTHS = ((32, 16), (64, 32), (128, 64))  # (decoder width, spatial feature width); 64 / 32 is the default
+CHOSEN = (64, 32)
+
+
+def _worker(args) -> tuple[float, float]:
+    """(wall s, CPU s) of ``repeats`` passes over ``n`` queries at one width (best of the passes)."""
+    import time
+
+    from clothlab.neural.network import Architecture, SurrogateNetwork
+    from clothlab.neural.surrogate import Surrogate
+
+    width, spatial, n, repeats = args
+    arch = Architecture(n_material=39, n_spatial=24, n_angular=8, n_out=3, width=width, spatial=spatial)
+    rng = np.random.default_rng(0)
+    surrogate = Surrogate(SurrogateNetwork(arch), ("diffuse", "specular_warp", "specular_weft"),
+                          rng.random((1, 39)))
+    features = rng.random((n, 24)).astype(np.float32), rng.standard_normal((n, 8)).astype(np.float32)
+    surrogate.outputs(features[0][:CHUNK], features[1][:CHUNK])  # warm-up
+    best = (np.inf, np.inf)
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        surrogate.outputs(*features, chunk=CHUNK)
+        best = min(best, (time.perf_counter() - wall, time.process_time() - cpu))
+    return best
+
+
+def _pool(processes: int):
+    """A spawn pool whose workers start with one BLAS thread (the variables are read at numpy import)."""
+    import multiprocessing
+
+    names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    saved = {k: os.environ.get(k) for k in names}
+    os.environ.update({k: "1" for k in names})
+    try:
+        return multiprocessing.get_context("spawn").Pool(processes)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def neural_speed(quick: bool, queries: int | None = None, repeats: int | None = None) -> dict:
+    """Queries/s and queries per CPU-second per width, one worker and one worker per core (``queries`` per
+    worker and timing ``repeats`` override the run size)."""
+    from clothlab.neural.network import Architecture
+
+    cores = max(1, os.cpu_count() or 1)
+    n = queries or (65536 if quick else 262144)
+    repeats = repeats or (3 if quick else 5)
+    rows = []
+    with _pool(cores) as pool:
+        pool.map(_worker, [(8, 8, CHUNK, 1)] * cores)  # start the workers (imports) before timing
+        for width, spatial in WIDTHS:
+            one = pool.apply(_worker, ((width, spatial, n, repeats),))
+            many = pool.map(_worker, [(width, spatial, n, repeats)] * cores)
+            arch = Architecture(39, 24, 8, 3, width=width, spatial=spatial)
+            qps = cores * n / max(w for w, _ in many)
+            rows.append({"width": width, "spatial": spatial, "kflop_per_query": arch.decoder_flops() / 1e3,
+                         "qps_one_worker": n / one[0], "qps_per_cpu_s_one_worker": n / max(one[1], 1e-9),
+                         "workers": cores, "qps": qps, "qps_per_cpu_s": cores * n / max(sum(c for _, c in many), 1e-9),
+                         "chosen": (width, spatial) == CHOSEN, "meets_target": qps >= TARGET_QPS})
+    return {"queries": n, "chunk": CHUNK, "target_qps": TARGET_QPS, "widths": rows}
+
+
+REFERENCE_SAMPLES = 4096
+MC_SAMPLES = (1, 2, 4, 8, 16, 32, 64, 128, 256)
+SHIPPED_FABRIC = "silk-shantung"
+
+
+def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | None = None) -> dict:
+    """MSE and seconds per query of the shipped surrogate and of k-sample MC, by footprint group."""
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.models.registry import build_model
+    from clothlab.neural.data import DataSpec, heldout_queries
+    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+    from clothlab.neural.serialise import load_surrogate
+    from clothlab.studies.timing import best_time
+    from clothlab.weave.presets import get_preset
+
+    path = SHIPPED / f"{fabric}.npz"
+    if not path.exists():
+        return {"skipped": f"no shipped surrogate for {fabric}"}
+    surrogate, sidecar = load_surrogate(path)
+    enc = sidecar["encoding"]
+    model = build_model("irawan", get_preset(enc["weave"]))
+    params, texture = enc["params"], model.texture()
+    q = heldout_queries(DataSpec(**enc.get("data_spec", {})), queries or (200 if quick else 1000), seed=11,
+                        sizes=(0.12, 5.0))
+    args = (q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3])
+    ref = TextureMonteCarloLabels(texture, params, samples=REFERENCE_SAMPLES // (4 if quick else 1), seed=12345,
+                                  tile_average=ModelLabels(model, params))(*args).sum(axis=1)
+    groups = {"size >= 0.12": q[:, 3] >= 0.12, "size >= 1": q[:, 3] >= 1.0}
+
+    def row(name, fn, samples=None):
+        value = fn().sum(axis=1)
+        seconds = best_time(fn, 1 if quick else 3, min_sample_s=0.0) / len(q)
+        return {"method": name, "samples": samples, "us_per_query": 1e6 * seconds,
+                **{g: float(np.mean(np.square(value[sel] - ref[sel]))) for g, sel in groups.items()}}
+
+    rows = [row("surrogate", lambda: surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10]))]
+    for k in MC_SAMPLES:
+        rows.append(row(f"MC {k}", lambda k=k: TextureMonteCarloLabels(texture, params, samples=k, seed=7)(*args), k))
+    sur = rows[0]
+    equal = next((r for r in rows[1:] if r["us_per_query"] >= sur["us_per_query"]), rows[-1])
+    ratios = {g: equal[g] / max(sur[g], 1e-300) for g in groups}
+    mc16 = next(r for r in rows if r["samples"] == 16)
+    return {"fabric": fabric, "queries": int(len(q)), "reference_samples": REFERENCE_SAMPLES // (4 if quick else 1),
+            "rows": rows, "equal_time_mc": equal["method"], "mse_ratio_equal_time": ratios,
+            "mse_ratio_mc16_size_ge_1": mc16["size >= 1"] / max(sur["size >= 1"], 1e-300)}
+
+
+def run(context) -> dict:
+    return {**neural_speed(context.quick), "versus_mc": surrogate_vs_mc(context.quick)}
+
+
+def lines(f: dict) -> list[str]:
+    out = [f"== neural surrogate: decoder inference, float32, {f['chunk']}-row chunks, 1 BLAS thread per worker "
+           f"({f['queries']:,} queries per worker) ==",
+           "  width/spatial  kFLOP/query   1 worker q/s   q/CPU-s   workers   all q/s   q/CPU-s   target 1 M/s"]
+    for r in f["widths"]:
+        out.append(f"  {r['width']:>5}/{r['spatial']:<6}{'*' if r['chosen'] else ' '} {r['kflop_per_query']:>10.1f} "
+                   f"{r['qps_one_worker']:>14,.0f} {r['qps_per_cpu_s_one_worker']:>9,.0f} {r['workers']:>9} "
+                   f"{r['qps']:>9,.0f} {r['qps_per_cpu_s']:>9,.0f}   {'met' if r['meets_target'] else 'NOT met'}")
+    out.append("  * the default width")
+    v = f.get("versus_mc") or {}
+    if "rows" in v:
+        out.append(f"  {v['fabric']}: shipped surrogate vs MC footprint integration, {v['queries']} held-out queries, "
+                   f"reference MC {v['reference_samples']} (whole-tile split); MSE of f")
+        out.append("    method        us/query   MSE size>=0.12   MSE size>=1")
+        for r in v["rows"]:
+            out.append(f"    {r['method']:<12}{r['us_per_query']:>9.2f}   {r['size >= 0.12']:>14.4g}"
+                       f"   {r['size >= 1']:>11.4g}")
+        ratio = v["mse_ratio_equal_time"]
+        out.append(f"    equal time ({v['equal_time_mc']}): MC MSE / surrogate MSE = {ratio['size >= 0.12']:.1f} "
+                   f"(>= 0.12 tile), {ratio['size >= 1']:.1f} (>= 1 tile); MC 16 / surrogate at >= 1 tile = "
+                   f"{v['mse_ratio_mc16_size_ge_1']:.1f}")
+    elif v:
+        out.append(f"  surrogate vs MC: {v['skipped']}")
+    return out
