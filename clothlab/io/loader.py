@@ -21,8 +21,8 @@ from pathlib import Path
 from clothlab.errors import InputError
 from clothlab.io.astm import read_astm
 from clothlab.io.measurement import Measurement
-from clothlab.io.pabopto import read_pabopto
-from clothlab.io.table import check_row_count, find_sidecar, read_table
+from clothlab.io.pabopto import SAMPLE_UP, read_pabopto
+from clothlab.io.table import CONVENTION_CHOICES, check_row_count, find_sidecar, read_table
 from clothlab.strict import MAX_LINE_CHARS, MAX_TABLE_BYTES, check_regular_file
 
 READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto}
@@ -32,6 +32,8 @@ AUTO = "auto"
 """``format="auto"`` (like None) detects the format with :func:`detect_format`."""
 FORMAT_CHOICES = (AUTO, *FORMATS)
 """Every value ``measurement.format`` accepts."""
+OPTION_CHOICES = {**{name: tuple(values) for name, values in CONVENTION_CHOICES.items()}, "up": tuple(SAMPLE_UP)}
+"""The allowed values of each reader option (the conventions of a table, the pab-opto sample ``up``)."""
 _DETECT_LINES = 200
 _CLOTHLAB = re.compile(r"^#\s*clothlab-table\s*:")
 _PABOPTO = re.compile(r"^#\s*(format\s*:|intheta\b|inphi\b|incident_angle\b)", re.IGNORECASE)
@@ -81,6 +83,24 @@ def detect_format(path) -> str:
         "'#intheta' or '#incident_angle' lines); or pass format= one of " + ", ".join(FORMATS), path=path)
 
 
+def check_reader_options(path, format: str, options: dict) -> None:  # noqa: A002
+    """InputError (``field`` = the option name) for an option the reader of ``format`` does not take or a
+    value outside its choices; ``format='auto'`` detects the format of ``path`` first."""
+    if format is None or format == AUTO:
+        format = detect_format(path)
+    reader = READERS[format]
+    declared = {p.name: p.default for p in inspect.signature(reader).parameters.values()
+                if p.kind == p.KEYWORD_ONLY}
+    for name, value in options.items():
+        if name not in declared:
+            raise InputError(f"option {name!r} is not accepted by the {format} reader; it takes "
+                             f"{', '.join(declared) or 'no options'}", path=path, field=name)
+        choices = OPTION_CHOICES.get(name)
+        if choices is not None and value not in choices:
+            raise InputError(f"unknown {name} {value!r} for the {format} reader; expected one of "
+                             f"{' | '.join(choices)}", path=path, field=name)
+
+
 def load_measurement(path, format: str | None = None, **options) -> Measurement:  # noqa: A002
     """Load a measurement in any supported format into clothlab's convention (degrees, BRDF in 1/sr).
 
@@ -93,12 +113,7 @@ def load_measurement(path, format: str | None = None, **options) -> Measurement:
                          path=path, field="format")
     else:
         _existing(path)
-    reader = READERS[format]
-    accepted = [p.name for p in inspect.signature(reader).parameters.values() if p.kind == p.KEYWORD_ONLY]
-    for name in options:
-        if name not in accepted:
-            raise InputError(f"option {name!r} is not accepted by the {format} reader; it takes "
-                             f"{', '.join(accepted) or 'no options'}", path=path, field=name)
-    measurement = reader(path, **options)
+    check_reader_options(path, format, options)
+    measurement = READERS[format](path, **options)
     check_row_count(measurement.n, path)
     return measurement

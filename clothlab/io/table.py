@@ -79,6 +79,8 @@ _ALLOWED = {
     "azimuth_zero": tuple(AZIMUTH_ZERO),
     "azimuth_sense": AZIMUTH_SENSE,
 }
+CONVENTION_CHOICES = _ALLOWED
+"""The allowed keywords of each convention (angle_unit, quantity, azimuth_zero, azimuth_sense)."""
 _TOP_KEY = re.compile(r"^(?![-?] )([^\s:#'\"\[\]{},][^:]*?)\s*:(\s|$)")
 _CHANNEL_NAME = re.compile(r"^[^\s,#'\"]+$")
 
