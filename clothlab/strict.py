@@ -238,7 +238,7 @@ def yaml_error(exc, *, path, error=InputError, what: str = "YAML") -> ClothlabEr
     mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
     problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
     context = getattr(exc, "context", None)
-    message = f"{what} syntax error: {problem}" + (f" ({context})" if context else "")
+    message = f"not valid {what}: {problem}" + (f" ({context})" if context else "")
     return error(message, path=path, line=None if mark is None else mark.line + 1)
 
 
