@@ -45,5 +45,10 @@ class ResultExistsError(ClothlabError):
     """A result directory exists and overwriting it was not asked for (``--force``)."""
 
 
+class ResultError(ClothlabError):
+    """A computation produced a result that cannot be trusted (a non-finite coefficient, prediction or
+    percentile); nothing is saved."""
+
+
 class GeometryWarning(UserWarning):
     """A yarn geometry violates a constraint of the paper and was mapped to its documented limit form."""

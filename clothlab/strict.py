@@ -318,7 +318,7 @@ def load_json_text(text: str, *, path=None, error=InputError):
     import json
 
     if not _json_depth_ok(text):
-        raise error(f"JSON nested more than {MAX_DEPTH} levels deep", path=path)
+        raise error(f"invalid JSON: nested more than {MAX_DEPTH} levels deep", path=path)
 
     def constant(name):
         raise ValueError(f"{name} is not a finite number")
@@ -326,9 +326,9 @@ def load_json_text(text: str, *, path=None, error=InputError):
     try:
         return json.loads(text, parse_constant=constant)
     except json.JSONDecodeError as exc:
-        raise error(f"not valid JSON: {exc.msg} (column {exc.colno})", path=path, line=exc.lineno) from None
+        raise error(f"invalid JSON: {exc.msg} (column {exc.colno})", path=path, line=exc.lineno) from None
     except (ValueError, RecursionError) as exc:
-        raise error(f"not valid JSON: {exc}", path=path) from None
+        raise error(f"invalid JSON: {exc}", path=path) from None
 
 
 def load_json_file(path, *, error=InputError, what: str = "JSON file", limit: int = MAX_YAML_BYTES):

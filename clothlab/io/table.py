@@ -218,6 +218,11 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
         raise InputError(f"value {float(numbers[row, col])!r} is not finite; expected a finite number",
                          path=raw.path, line=int(raw.lines[row]), field=columns[col])
     _check_magnitude(raw.values, raw, raw.channels)
+    if len(raw.values) > 1:
+        for col in np.flatnonzero(~raw.values.any(axis=0)):
+            raise InputError(f"every value of channel {raw.channels[col]} is 0 ({len(raw.values)} rows): a "
+                             "measurement holds reflected light", path=raw.path, line=int(raw.lines[0]),
+                             field=raw.channels[col])
     _check_angle_plausibility(raw, angle_unit)
     right_angle = 90.0 if angle_unit == "deg" else math.pi / 2
     thetas = raw.angles[:, [0, 2]]
