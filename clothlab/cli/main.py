@@ -7,7 +7,9 @@ duration of the command.  Messages (log records, warnings) go to stderr, results
 
 Exit codes: 0 success; 1 a command's own failure verdict (e.g. ``check`` found a violation); 2 a user
 mistake (:class:`clothlab.errors.ClothlabError`: one line ``clothlab: error: ...``, no traceback) or a usage
-error; 130 interrupted (Ctrl-C).
+error, or a file-system fault (``OSError``: the path and the reason, no traceback); 130 interrupted (Ctrl-C;
+a Ctrl-C swallowed by a C callback still stops the command before any result is committed, and a second
+Ctrl-C while stopping is ignored).
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import signal
 import sys
 
 from clothlab import __version__
+from clothlab.atomic import interrupts_recorded
 from clothlab.cli import bench, calibrate, check, fit, fit_btf, render, report, simulate
 from clothlab.cli import eval as eval_
 from clothlab.cli.options import DEPRECATED
@@ -71,7 +75,7 @@ def main(argv=None) -> int:
         return 0
     log = logging.getLogger("clothlab.cli")
     try:
-        with _configured(verbosity(args)), _geometry_warnings_logged():
+        with interrupts_recorded(), _configured(verbosity(args)), _geometry_warnings_logged():
             for old, new in getattr(args, DEPRECATED, []):
                 log.warning(f"{old} is deprecated; use {new}")
             return args.run(args)
@@ -79,8 +83,16 @@ def main(argv=None) -> int:
         print(f"clothlab: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C while we stop is not a traceback
         print("\nclothlab: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # a file-system fault the command did not foresee: name the path, no traceback
+        where = exc.filename if exc.filename is not None else "a file"
+        print(f"clothlab: error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except RecursionError:
+        print("clothlab: error: input nested too deeply to be read", file=sys.stderr)
+        return 2
 
 
 class _Formatter(logging.Formatter):

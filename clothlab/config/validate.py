@@ -68,6 +68,7 @@ from clothlab.models.registry import MODEL_KINDS, model_class
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 NODES_RANGE = (2, 1000)
+MAX_NAME_CHARS = 200
 MAX_EVALS = 2**31 - 1  # nlopt's maxeval is a C int
 SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
 
@@ -132,6 +133,10 @@ class _Validator:
         self.section(top, (), ("name", "measurement", "model", "fit", "report", "output"),
                      required=("name", "measurement"))
         name = as_str(top["name"], self.at(("name",)))
+        if len(name) > MAX_NAME_CHARS:
+            raise self.at(("name",)).error(
+                f"the name has {len(name)} characters; at most {MAX_NAME_CHARS} (it names the fits/ and reports/ "
+                "directories and their hidden siblings, within the file system's 255-byte limit)")
         if not NAME_PATTERN.fullmatch(name) or name in (".", ".."):
             raise self.at(("name",)).error(
                 f"{name!r} is not a valid name: use letters, digits, '.', '_' and '-' only "
