@@ -248,7 +248,13 @@ def compose_yaml(text: str, *, path=None, error=InputError):
 
     if len(text) > MAX_YAML_BYTES:
         raise error(f"YAML text of {len(text)} characters; at most {MAX_YAML_BYTES}", path=path)
-    loader = strict_loader(text)
+    try:
+        loader = strict_loader(text)
+    except yaml.YAMLError as exc:  # a character YAML does not allow (a control character)
+        position = getattr(exc, "position", None)
+        line = None if position is None else text.count("\n", 0, position) + 1
+        raise error(f"not valid YAML: a character YAML does not allow ({getattr(exc, 'character', '?')!r})",
+                    path=path, line=line) from None
     try:
         node = loader.get_single_node()
         check_node_bounds(node, path=path, error=error)
