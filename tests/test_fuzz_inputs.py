@@ -318,7 +318,8 @@ def test_fuzz_scene(tmp_path):
 
 def chart_lines() -> list[str]:
     rng = np.random.default_rng(5)
-    return ["patch,R,G,B"] + [f"p{k},{r!r},{g!r},{b!r}" for k, (r, g, b) in enumerate(rng.uniform(0.02, 0.9, (24, 3)).tolist())]
+    patches = rng.uniform(0.02, 0.9, (24, 3)).tolist()
+    return ["patch,R,G,B"] + [f"p{k},{r!r},{g!r},{b!r}" for k, (r, g, b) in enumerate(patches)]
 
 
 def test_fuzz_chart(tmp_path):
