@@ -144,8 +144,8 @@ def load_fitted(fit_dir):
         channels = tuple(fit["measurement"]["channels"])
         coefficients = {k: np.array([_number(v[c], f"coefficients.{k}.{c}", fit_dir) for c in channels])
                         for k, v in fit["coefficients"].items()}
-        if not params or not coefficients or not channels:
-            raise KeyError("parameters, coefficients and measurement.channels must not be empty")
+        if not coefficients or not channels:
+            raise KeyError("coefficients and measurement.channels must not be empty")
         # the model's constructor options as fitted (e.g. kang: alternating, tile_nodes)
         options = dict(fit["model"].get("options") or (fit.get("config") or {}).get("model", {}).get("options") or {})
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

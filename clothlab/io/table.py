@@ -171,8 +171,9 @@ MIN_VALUE = float(np.finfo(np.float64).tiny)
 precision and its square underflows to 0 inside least squares."""
 MIN_ROWS = 2
 """Fewest rows of a measurement (one row cannot be fitted or summarised by percentiles)."""
-RADIAN_SUSPECT_DEG = 1.6
-"""A ``deg`` table whose angles all lie below this (just above pi/2) holds radians."""
+RADIAN_SUSPECT_DEG = (1.6, 6.3)
+"""A ``deg`` table whose polar angles all lie below 1.6 (just above pi/2) and whose azimuths all lie within
+6.3 (just above 2 pi) holds radians."""
 
 
 def _check_magnitude(array: np.ndarray, raw: RawRows, names) -> None:
@@ -198,11 +199,12 @@ def _check_angle_plausibility(raw: RawRows, angle_unit: str) -> None:
         raise InputError(f"value {float(phis[row, col])!r} is outside [-{turn:g}, {turn:g}] {angle_unit}; an "
                          "azimuth lies within one turn", path=raw.path, line=int(raw.lines[row]),
                          field=names[2 * col + 1])
-    if angle_unit == "deg" and len(raw.angles) > 1 and float(np.abs(raw.angles).max()) < RADIAN_SUSPECT_DEG:
+    polar_max, azimuth_max = RADIAN_SUSPECT_DEG
+    if (angle_unit == "deg" and len(raw.angles) > 1 and float(raw.angles[:, [0, 2]].max()) < polar_max
+            and float(np.abs(phis).max()) < azimuth_max):
         raise InputError(
-            f"every angle lies below {RADIAN_SUSPECT_DEG} deg (largest {float(np.abs(raw.angles).max())!r}): "
-            "these look like radians; declare angle_unit: rad", path=raw.path, line=int(raw.lines[0]),
-            field="angle_unit")
+            f"every polar angle lies below {polar_max} deg and every azimuth within {azimuth_max} deg: these look "
+            "like radians; declare angle_unit: rad", path=raw.path, line=int(raw.lines[0]), field="angle_unit")
 
 
 def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:

@@ -152,8 +152,8 @@ def _check_fit_json(fit: dict, path: Path) -> None:
                 "optimizer", "versions"):
         if key in fit and fit[key] is not None and not isinstance(fit[key], dict):
             raise InputError(f"expected an object, found {type(fit[key]).__name__}", path=path, field=key)
-    for key in ("parameters", "coefficients", "measurement"):
-        if not fit.get(key):
+    for key in ("parameters", "coefficients", "measurement"):  # a baseline may have no parameters
+        if key not in fit or not isinstance(fit[key], dict) or (key != "parameters" and not fit[key]):
             raise InputError(f"the entry {key!r} is missing or empty", path=path, field=key)
     for pname, entry in fit["parameters"].items():
         if not isinstance(entry, dict) or "value" not in entry:
