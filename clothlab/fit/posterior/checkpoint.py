@@ -130,7 +130,7 @@ def _load_checkpoint(path: Path, fingerprint: str) -> _ChainState:
     try:
         if path.stat().st_size == 0:
             raise _unreadable(path, "the file is empty")
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as z:
             missing = [key for key in _CHECKPOINT_KEYS if key not in z.files]
             if missing:
                 raise _unreadable(path, f"missing {', '.join(missing)}")
