@@ -96,6 +96,8 @@ _INTERRUPTED = False
 
 def _on_sigint(signum, frame):
     global _INTERRUPTED
+    if _INTERRUPTED:  # a second Ctrl-C while the first one unwinds: already stopping
+        return
     _INTERRUPTED = True
     raise KeyboardInterrupt
 
@@ -104,7 +106,9 @@ def _on_sigint(signum, frame):
 def interrupts_recorded() -> Iterator[None]:
     """Install a SIGINT handler that records the interrupt before raising KeyboardInterrupt, for the
     ``with`` block (main thread only; elsewhere a no-op).  :func:`atomic_directory` refuses to commit a
-    result once an interrupt was recorded, even if the KeyboardInterrupt was swallowed on the way."""
+    result once an interrupt was recorded, even if the KeyboardInterrupt was swallowed on the way.  Further
+    Ctrl-C are ignored once one was recorded (also after the block: the process is stopping), so a second
+    Ctrl-C while the first unwinds cannot turn into a traceback."""
     import signal
     import threading
 
@@ -117,7 +121,8 @@ def interrupts_recorded() -> Iterator[None]:
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if not _INTERRUPTED:
+            signal.signal(signal.SIGINT, previous)
 
 
 def check_interrupted() -> None:

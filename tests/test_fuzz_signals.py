@@ -75,7 +75,7 @@ def test_ctrl_c_thirty_times_over_the_whole_run(tmp_path):
     for k in range(30):
         root = tmp_path / f"t{k}"
         root.mkdir()
-        rc, _ = interrupt_trial(root, 0.4 + 0.2 * k, second=k % 3 == 0)
+        rc, _ = interrupt_trial(root, 0.5 + 0.2 * k, second=k % 3 == 0)
         codes.append(rc)
     interrupted = [c for c in codes if c is not None]
     print(f"\nCtrl-C trials: {len(interrupted)} interrupted, all exit 130 with the previous result intact; "
