@@ -75,6 +75,30 @@ def replace_field(lines: list[str], row: int, col: int, token: str, sep: str = "
     return out
 
 
+def replace_nth(text: str, old: str, nth: int, token: str) -> bytes:
+    """``text`` with one occurrence of ``old`` (the nth, cyclically) replaced by ``token``, as bytes."""
+    pieces = text.split(old)
+    k = 1 + nth % (len(pieces) - 1)
+    return (old.join(pieces[:k]) + token + old.join(pieces[k:])).encode("utf-8", "surrogatepass")
+
+
+def fuzz_yaml_values(family: str, path: Path, text: str, values, load, check) -> None:
+    """Replace one occurrence of one of ``values`` in the YAML ``text`` by a drawn token, write it to
+    ``path`` and read it with ``load``: a named refusal, or ``check(result)`` holds."""
+    counts = collections.Counter()
+
+    @SETTINGS
+    @given(old=st.sampled_from(values), token=TOKENS, nth=st.integers(0, 3))
+    def run(old, token, nth):
+        path.write_bytes(replace_nth(text, old, nth, token))
+        kind, result = outcome(counts, load, path, paths=(path,))
+        if kind == "accepted":
+            check(result)
+
+    run()
+    report(family, counts)
+
+
 def mutate_lines(lines: list[str], op: int, index: int, token: str) -> list[str]:
     out = list(lines)
     index %= len(out)
@@ -210,24 +234,13 @@ def test_fuzz_fabric_yaml(tmp_path):
     (tmp_path / "m.csv").write_text("\n".join(clothlab_lines()) + "\n")
     (tmp_path / "fabric.yaml").write_text(FABRIC)
     assert load_config(tmp_path / "fabric.yaml").name == "fuzz"  # the unmutated file is valid
-    counts = collections.Counter()
 
-    @SETTINGS
-    @given(old=st.sampled_from(FABRIC_VALUES), token=TOKENS, nth=st.integers(0, 3))
-    def run(old, token, nth):
-        pieces = FABRIC.split(old)
-        k = 1 + nth % (len(pieces) - 1)
-        text = old.join(pieces[:k]) + token + old.join(pieces[k:])
-        path = tmp_path / "fabric.yaml"
-        path.write_bytes(text.encode("utf-8", errors="surrogatepass"))
-        kind, cfg = outcome(counts, load_config, path, paths=(path,))
-        if kind == "accepted":
-            _finite_everywhere(cfg.canonical())
-            assert 1 <= cfg.fit.optimizer.max_evals <= 2**31 - 1
-            assert len(cfg.name) <= 200
+    def check(cfg):
+        _finite_everywhere(cfg.canonical())
+        assert 1 <= cfg.fit.optimizer.max_evals <= 2**31 - 1
+        assert len(cfg.name) <= 200
 
-    run()
-    report("fabric.yaml", counts)
+    fuzz_yaml_values("fabric.yaml", tmp_path / "fabric.yaml", FABRIC, FABRIC_VALUES, load_config, check)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -293,24 +306,14 @@ def test_fuzz_scene(tmp_path):
 
     (tmp_path / "base.yaml").write_text(SCENE)
     assert load_scene(tmp_path / "base.yaml").camera.resolution == (32, 24)  # the unmutated file is valid
-    counts = collections.Counter()
 
-    @SETTINGS
-    @given(old=st.sampled_from(SCENE_VALUES), token=TOKENS, nth=st.integers(0, 3))
-    def run(old, token, nth):
-        pieces = SCENE.split(old)
-        k = 1 + nth % (len(pieces) - 1)
-        path = tmp_path / "scene.yaml"
-        path.write_bytes((old.join(pieces[:k]) + token + old.join(pieces[k:])).encode("utf-8", "surrogatepass"))
-        kind, scene = outcome(counts, load_scene, path, paths=(path,))
-        if kind == "accepted":
-            for coef in scene.fabric.coefficients.values():
-                assert np.isfinite(coef).all() and (coef >= 0).all()
-            assert render_bytes(scene.camera.resolution, scene.spp) <= MAX_RENDER_BYTES
-            assert all(math.isfinite(float(v)) for v in scene.fabric.params.values())
+    def check(scene):
+        for coef in scene.fabric.coefficients.values():
+            assert np.isfinite(coef).all() and (coef >= 0).all()
+        assert render_bytes(scene.camera.resolution, scene.spp) <= MAX_RENDER_BYTES
+        assert all(math.isfinite(float(v)) for v in scene.fabric.params.values())
 
-    run()
-    report("scene", counts)
+    fuzz_yaml_values("scene", tmp_path / "scene.yaml", SCENE, SCENE_VALUES, load_scene, check)
 
 
 # ---------------------------------------------------------------------------------------------------------
