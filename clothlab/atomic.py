@@ -92,14 +92,36 @@ def _refuse_existing(dest: Path) -> None:
 # still stops the command before a result is committed.
 
 _INTERRUPTED = False
+_REDELIVER = False
 
 
 def _on_sigint(signum, frame):
-    global _INTERRUPTED
+    global _INTERRUPTED, _REDELIVER
+    if _REDELIVER:  # the KeyboardInterrupt of a Ctrl-C was swallowed by a callback: raise it again here
+        _REDELIVER = False
+        raise KeyboardInterrupt
     if _INTERRUPTED:  # a second Ctrl-C while the first one unwinds: already stopping
         return
     _INTERRUPTED = True
     raise KeyboardInterrupt
+
+
+def _swallowed(previous_hook):
+    """A ``sys.unraisablehook`` that, for a KeyboardInterrupt raised where Python could only print "Exception
+    ignored" (a weakref or C callback, e.g. during numba compilation), prints nothing and delivers the
+    interrupt again to the main thread; anything else goes to ``previous_hook``."""
+    def hook(unraisable):
+        global _REDELIVER
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            import _thread
+            import signal
+            import threading
+
+            _REDELIVER = True  # from another thread, so the handler runs after this callback has returned
+            threading.Timer(0.01, _thread.interrupt_main, (signal.SIGINT,)).start()
+            return
+        previous_hook(unraisable)
+    return hook
 
 
 @contextlib.contextmanager
@@ -112,15 +134,19 @@ def interrupts_recorded() -> Iterator[None]:
     import signal
     import threading
 
-    global _INTERRUPTED
+    global _INTERRUPTED, _REDELIVER
+    _REDELIVER = False
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = signal.signal(signal.SIGINT, _on_sigint)
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _swallowed(previous_hook)
     _INTERRUPTED = False
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         if not _INTERRUPTED:
             signal.signal(signal.SIGINT, previous)
 

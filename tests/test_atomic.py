@@ -296,3 +296,31 @@ def test_paper_examples_into_an_existing_set_writes_nothing(tmp_path):
     with pytest.raises(ResultExistsError, match="nothing was written"):
         write_paper_examples(tmp_path)
     assert sorted(p.name for p in tmp_path.rglob("*")) == sorted([name, EXAMPLE_FILES[-1]])
+
+
+def test_ctrl_c_swallowed_by_a_callback_is_delivered_again_to_the_main_flow(capsys):
+    import gc
+    import signal
+    import time
+    import weakref
+
+    import clothlab.atomic as atomic
+
+    class Node:
+        pass
+
+    previous = signal.getsignal(signal.SIGINT)
+    loops = 0
+    try:
+        with atomic.interrupts_recorded(), pytest.raises(KeyboardInterrupt):
+            node = Node()
+            ref = weakref.ref(node, lambda r: signal.raise_signal(signal.SIGINT))  # Python can only "ignore" it
+            del node
+            gc.collect()
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                loops += 1
+        assert ref() is None
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert "Exception ignored" not in capsys.readouterr().err and loops > 0
