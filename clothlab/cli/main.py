@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import signal
 import sys
 
 from clothlab import __version__
@@ -68,6 +67,16 @@ def verbosity(args) -> int:
 
 def main(argv=None) -> int:
     """The console entry point: parse ``argv`` (default ``sys.argv[1:]``), run the command, return its exit code."""
+    with interrupts_recorded():  # from here on a second Ctrl-C while stopping is ignored
+        try:
+            return _run(argv)
+        except KeyboardInterrupt:
+            print("\nclothlab: interrupted", file=sys.stderr)
+            return 130
+
+
+def _run(argv) -> int:
+    """Parse and run; a user mistake or an unforeseen file-system fault -> one line and exit 2."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -75,17 +84,13 @@ def main(argv=None) -> int:
         return 0
     log = logging.getLogger("clothlab.cli")
     try:
-        with interrupts_recorded(), _configured(verbosity(args)), _geometry_warnings_logged():
+        with _configured(verbosity(args)), _geometry_warnings_logged():
             for old, new in getattr(args, DEPRECATED, []):
                 log.warning(f"{old} is deprecated; use {new}")
             return args.run(args)
     except ClothlabError as exc:
         print(f"clothlab: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C while we stop is not a traceback
-        print("\nclothlab: interrupted", file=sys.stderr)
-        return 130
     except OSError as exc:  # a file-system fault the command did not foresee: name the path, no traceback
         where = exc.filename if exc.filename is not None else "a file"
         print(f"clothlab: error: {where}: {exc.strerror or exc}", file=sys.stderr)
