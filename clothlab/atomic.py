@@ -147,7 +147,7 @@ def interrupts_recorded() -> Iterator[None]:
         yield
     finally:
         sys.unraisablehook = previous_hook
-        if not _INTERRUPTED:
+        if not _INTERRUPTED and signal.getsignal(signal.SIGINT) is _on_sigint:
             signal.signal(signal.SIGINT, previous)
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import signal
 import sys
 
 from clothlab import __version__
@@ -71,6 +72,8 @@ def main(argv=None) -> int:
         try:
             return _run(argv)
         except KeyboardInterrupt:
+            if argv is None:  # the process ends: ignore Ctrl-C through interpreter shutdown too (Python resets
+                signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Python handler to SIG_DFL while finalising)
             print("\nclothlab: interrupted", file=sys.stderr)
             return 130
 
