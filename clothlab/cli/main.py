@@ -72,10 +72,28 @@ def main(argv=None) -> int:
         try:
             return _run(argv)
         except KeyboardInterrupt:
-            if argv is None:  # the process ends: ignore Ctrl-C through interpreter shutdown too (Python resets
-                signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Python handler to SIG_DFL while finalising)
             print("\nclothlab: interrupted", file=sys.stderr)
+            if argv is None:  # the process itself: end it here
+                _exit_interrupted()
             return 130
+
+
+def _exit_interrupted() -> None:
+    """End an interrupted process with status 130 at once, after flushing its output.
+
+    Every result was already committed or rolled back by the ``with`` blocks that unwound; skipping the
+    interpreter's finalisation avoids its known faults after a Ctrl-C: a SIGINT there kills the process
+    (Python resets handlers to SIG_DFL, and re-raises SIGINT at exit when a KeyboardInterrupt went through
+    embedded code), and native threads (numba, OpenMP) can crash while they are torn down."""
+    import os
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(130)
 
 
 def _run(argv) -> int:
