@@ -70,7 +70,10 @@ def main(argv=None) -> int:
     """The console entry point: parse ``argv`` (default ``sys.argv[1:]``), run the command, return its exit code."""
     with interrupts_recorded():  # from here on a second Ctrl-C while stopping is ignored
         try:
-            return _run(argv)
+            code = _run(argv)
+            if argv is None:  # done: a Ctrl-C from now on (interpreter shutdown) cannot undo or break anything
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+            return code
         except KeyboardInterrupt:
             print("\nclothlab: interrupted", file=sys.stderr)
             if argv is None:  # the process itself: end it here
