@@ -124,6 +124,16 @@ def _swallowed(previous_hook):
     return hook
 
 
+def _quiet_interrupt(previous_hook):
+    """A ``sys.excepthook`` that prints nothing for a KeyboardInterrupt (compiled extensions print the
+    traceback of an exception they cannot propagate through it, then report it as unraisable)."""
+    def hook(exc_type, exc_value, tb):
+        if issubclass(exc_type, KeyboardInterrupt):
+            return
+        previous_hook(exc_type, exc_value, tb)
+    return hook
+
+
 @contextlib.contextmanager
 def interrupts_recorded() -> Iterator[None]:
     """Install a SIGINT handler that records the interrupt before raising KeyboardInterrupt, for the
@@ -140,13 +150,14 @@ def interrupts_recorded() -> Iterator[None]:
         yield
         return
     previous = signal.signal(signal.SIGINT, _on_sigint)
-    previous_hook = sys.unraisablehook
+    previous_hook, previous_excepthook = sys.unraisablehook, sys.excepthook
     sys.unraisablehook = _swallowed(previous_hook)
+    sys.excepthook = _quiet_interrupt(previous_excepthook)
     _INTERRUPTED = False
     try:
         yield
     finally:
-        sys.unraisablehook = previous_hook
+        sys.unraisablehook, sys.excepthook = previous_hook, previous_excepthook
         if not _INTERRUPTED and signal.getsignal(signal.SIGINT) is _on_sigint:
             signal.signal(signal.SIGINT, previous)
 
