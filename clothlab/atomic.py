@@ -162,6 +162,11 @@ def interrupts_recorded() -> Iterator[None]:
             signal.signal(signal.SIGINT, previous)
 
 
+def was_interrupted() -> bool:
+    """True once a Ctrl-C was recorded by :func:`interrupts_recorded` (until the next block starts)."""
+    return _INTERRUPTED
+
+
 def check_interrupted() -> None:
     """KeyboardInterrupt if a Ctrl-C was recorded by :func:`interrupts_recorded` (and swallowed since)."""
     if _INTERRUPTED:

@@ -21,7 +21,7 @@ import signal
 import sys
 
 from clothlab import __version__
-from clothlab.atomic import interrupts_recorded
+from clothlab.atomic import interrupts_recorded, was_interrupted
 from clothlab.cli import bench, calibrate, check, fit, fit_btf, render, report, simulate
 from clothlab.cli import eval as eval_
 from clothlab.cli.options import DEPRECATED
@@ -74,11 +74,21 @@ def main(argv=None) -> int:
             if argv is None:  # done: a Ctrl-C from now on (interpreter shutdown) cannot undo or break anything
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
             return code
+        except Exception:
+            if not was_interrupted():
+                raise
+            # a failure caused by the interrupt itself (a library whose C callback swallowed the
+            # KeyboardInterrupt and then failed, e.g. numba's compiler): report the interrupt
+            return _interrupted(argv)
         except KeyboardInterrupt:
-            print("\nclothlab: interrupted", file=sys.stderr)
-            if argv is None:  # the process itself: end it here
-                _exit_interrupted()
-            return 130
+            return _interrupted(argv)
+
+
+def _interrupted(argv) -> int:
+    print("\nclothlab: interrupted", file=sys.stderr)
+    if argv is None:  # the process itself: end it here
+        _exit_interrupted()
+    return 130
 
 
 def _exit_interrupted() -> None:
