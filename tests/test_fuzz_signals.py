@@ -25,7 +25,7 @@ measurement: {path: m.csv}
 model: {kind: irawan, weave: preset:cotton-denim}
 fit:
   free: [alpha]
-  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 400, seed: 1}
+  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 20000, seed: 1}
 output: {fits: fits, reports: reports}
 """
 
