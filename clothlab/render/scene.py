@@ -57,6 +57,9 @@ import numpy as np
 from clothlab.errors import ConfigError
 
 SHAPES = ("flat", "cylinder")
+MAX_MAGNITUDE = 1e9
+"""Largest magnitude of a scene number or vector component (mm for lengths: 1000 km), so products of
+positions and directions cannot overflow."""
 MAX_COEFFICIENT = 1e6
 """Largest kd / ks coefficient accepted in a scene (they scale a BRDF in 1/sr)."""
 RENDER_BYTES_PER_SAMPLE = 8 * 48
@@ -198,6 +201,8 @@ class _Reader:
             raise self.error(where, "missing value")
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise self.error(where, f"expected a finite number, got {value!r}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise self.error(where, f"expected a number within +-{MAX_MAGNITUDE:g}, got {value!r}")
         if minimum is not None and (value <= minimum if exclusive else value < minimum):
             raise self.error(where, f"expected a number {'>' if exclusive else '>='} {minimum}, got {value!r}")
         if maximum is not None and value > maximum:
@@ -215,6 +220,8 @@ class _Reader:
                 or not all(isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c)
                            for c in value)):
             raise self.error(where, f"expected a list of {n} finite numbers, got {value!r}")
+        if not all(abs(c) <= MAX_MAGNITUDE for c in value):
+            raise self.error(where, f"expected numbers within +-{MAX_MAGNITUDE:g} (mm), got {value!r}")
         if positive and not all(c > 0 for c in value):
             raise self.error(where, f"expected positive numbers, got {value!r}")
         if nonzero and not any(c != 0 for c in value):
