@@ -93,6 +93,7 @@ def _refuse_existing(dest: Path) -> None:
 
 _INTERRUPTED = False
 _REDELIVER = False
+_ACTIVE = False  # inside an interrupts_recorded block
 
 
 def _on_sigint(signum, frame):
@@ -144,7 +145,7 @@ def interrupts_recorded() -> Iterator[None]:
     import signal
     import threading
 
-    global _INTERRUPTED, _REDELIVER
+    global _INTERRUPTED, _REDELIVER, _ACTIVE
     _REDELIVER = False
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -153,23 +154,25 @@ def interrupts_recorded() -> Iterator[None]:
     previous_hook, previous_excepthook = sys.unraisablehook, sys.excepthook
     sys.unraisablehook = _swallowed(previous_hook)
     sys.excepthook = _quiet_interrupt(previous_excepthook)
-    _INTERRUPTED = False
+    _INTERRUPTED, _ACTIVE = False, True
     try:
         yield
     finally:
+        _ACTIVE = False
         sys.unraisablehook, sys.excepthook = previous_hook, previous_excepthook
         if not _INTERRUPTED and signal.getsignal(signal.SIGINT) is _on_sigint:
             signal.signal(signal.SIGINT, previous)
 
 
 def was_interrupted() -> bool:
-    """True once a Ctrl-C was recorded by :func:`interrupts_recorded` (until the next block starts)."""
-    return _INTERRUPTED
+    """True inside an :func:`interrupts_recorded` block once a Ctrl-C was recorded in it."""
+    return _ACTIVE and _INTERRUPTED
 
 
 def check_interrupted() -> None:
-    """KeyboardInterrupt if a Ctrl-C was recorded by :func:`interrupts_recorded` (and swallowed since)."""
-    if _INTERRUPTED:
+    """KeyboardInterrupt if a Ctrl-C was recorded in the current :func:`interrupts_recorded` block (and
+    swallowed since)."""
+    if was_interrupted():
         raise KeyboardInterrupt
 
 

@@ -248,6 +248,8 @@ def compose_yaml(text: str, *, path=None, error=InputError):
 
     if len(text) > MAX_YAML_BYTES:
         raise error(f"YAML text of {len(text)} characters; at most {MAX_YAML_BYTES}", path=path)
+    if not _json_depth_ok(text):  # flow collections nested deeper than the bound: refuse before composing
+        raise error(f"YAML collections nested more than {MAX_DEPTH} deep", path=path)
     try:
         loader = strict_loader(text)
     except yaml.YAMLError as exc:  # a character YAML does not allow (a control character)
@@ -297,6 +299,10 @@ def load_yaml_file(path, *, error=InputError, what: str = "YAML file", limit: in
 
 
 def _json_depth_ok(text: str) -> bool:
+    """False when '[' / '{' outside double-quoted strings nest deeper than :data:`MAX_DEPTH` (JSON exactly,
+    YAML flow collections conservatively)."""
+    if text.count("[") + text.count("{") <= MAX_DEPTH:
+        return True
     depth = deepest = 0
     in_string = escape = False
     for ch in text:
