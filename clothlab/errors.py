@@ -45,5 +45,18 @@ class ResultExistsError(ClothlabError):
     """A result directory exists and overwriting it was not asked for (``--force``)."""
 
 
+class ResultBusyError(ClothlabError):
+    """Another process is writing the same result directory (its lock file is held)."""
+
+
+class OutputError(ClothlabError):
+    """An output path cannot be written (not a directory, not writable, a name too long, a NUL byte)."""
+
+
+class ResultError(ClothlabError):
+    """A computation produced a result that cannot be trusted (a non-finite coefficient, prediction or
+    percentile); nothing is saved."""
+
+
 class GeometryWarning(UserWarning):
     """A yarn geometry violates a constraint of the paper and was mapped to its documented limit form."""

@@ -349,12 +349,12 @@ def test_optimizer_needs_an_algorithm(tmp_path):
     assert only_local.fit.optimizer.global_algorithm is None
 
 
-@pytest.mark.parametrize("value", ["0", "-5"])
-def test_max_evals_must_be_positive(tmp_path, value):
+@pytest.mark.parametrize("value", ["0", "-5", str(2**31), "1" + "0" * 23])
+def test_max_evals_must_be_a_positive_c_int(tmp_path, value):
     text = edit(FULL, "max_evals: 1234", f"max_evals: {value}")
     err = fails(tmp_path, text)
     assert err.field == "fit.optimizer.max_evals" and err.line == line_of(text, "optimizer:")
-    assert value in str(err) and ">= 1" in str(err)
+    assert value in str(err) and f"[1, {2**31 - 1}]" in str(err)
 
 
 def test_walkers_at_least_twice_the_free_parameters(tmp_path):
@@ -576,7 +576,26 @@ def test_closed_lists_come_from_their_owners(tmp_path):
         assert config.model.quadrature.rule == rule == apply_overrides(config, rule=rule).model.quadrature.rule
         assert Quadrature(rule, 8).rule == rule
     for fmt in FORMAT_CHOICES:
-        assert load_config(project(tmp_path, edit(FULL, "format: astm", f"format: {fmt}"))).measurement.format == fmt
+        text = edit(edit(FULL, "format: astm", f"format: {fmt}"), "  options: {angle_unit: rad}\n", "")
+        assert load_config(project(tmp_path, text)).measurement.format == fmt
+
+
+@pytest.mark.parametrize("options, field, fragment", [
+    ("{angle_units: rad}", "measurement.options.angle_units", "not accepted by the astm reader"),
+    ("{angle_unit: radians}", "measurement.options.angle_unit", "expected one of deg | rad"),
+    ("{up: north}", "measurement.options.up", "not accepted"),
+])
+def test_measurement_options_are_checked_at_their_line(tmp_path, options, field, fragment):
+    text = edit(FULL, "options: {angle_unit: rad}", f"options: {options}")
+    err = fails(tmp_path, text)
+    assert err.field == field and err.line == line_of(text, f"options: {options}") and fragment in str(err)
+    assert err.path is not None and err.path.endswith("fabric.yaml")
+
+
+def test_model_options_are_checked_at_their_line(tmp_path):
+    text = edit(FULL, "kind: irawan\n", "kind: irawan\n  options: {no_such_option: 1}\n")
+    err = fails(tmp_path, text)
+    assert err.field == "model.options.no_such_option" and err.line == line_of(text, "options: {no_such")
 
 
 def test_auto_format_detects_like_no_format():

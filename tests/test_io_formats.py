@@ -246,9 +246,9 @@ def test_detects_table_with_sidecar(tmp_path):
 
 def test_explicit_format_and_options(tmp_path):
     path = tmp_path / "deg.dat"
-    path.write_text("NUM_POINTS 1\nVARS theta_i,phi_i,theta_s,phi_s,Y\n30,0,60,0,0.5\n")
+    path.write_text("NUM_POINTS 2\nVARS theta_i,phi_i,theta_s,phi_s,Y\n30,0,60,0,0.5\n30,0,50,0,0.5\n")
     m = load_measurement(path, format="astm", angle_unit="deg")
-    np.testing.assert_allclose(m.theta_o, [60.0])
+    np.testing.assert_allclose(m.theta_o, [60.0, 50.0])
     with pytest.raises(InputError, match="option 'angle_units'") as info:
         load_measurement(path, angle_units="deg")
     assert info.value.field == "angle_units"

@@ -17,6 +17,18 @@ import numpy as np
 from clothlab.errors import InputError
 
 ENCODINGS = ("auto", "srgb", "linear")
+MAX_IMAGE_BYTES = 2 << 30
+"""Largest decoded image (float32 pixels, after the crop's rows are selected) read at once (2 GiB)."""
+
+
+def check_image_memory(width: int, height: int, channels: int, *, path=None, cropped: bool = False) -> None:
+    """InputError naming the image and the ``crop`` option when decoding would exceed :data:`MAX_IMAGE_BYTES`."""
+    need = int(width) * int(height) * max(int(channels), 1) * 4
+    if need > MAX_IMAGE_BYTES:
+        raise InputError(f"decoding {width} x {height} pixels x {channels} channels needs {need / 2**30:.1f} GiB "
+                         f"(at most {MAX_IMAGE_BYTES / 2**30:.0f} GiB); "
+                         + ("choose a smaller crop" if cropped else "give a crop (x0, y0, width, height)"),
+                         path=path, field="crop")
 
 
 @dataclass(frozen=True)
@@ -97,7 +109,16 @@ def read_image(path, *, crop=None, encoding: str = "auto") -> tuple[np.ndarray, 
         info = _info(inp)
         decode = encoding == "srgb" or (encoding == "auto" and info.is_integer)
         lut = _srgb_table(info.pixel_type) if decode else None
-        pixels = inp.read_image(info.pixel_type if lut is not None else oiio.FLOAT)
+        pixel_type = info.pixel_type if lut is not None else oiio.FLOAT
+        rows = columns = None
+        if crop is not None:  # decode only the crop's rows (a scanline ROI read), then cut its columns
+            rows, columns = crop_slices(crop, info.width, info.height, path)
+        height = info.height if rows is None else rows.stop - rows.start
+        check_image_memory(info.width, height, info.channels, path=path, cropped=crop is not None)
+        if rows is None:
+            pixels = inp.read_image(pixel_type)
+        else:
+            pixels = inp.read_scanlines(0, 0, rows.start, rows.stop, 0, 0, info.channels, pixel_type)
         failed = inp.has_error
         message = inp.geterror() if failed else ""
     finally:
@@ -108,8 +129,8 @@ def read_image(path, *, crop=None, encoding: str = "auto") -> tuple[np.ndarray, 
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    if crop is not None:
-        pixels = pixels[crop_slices(crop, info.width, info.height, path)]
+    if columns is not None:
+        pixels = pixels[:, columns]
     if lut is not None:
         return lut[pixels], info  # exact decoding of every code value, and fast
     pixels = pixels.astype(np.float32, copy=False)

@@ -49,6 +49,7 @@ import numpy as np
 
 from clothlab.errors import InputError
 from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_to_clothlab
+from clothlab.strict import MAX_YAML_BYTES, compose_yaml, construct_yaml, parse_number, read_text
 
 #: Image file suffixes a stack may hold (lower case).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
@@ -245,25 +246,34 @@ def read_manifest(path) -> tuple[list[BtfEntry], str]:
     convention = {"zero": zero, "sense": sense}
     entries = []
     root = path.parent
+    first_line: dict[Path, int | None] = {}
     for line, row in rows:
         name = row.get("file")
-        if name is None or not str(name).strip():
-            raise InputError("manifest row has no 'file'", path=path, line=line, field="file")
-        angles = []
-        for field_name in ANGLE_FIELDS:
-            value = row.get(field_name)
-            try:
-                angle = float(value)
-            except (TypeError, ValueError):
-                raise InputError(f"expected an angle in degrees, found {value!r}", path=path, line=line,
-                                 field=field_name) from None
-            angles.append(angle)
-        image = root / str(name).strip()
+        if name is None or not isinstance(name, str) or not name.strip():
+            raise InputError(f"manifest row has no 'file' name (found {name!r})", path=path, line=line,
+                             field="file")
+        angles = [_angle(row.get(field_name), path=path, line=line, field=field_name)
+                  for field_name in ANGLE_FIELDS]
+        image = root / name.strip()
+        if image in first_line:
+            where = "" if first_line[image] is None else f" (first on line {first_line[image]})"
+            raise InputError(f"image {name.strip()!r} is listed twice{where}: one image holds one angle set",
+                             path=path, line=line, field="file")
+        first_line[image] = line
         entries.append(_entry(image, tuple(angles), convention, path, line=line))
     if not entries:
         raise InputError("manifest lists no images", path=path)
     check_duplicates(entries)
     return entries, warp_axis
+
+
+def _angle(value, **where) -> float:
+    """An angle in degrees from a manifest cell: a YAML number, or text in plain decimal notation."""
+    if isinstance(value, str):
+        return parse_number(value, **where)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"expected an angle in degrees, found {value!r}", **where)
+    return float(value)
 
 
 def check_duplicates(entries: list[BtfEntry]) -> None:
@@ -301,12 +311,13 @@ def _check_warp_axis(warp_axis: str, path) -> None:
 def _read_yaml_manifest(path: Path) -> tuple[dict, list[tuple[int | None, dict]]]:
     import yaml
 
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(f"not valid YAML: {exc}", path=path,
-                         line=None if mark is None else mark.line + 1) from None
+    node, loader = compose_yaml(read_text(path, limit=MAX_YAML_BYTES, what="BTF manifest"), path=path)
+    item_lines = []
+    if isinstance(node, yaml.MappingNode):
+        for key, value in node.value:
+            if key.value == "images" and isinstance(value, yaml.SequenceNode):
+                item_lines = [item.start_mark.line + 1 for item in value.value]
+    data = construct_yaml(loader, node, path=path)
     if not isinstance(data, dict) or not isinstance(data.get("images"), list):
         raise InputError("expected a mapping with an 'images' list of {file, theta_i, phi_i, theta_o, phi_o}",
                          path=path, field="images")
@@ -317,16 +328,17 @@ def _read_yaml_manifest(path: Path) -> tuple[dict, list[tuple[int | None, dict]]
               "azimuth_sense": azimuth.get("sense", "ccw")}
     rows = []
     for index, row in enumerate(data["images"]):
+        line = item_lines[index] if index < len(item_lines) else None
         if not isinstance(row, dict):
             raise InputError(f"images[{index}] is {row!r}; expected a mapping with file and four angles",
-                             path=path, field=f"images[{index}]")
-        rows.append((None, row))
+                             path=path, line=line, field=f"images[{index}]")
+        rows.append((line, row))
     return header, rows
 
 
 def _read_csv_manifest(path: Path) -> tuple[dict, list[tuple[int | None, dict]]]:
     header: dict = {}
-    lines = path.read_text(encoding="utf-8").splitlines()
+    lines = read_text(path, limit=MAX_YAML_BYTES, what="BTF manifest").splitlines()
     body_start = 0
     for number, text in enumerate(lines):
         stripped = text.strip()

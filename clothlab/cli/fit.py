@@ -7,6 +7,7 @@ Progress of the optimiser and the posterior is shown by the fit package itself (
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
@@ -34,10 +35,16 @@ def add_parser(sub):
 
 
 def run(args) -> int:
+    with contextlib.ExitStack() as held:  # each result's lock, held from the checks to the save
+        return _run(args, held)
+
+
+def _run(args, held) -> int:
     from dataclasses import replace
 
+    from clothlab.atomic import prepare_result
     from clothlab.config import PosteriorConfig, apply_overrides, load_config
-    from clothlab.errors import ConfigError, ResultExistsError
+    from clothlab.errors import ConfigError
     from clothlab.fit.runner import run_fit, save_fit
 
     if args.cv is not None and args.cv < 2:
@@ -54,8 +61,8 @@ def run(args) -> int:
             walkers = max(32, 2 * len(cfg.fit.free) + 2)
             cfg = replace(cfg, fit=replace(cfg.fit, posterior=PosteriorConfig(walkers=walkers)))
         dest = (args.output or cfg.output.fits) / cfg.name
-        if dest.exists() and not args.force:
-            raise ResultExistsError(f"{dest} exists; pass --force to replace it", path=dest)
+        # writable, not being written by another fit (locked until saved), no result overwritten without --force
+        held.enter_context(prepare_result(dest, force=args.force))
         configs.append(cfg)
     for cfg in configs:
         result = run_fit(cfg, fits_dir=args.output)

@@ -7,7 +7,9 @@ duration of the command.  Messages (log records, warnings) go to stderr, results
 
 Exit codes: 0 success; 1 a command's own failure verdict (e.g. ``check`` found a violation); 2 a user
 mistake (:class:`clothlab.errors.ClothlabError`: one line ``clothlab: error: ...``, no traceback) or a usage
-error; 130 interrupted (Ctrl-C).
+error, or a file-system fault (``OSError``: the path and the reason, no traceback); 130 interrupted (Ctrl-C;
+a Ctrl-C swallowed by a C callback still stops the command before any result is committed, and a second
+Ctrl-C while stopping is ignored).
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import signal
 import sys
 
 from clothlab import __version__
+from clothlab.atomic import interrupts_recorded, was_interrupted
 from clothlab.cli import bench, calibrate, check, fit, fit_btf, render, report, simulate, train_surrogate
 from clothlab.cli import eval as eval_
 from clothlab.cli.options import DEPRECATED
@@ -64,6 +68,49 @@ def verbosity(args) -> int:
 
 def main(argv=None) -> int:
     """The console entry point: parse ``argv`` (default ``sys.argv[1:]``), run the command, return its exit code."""
+    with interrupts_recorded():  # from here on a second Ctrl-C while stopping is ignored
+        try:
+            code = _run(argv)
+            if argv is None:  # done: a Ctrl-C from now on (interpreter shutdown) cannot undo or break anything
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+            return code
+        except Exception:
+            if not was_interrupted():
+                raise
+            # a failure caused by the interrupt itself (a library whose C callback swallowed the
+            # KeyboardInterrupt and then failed, e.g. numba's compiler): report the interrupt
+            return _interrupted(argv)
+        except KeyboardInterrupt:
+            return _interrupted(argv)
+
+
+def _interrupted(argv) -> int:
+    print("\nclothlab: interrupted", file=sys.stderr)
+    if argv is None:  # the process itself: end it here
+        _exit_interrupted()
+    return 130
+
+
+def _exit_interrupted() -> None:
+    """End an interrupted process with status 130 at once, after flushing its output.
+
+    Every result was already committed or rolled back by the ``with`` blocks that unwound; skipping the
+    interpreter's finalisation avoids its known faults after a Ctrl-C: a SIGINT there kills the process
+    (Python resets handlers to SIG_DFL, and re-raises SIGINT at exit when a KeyboardInterrupt went through
+    embedded code), and native threads (numba, OpenMP) can crash while they are torn down."""
+    import os
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(130)
+
+
+def _run(argv) -> int:
+    """Parse and run; a user mistake or an unforeseen file-system fault -> one line and exit 2."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -78,9 +125,13 @@ def main(argv=None) -> int:
     except ClothlabError as exc:
         print(f"clothlab: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("\nclothlab: interrupted", file=sys.stderr)
-        return 130
+    except OSError as exc:  # a file-system fault the command did not foresee: name the path, no traceback
+        where = exc.filename if exc.filename is not None else "a file"
+        print(f"clothlab: error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except RecursionError:
+        print("clothlab: error: input nested too deeply to be read", file=sys.stderr)
+        return 2
 
 
 class _Formatter(logging.Formatter):

@@ -13,23 +13,31 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from clothlab.colour.chart import Correction, chart_reference, delta_e_2000, fit_correction
+from clothlab.colour.chart import (
+    Correction,
+    chart_reference,
+    check_patch_value,
+    check_patches,
+    delta_e_2000,
+    fit_correction,
+)
 from clothlab.errors import InputError
 from clothlab.progress import get_logger
+from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
 
 
 def read_chart(path) -> tuple[np.ndarray, list[str]]:
     """(N, 3) patch values and patch names of a chart CSV; errors name the line and column."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError("chart file not found", path=path)
-    with path.open(newline="") as fh:
-        rows = [(i, r) for i, r in enumerate(csv.reader(fh), start=1) if r and not r[0].lstrip().startswith("#")]
+    text = read_text(path, limit=MAX_TABLE_BYTES, what="chart file")
+    rows = [(i, r) for i, r in enumerate(csv.reader(io.StringIO(text, newline="")), start=1)
+            if r and not r[0].lstrip().startswith("#")]
     if not rows:
         raise InputError("empty chart file", path=path)
     header = [h.strip() for h in rows[0][1]]
@@ -42,16 +50,14 @@ def read_chart(path) -> tuple[np.ndarray, list[str]]:
         cells = []
         for c in ("R", "G", "B"):
             i = header.index(c)
-            try:
-                v = float(row[i])
-            except (IndexError, ValueError):
-                raise InputError(f"expected a number, found {row[i] if i < len(row) else '(nothing)'!r}",
-                                 path=path, line=line, field=c) from None
-            if not np.isfinite(v) or v < 0:
-                raise InputError(f"value {v!r} must be finite and >= 0", path=path, line=line, field=c)
+            if i >= len(row):
+                raise InputError("expected a number, found (nothing)", path=path, line=line, field=c)
+            v = parse_number(row[i], path=path, line=line, field=c)
+            check_patch_value(v, path=path, line=line, field=c)
             cells.append(v)
         values.append(cells)
         names.append(row[header.index("patch")] if "patch" in header else str(len(names) + 1))
+    check_patches(np.array(values), path=path)
     return np.array(values), names
 
 

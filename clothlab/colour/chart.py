@@ -76,6 +76,29 @@ def chart_reference(name: str = DEFAULT_CHART, illuminant: str | None = "D65", s
                                        method="Von Kries", transform="Bradford")
 
 
+MAX_PATCH_VALUE = 1e30
+"""Largest linear camera value of a patch accepted (beyond it delta E 2000 overflows to NaN)."""
+
+
+def check_patch_value(value: float, **where) -> None:
+    """InputError (naming ``where``: path, line, field) unless one patch value is finite, >= 0 and at most
+    :data:`MAX_PATCH_VALUE`."""
+    if not np.isfinite(value) or value < 0 or value > MAX_PATCH_VALUE:
+        raise InputError(f"value {value!r} must be finite, >= 0 and <= {MAX_PATCH_VALUE:g} (linear camera RGB)",
+                         **where)
+
+
+def check_patches(values: np.ndarray, **where) -> None:
+    """InputError unless the (N, 3) patches vary: an all-zero chart or one whose patches are all identical
+    cannot determine a colour correction (the least-squares system is singular)."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.size and not values.any():
+        raise InputError(f"all {len(values)} patches are zero; expected the photographed chart's values", **where)
+    if len(values) > 1 and np.all(values == values[0]):
+        raise InputError(f"all {len(values)} patches have the same value {values[0].tolist()}; expected the "
+                         "chart's distinct patches", **where)
+
+
 def _check_rgb(values, name: str, *, rows: int | None = None) -> np.ndarray:
     array = np.asarray(values, dtype=np.float64)
     if array.ndim < 1 or array.shape[-1] != 3:
@@ -197,9 +220,16 @@ def fit_correction(measured, reference, method: str = "Cheung 2004", *, degree: 
     measured = _check_rgb(measured, "measured")
     if measured.ndim != 2:
         raise InputError(f"expected (N, 3) patch values, got shape {measured.shape}", field="measured")
+    if np.abs(measured).max(initial=0.0) > MAX_PATCH_VALUE:
+        raise InputError(f"patch values exceed {MAX_PATCH_VALUE:g}", field="measured")
+    check_patches(measured, field="measured")
     reference = _check_rgb(reference, "reference", rows=measured.shape[0])
     options = _options(method, degree, terms)
-    matrix = np.asarray(matrix_colour_correction(measured, reference, method, **options), dtype=np.float64)
+    with np.errstate(all="ignore"):
+        matrix = np.asarray(matrix_colour_correction(measured, reference, method, **options), dtype=np.float64)
+    if not np.isfinite(matrix).all():
+        raise InputError(f"the {method} fit gives a non-finite correction: the patches do not determine it",
+                         field="measured")
     if matrix.shape[1] > measured.shape[0]:
         raise InputError(f"{method} {options} has {matrix.shape[1]} terms but only {measured.shape[0]} "
                          "patches: the fit is under-determined", field="measured")

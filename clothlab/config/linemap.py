@@ -18,6 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from clothlab.errors import ConfigError
+from clothlab.strict import MAX_YAML_BYTES, compose_yaml, construct_yaml, read_text
 
 _MERGE_TAG = "tag:yaml.org,2002:merge"
 
@@ -145,35 +146,32 @@ class LineMap:
 def parse_yaml_with_lines(text: str, source: str | None = None):
     """``(data, LineMap)`` of the YAML document ``text``; ``data`` is None for an empty document.
 
-    A syntax error, a duplicate key or an alias cycle raises :class:`~clothlab.errors.ConfigError` with
-    ``source`` and the line PyYAML reports.
+    The document is read by the strict, bounded loader of :mod:`clothlab.strict` (plain decimal numbers,
+    no timestamps, depth and alias-expansion limits).  A syntax error, a duplicate key, an alias cycle or
+    a bound exceeded raises :class:`~clothlab.errors.ConfigError` with ``source`` and the line.
     """
-    import yaml
-
-    loader = yaml.SafeLoader(text)
+    node, loader = compose_yaml(text, path=source, error=ConfigError)
     try:
-        node = loader.get_single_node()
         lines = LineMap(node, source=source)
-        data = None if node is None else loader.construct_document(node)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-        problem = getattr(exc, "problem", None) or str(exc)
-        context = getattr(exc, "context", None)
-        message = f"YAML syntax error: {problem}" + (f" ({context})" if context else "")
-        raise ConfigError(message, path=source, line=None if mark is None else mark.line + 1) from None
-    finally:
+    except BaseException:
         loader.dispose()
+        raise
+    data = construct_yaml(loader, node, path=source, error=ConfigError)
     return data, lines
 
 
-def load_yaml_with_lines(path):
-    """``(data, LineMap)`` of the YAML file ``path`` (UTF-8); messages name the file as ``str(path)``."""
-    path = Path(path)
-    source = str(path)
+def _exists(path) -> bool:
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"configuration file not found: {path.absolute()}", path=source) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read the configuration file: {exc}", path=source) from None
+        return Path(path).exists()
+    except OSError:  # e.g. a name too long: the strict reader names the problem
+        return True
+
+
+def load_yaml_with_lines(path):
+    """``(data, LineMap)`` of the YAML file ``path`` (a regular UTF-8 file of at most
+    :data:`clothlab.strict.MAX_YAML_BYTES`); messages name the file as ``str(path)``."""
+    source = str(path)
+    if "\x00" not in source and not Path(path).is_file() and not Path(path).is_dir() and not _exists(path):
+        raise ConfigError(f"configuration file not found: {Path(path).absolute()}", path=source)
+    text = read_text(path, limit=MAX_YAML_BYTES, what="configuration file", error=ConfigError)
     return parse_yaml_with_lines(text, source=source)

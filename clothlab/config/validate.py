@@ -25,6 +25,7 @@ rules stay here, in one place.
 from __future__ import annotations
 
 import copy
+import inspect
 import os
 import re
 from dataclasses import replace
@@ -61,11 +62,14 @@ from clothlab.config.schema import (
     QuadratureConfig,
     ReportConfig,
 )
-from clothlab.errors import ConfigError, ParameterError
+from clothlab.errors import ConfigError, InputError, ParameterError
+from clothlab.io.loader import check_reader_options
 from clothlab.models.registry import MODEL_KINDS, model_class
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 NODES_RANGE = (2, 1000)
+MAX_NAME_CHARS = 200
+MAX_EVALS = 2**31 - 1  # nlopt's maxeval is a C int
 SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
 
 
@@ -129,6 +133,10 @@ class _Validator:
         self.section(top, (), ("name", "measurement", "model", "fit", "report", "output"),
                      required=("name", "measurement"))
         name = as_str(top["name"], self.at(("name",)))
+        if len(name) > MAX_NAME_CHARS:
+            raise self.at(("name",)).error(
+                f"the name has {len(name)} characters; at most {MAX_NAME_CHARS} (it names the fits/ and reports/ "
+                "directories and their hidden siblings, within the file system's 255-byte limit)")
         if not NAME_PATTERN.fullmatch(name) or name in (".", ".."):
             raise self.at(("name",)).error(
                 f"{name!r} is not a valid name: use letters, digits, '.', '_' and '-' only "
@@ -159,7 +167,43 @@ class _Validator:
         if not isinstance(options, dict):
             raise self.at(p + ("options",)).error(f"expected a mapping, got {shown(options)}")
         check_plain_data(options, self.at(p + ("options",)))
+        self.reader_options(resolved, fmt, options, p + ("options",))
         return MeasurementConfig(path=resolved, format=fmt, options=copy.deepcopy(options))
+
+    def reader_options(self, path: Path, fmt: str, options: dict, p: tuple) -> None:
+        """``measurement.options`` checked against the reader of the (given or detected) format, at their
+        lines in fabric.yaml."""
+        if not options:
+            return
+        try:
+            check_reader_options(path, fmt, options)
+        except InputError as exc:
+            if exc.field in options:
+                where = self.at(p + (exc.field,))
+                raise ConfigError(exc.detail, path=where.source, line=where.line,
+                                  field=dotted(p + (exc.field,))) from None
+            # the measurement itself is unreadable: loading it reports that, naming the file
+
+    def model_options(self, kind: str, options: dict, p: tuple) -> None:
+        """``model.options`` checked against the model's keyword-only constructor arguments: the name, and
+        the type of the default where it has one."""
+        declared = {q.name: q.default for q in inspect.signature(model_class(kind).__init__).parameters.values()
+                    if q.kind == q.KEYWORD_ONLY}
+        for name, value in options.items():
+            if name not in declared:
+                raise self.at(p + (name,), key=True).error(
+                    f"model kind {kind!r} takes no option {name!r}{suggest(name, declared)}; options: "
+                    f"{', '.join(declared) or 'none'}")
+            default, at = declared[name], self.at(p + (name,))
+            if isinstance(default, bool):
+                if not isinstance(value, bool):
+                    raise at.error(f"expected true or false, got {shown(value)}")
+            elif isinstance(default, int):
+                as_int(value, at)
+            elif isinstance(default, float):
+                as_number(value, at)
+            elif isinstance(default, str):
+                as_str(value, at)
 
     def model(self, value: Any) -> ModelConfig:
         p = ("model",)
@@ -194,6 +238,7 @@ class _Validator:
         if not isinstance(options, dict):
             raise self.at(p + ("options",)).error(f"expected a mapping, got {shown(options)}")
         check_plain_data(options, self.at(p + ("options",)))
+        self.model_options(kind, options, p + ("options",))
         return ModelConfig(kind=kind, weave=weave, quadrature=QuadratureConfig(rule, nodes), params=checked,
                            options=copy.deepcopy(options))
 
@@ -310,7 +355,7 @@ class _Validator:
         if g in NEEDS_LOCAL and loc is None:
             raise self.at(p + ("local",)).error(f"{g} needs a local polish after its {MLSL_LOCAL} multistart; "
                                                 f"give one of {', '.join(LOCAL_ALGORITHMS)}")
-        max_evals = as_int(o.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1)
+        max_evals = as_int(o.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1, MAX_EVALS)
         seed = as_int(o.get("seed", d.seed), self.at(p + ("seed",)), *SEED_RANGE)
         max_time = o.get("max_time")
         if max_time is not None:
@@ -324,7 +369,7 @@ class _Validator:
                                                  f"{max_evals}")
         polish = o.get("polish")
         if polish is not None:
-            polish = as_int(polish, self.at(p + ("polish",)), 0)
+            polish = as_int(polish, self.at(p + ("polish",)), 0, MAX_EVALS)
         return OptimizerConfig(g, loc, max_evals, seed, max_time, starts, polish)
 
     def posterior(self, value: Any, free: tuple) -> PosteriorConfig | None:
@@ -431,7 +476,7 @@ def apply_overrides(config: Config, *, rule=None, nodes=None, max_evals=None, se
     if nodes is not None:
         quadrature = replace(quadrature, nodes=as_cli_int(nodes, Location(None, "--nodes"), *NODES_RANGE))
     if max_evals is not None:
-        optimizer = replace(optimizer, max_evals=as_cli_int(max_evals, Location(None, "--max-evals"), 1))
+        optimizer = replace(optimizer, max_evals=as_cli_int(max_evals, Location(None, "--max-evals"), 1, MAX_EVALS))
     if seed is not None:
         optimizer = replace(optimizer, seed=as_cli_int(seed, Location(None, "--seed"), *SEED_RANGE))
     return replace(

@@ -34,13 +34,17 @@ import numpy as np
 
 from clothlab import __version__
 from clothlab.atomic import atomic_directory
-from clothlab.errors import GeometryWarning, InputError
+from clothlab.errors import GeometryWarning, InputError, ResultError
 from clothlab.fit.fitreport import Reportable
 from clothlab.frames import spherical_to_vector
 from clothlab.models.components import combine
 from clothlab.models.registry import build_model
+from clothlab.strict import load_json_file
 from clothlab.weave.wvformat import format_wv, parse_wv
 
+MAX_SLICE_DIRECTIONS = 24
+"""Most exitant directions slices.csv holds (the report's slice figure shows a grid of panels; a table with
+thousands of exitant directions gets the ones with the most measured rows)."""
 VERSIONED = ("numpy", "scipy", "numba", "nlopt", "matplotlib", "PyYAML", "emcee")
 
 
@@ -113,10 +117,17 @@ def read_fit_json(fit_dir) -> dict:
     path = Path(fit_dir) / "fit.json"
     if not path.is_file():
         raise InputError("no fit.json here: not a fit directory (run `clothlab fit fabric.yaml` first)", path=path)
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"fit.json is not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+    data = load_json_file(path, what="fit.json")
+    if not isinstance(data, dict):
+        raise InputError(f"expected a JSON object, found {type(data).__name__}", path=path)
+    return data
+
+
+def _number(value, field: str, fit_dir: Path) -> float:
+    """A finite JSON number from fit.json, or InputError naming the file and the dotted field."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(f"expected a finite number, found {value!r}", path=fit_dir / "fit.json", field=field)
+    return float(value)
 
 
 def load_fitted(fit_dir):
@@ -129,9 +140,12 @@ def load_fitted(fit_dir):
     try:
         kind = fit["model"]["kind"]
         q = fit["model"].get("quadrature") or {}
-        params = {k: float(v["value"]) for k, v in fit["parameters"].items()}
+        params = {k: _number(v["value"], f"parameters.{k}.value", fit_dir) for k, v in fit["parameters"].items()}
         channels = tuple(fit["measurement"]["channels"])
-        coefficients = {k: np.array([float(v[c]) for c in channels]) for k, v in fit["coefficients"].items()}
+        coefficients = {k: np.array([_number(v[c], f"coefficients.{k}.{c}", fit_dir) for c in channels])
+                        for k, v in fit["coefficients"].items()}
+        if not coefficients or not channels:
+            raise KeyError("coefficients and measurement.channels must not be empty")
         # the model's constructor options as fitted (e.g. kang: alternating, tile_nodes)
         options = dict(fit["model"].get("options") or (fit.get("config") or {}).get("model", {}).get("options") or {})
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -232,26 +246,63 @@ def slice_table(result, step: float = 1.0) -> dict:
     (positive on the mirror side, phi_i = phi_o + 180)."""
     problem = result.problem
     m = problem.measurement
-    exitant = np.unique(np.stack([m.theta_o, m.phi_o], axis=1), axis=0)
+    exitant = slice_directions(m.theta_o, m.phi_o)
     signed = np.arange(-89.0, 89.0 + 0.5 * step, step)
-    rows_to, rows_po, rows_s, wi, wo = [], [], [], [], []
-    for to, po in exitant:
-        phi_i = np.where(signed >= 0, po + 180.0, po) % 360.0
-        wi.append(spherical_to_vector(np.abs(signed), phi_i))
-        wo.append(np.repeat(spherical_to_vector(to, po)[None, :], len(signed), axis=0))
-        rows_to.append(np.full(len(signed), to))
-        rows_po.append(np.full(len(signed), po))
-        rows_s.append(signed)
-    wi, wo = np.concatenate(wi), np.concatenate(wo)
+    theta_o = np.repeat(exitant[:, 0], len(signed))
+    phi_o = np.repeat(exitant[:, 1], len(signed))
+    signed_all = np.tile(signed, len(exitant))
+    phi_i = np.where(signed_all >= 0, phi_o + 180.0, phi_o) % 360.0
+    wi = spherical_to_vector(np.abs(signed_all), phi_i)
+    wo = spherical_to_vector(theta_o, phi_o)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
         comps = problem.model.components(wi, wo, result.params, normalised=True, warn=False)
     values = combine(comps, result.coefficients)
-    table = {"theta_o": np.concatenate(rows_to), "phi_o": np.concatenate(rows_po),
-             "signed_theta_i": np.concatenate(rows_s)}
+    table = {"theta_o": theta_o, "phi_o": phi_o, "signed_theta_i": signed_all}
     for c, ch in enumerate(m.channels):
         table[f"model_{ch}"] = values[:, c]
     return table
+
+
+def slice_directions(theta_o, phi_o, limit: int = MAX_SLICE_DIRECTIONS) -> np.ndarray:
+    """(K, 2) distinct exitant directions (theta_o, phi_o) for slices.csv, sorted; at most ``limit`` of them
+    (those with the most measured rows, ties to the lower angles)."""
+    unique, counts = np.unique(np.stack([np.asarray(theta_o, float), np.asarray(phi_o, float)], axis=1),
+                               axis=0, return_counts=True)
+    if len(unique) > limit:
+        keep = np.sort(np.argsort(-counts, kind="stable")[:limit])
+        unique = unique[keep]
+    return unique
+
+
+def check_finite_result(result, predictions: dict) -> None:
+    """ResultError unless the parameters, coefficients, predictions and error percentiles are all finite:
+    a fit never saves a non-finite number where a number is expected."""
+    def bad(where: str, value) -> None:
+        raise ResultError(f"the fit produced a non-finite {where} ({value!r}); nothing was saved. Check the "
+                          "measurement for extreme values", path=getattr(result.config, "path", None))
+
+    for name, value in result.params.items():
+        if not math.isfinite(float(value)):
+            bad(f"parameter {name}", value)
+    for name, coef in result.coefficients.items():
+        coef = np.asarray(coef, dtype=np.float64)
+        if not np.isfinite(coef).all():
+            bad(f"coefficient {name}", coef.tolist())
+    for name, column in predictions.items():
+        column = np.asarray(column)
+        if column.dtype.kind == "f" and not np.isfinite(column).all():
+            bad(f"value in predictions column {name} (row {int(np.flatnonzero(~np.isfinite(column))[0])})",
+                float(column[~np.isfinite(column)][0]))
+
+    def walk(where: str, value) -> None:
+        if isinstance(value, dict):
+            for k, v in value.items():
+                walk(f"{where}.{k}", v)
+        elif isinstance(value, float | np.floating) and not math.isfinite(float(value)):
+            bad(f"error percentile {where}", float(value))
+
+    walk("errors", result.errors)
 
 
 def trace_table(result, every: int = 10) -> dict:
@@ -294,9 +345,11 @@ def save_fit(result, *, force: bool = False, fits_dir=None) -> Path:
     cfg = result.config
     dest = (fits_dir if fits_dir is not None else cfg.output.fits) / cfg.name
     config_text = cfg.path.read_text() if cfg.path is not None else None
+    predictions = prediction_table(result)
+    check_finite_result(result, predictions)
     extra = posterior_files(result)
     weave = result.problem.model.fitted_weave(result.params)
-    out = write_fit_directory(dest, fit=fit_summary(result), predictions=prediction_table(result),
+    out = write_fit_directory(dest, fit=fit_summary(result), predictions=predictions,
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
                                weave_text=format_wv(weave), extra=extra, force=force)
     if result.posterior is not None:  # the fit directory now holds the result: the checkpoint has served
@@ -342,8 +395,5 @@ def load_fit(fit_dir) -> SavedFit:
     posterior = None
     path = fit_dir / "posterior.json"
     if path.is_file():
-        try:
-            posterior = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise InputError(f"posterior.json is not valid JSON: {exc.msg}", path=path, line=exc.lineno) from None
+        posterior = load_json_file(path, what="posterior.json")
     return SavedFit(fit_dir, fit, posterior)

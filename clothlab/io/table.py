@@ -45,6 +45,14 @@ from clothlab.atomic import atomic_write_text
 from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_from_clothlab, azimuth_to_clothlab
 from clothlab.io.measurement import Measurement
+from clothlab.strict import (
+    MAX_TABLE_BYTES,
+    decode_text,
+    load_yaml_text,
+    plain_numeric_text,
+    read_bounded_bytes,
+)
+from clothlab.strict import parse_number as strict_number
 
 TABLE_VERSION = 1
 ANGLE_COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
@@ -71,6 +79,8 @@ _ALLOWED = {
     "azimuth_zero": tuple(AZIMUTH_ZERO),
     "azimuth_sense": AZIMUTH_SENSE,
 }
+CONVENTION_CHOICES = _ALLOWED
+"""The allowed keywords of each convention (angle_unit, quantity, azimuth_zero, azimuth_sense)."""
 _TOP_KEY = re.compile(r"^(?![-?] )([^\s:#'\"\[\]{},][^:]*?)\s*:(\s|$)")
 _CHANNEL_NAME = re.compile(r"^[^\s,#'\"]+$")
 
@@ -98,21 +108,13 @@ class RawRows:
 
 
 def read_text_lines(path) -> list[str]:
-    """The lines of a UTF-8 text file ('\\n' or '\\r\\n' endings), or InputError naming the bad line."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("file not found", path=path)
-    if path.is_dir():
-        raise InputError("is a directory, expected a file", path=path)
-    data = path.read_bytes()
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data[: exc.start].count(b"\n") + 1
-        raise InputError(f"not UTF-8 text (byte {data[exc.start]:#04x} at offset {exc.start})",
-                         path=path, line=line) from None
-    if text.startswith("\ufeff"):
-        text = text[1:]
+    """The lines of a UTF-8 text file ('\\n' or '\\r\\n' endings), or InputError naming the bad line.
+
+    The file must be a regular file of at most :data:`clothlab.strict.MAX_TABLE_BYTES`; a leading UTF-8
+    byte-order mark is dropped (:func:`clothlab.strict.decode_text`).
+    """
+    data = read_bounded_bytes(path, limit=MAX_TABLE_BYTES, what="measurement file")
+    text = decode_text(data, path=Path(path), what="measurement file")
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
@@ -120,14 +122,9 @@ def read_text_lines(path) -> list[str]:
 
 
 def parse_number(text: str, *, path, line: int, column: str) -> float:
-    """A float from one field, or InputError naming file, line and column."""
-    text = text.strip()
-    if not text:
-        raise InputError("empty field; expected a number", path=path, line=line, field=column)
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"value {text!r} is not a number", path=path, line=line, field=column) from None
+    """A finite float in plain decimal notation from one field (:func:`clothlab.strict.parse_number`), or
+    InputError naming file, line and column."""
+    return strict_number(text, path=path, line=line, field=column)
 
 
 def _split_csv(text: str) -> list[str]:
@@ -146,15 +143,18 @@ def parse_rows(rows: list[tuple[int, str]], columns, *, path, split=_split_csv, 
             raise InputError(f"row has {len(row)} fields, expected {len(columns)} ({separator.join(columns)})",
                              path=path, line=lineno, field=columns[len(row)] if len(row) < len(columns) else None)
         fields.append(row)
-    try:  # fast path; the per-field parse below finds and names the culprit
-        return np.array([[float(text) for text in row] for row in fields], dtype=np.float64).reshape(
-            len(rows), len(columns))
-    except ValueError:
-        pass
+    if all(plain_numeric_text(text) for _, text in rows):
+        try:  # fast path for rows of plain decimal numbers; the strict per-field parse names a culprit
+            table = np.array([[float(text) for text in row] for row in fields], dtype=np.float64).reshape(
+                len(rows), len(columns))
+        except ValueError:
+            table = None
+        if table is not None and np.isfinite(table).all():
+            return table
     for row, (lineno, _) in zip(fields, rows, strict=True):
         for text, column in zip(row, columns, strict=True):
             parse_number(text, path=path, line=lineno, column=column)
-    raise AssertionError("unreachable: a field failed float() but passed parse_number")
+    raise AssertionError("unreachable: a field failed the fast path but passed parse_number")
 
 
 def _first(mask: np.ndarray) -> tuple[int, int] | None:
@@ -163,8 +163,54 @@ def _first(mask: np.ndarray) -> tuple[int, int] | None:
     return None if len(hits) == 0 else (int(hits[0, 0]), int(hits[0, 1]))
 
 
+MAX_VALUE = 1e30
+"""Largest magnitude of a value or sigma accepted (1/sr or the file's quantity); a BRDF above it is a unit or
+parsing mistake, and squares of such values overflow in a fit."""
+MIN_VALUE = float(np.finfo(np.float64).tiny)
+"""Smallest non-zero magnitude accepted (the smallest normal float64, 2.2e-308): a denormal value loses
+precision and its square underflows to 0 inside least squares."""
+MIN_ROWS = 2
+"""Fewest rows of a measurement (one row cannot be fitted or summarised by percentiles)."""
+RADIAN_SUSPECT_DEG = (1.6, 6.3)
+"""A ``deg`` table whose polar angles all lie below 1.6 (just above pi/2) and whose azimuths all lie within
+6.3 (just above 2 pi) holds radians."""
+
+
+def _check_magnitude(array: np.ndarray, raw: RawRows, names) -> None:
+    """InputError at the first denormal or huge (> :data:`MAX_VALUE`) entry of ``array``."""
+    magnitude = np.abs(array)
+    bad = _first(((magnitude > 0.0) & (magnitude < MIN_VALUE)) | (magnitude > MAX_VALUE))
+    if bad is not None:
+        row, col = bad
+        value = float(array[row, col])
+        what = (f"is denormal (0 < |value| < {MIN_VALUE:.3g}); write 0 or a normal number" if abs(value) < 1.0
+                else f"exceeds {MAX_VALUE:g} in magnitude; check the unit and the quantity")
+        raise InputError(f"value {value!r} {what}", path=raw.path, line=int(raw.lines[row]), field=names[col])
+
+
+def _check_angle_plausibility(raw: RawRows, angle_unit: str) -> None:
+    """Azimuths within one turn either side of zero; a deg table with every angle below 1.6 deg refused."""
+    names = raw.angle_names
+    turn = 360.0 if angle_unit == "deg" else 2.0 * math.pi
+    phis = raw.angles[:, [1, 3]]
+    bad = _first(np.abs(phis) > turn)
+    if bad is not None:
+        row, col = bad
+        raise InputError(f"value {float(phis[row, col])!r} is outside [-{turn:g}, {turn:g}] {angle_unit}; an "
+                         "azimuth lies within one turn", path=raw.path, line=int(raw.lines[row]),
+                         field=names[2 * col + 1])
+    polar_max, azimuth_max = RADIAN_SUSPECT_DEG
+    if (angle_unit == "deg" and len(raw.angles) > 1 and float(raw.angles[:, [0, 2]].max()) < polar_max
+            and float(np.abs(phis).max()) < azimuth_max):
+        raise InputError(
+            f"every polar angle lies below {polar_max} deg and every azimuth within {azimuth_max} deg: these look "
+            "like radians; declare angle_unit: rad", path=raw.path, line=int(raw.lines[0]), field="angle_unit")
+
+
 def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
-    """Validate rows in their file units: finite numbers, 0 <= theta <= 90 deg, values >= 0, sigma > 0."""
+    """Validate rows in their file units: finite numbers, 0 <= theta <= 90 deg, |phi| within one turn,
+    values >= 0 and sigma > 0 with normal magnitudes in [2.2e-308, 1e30], angles that are not radians in a
+    deg table."""
     names = raw.angle_names
     columns = (*names, *raw.channels)
     numbers = np.concatenate([raw.angles, raw.values], axis=1)
@@ -173,6 +219,13 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
         row, col = bad
         raise InputError(f"value {float(numbers[row, col])!r} is not finite; expected a finite number",
                          path=raw.path, line=int(raw.lines[row]), field=columns[col])
+    _check_magnitude(raw.values, raw, raw.channels)
+    if len(raw.values) > 1:
+        for col in np.flatnonzero(~raw.values.any(axis=0)):
+            raise InputError(f"every value of channel {raw.channels[col]} is 0 ({len(raw.values)} rows): a "
+                             "measurement holds reflected light", path=raw.path, line=int(raw.lines[0]),
+                             field=raw.channels[col])
+    _check_angle_plausibility(raw, angle_unit)
     right_angle = 90.0 if angle_unit == "deg" else math.pi / 2
     thetas = raw.angles[:, [0, 2]]
     bad = _first((thetas < 0.0) | (thetas > right_angle))
@@ -211,6 +264,14 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
             raise InputError(
                 f"value {float(raw.sigma[row, col])!r} is not positive; an uncertainty (one standard deviation) "
                 f"must be > 0", path=raw.path, line=int(raw.lines[row]), field=sigma_names[col])
+        _check_magnitude(raw.sigma, raw, sigma_names)
+
+
+def check_row_count(n: int, path, line=None) -> None:
+    """InputError unless a measurement has at least :data:`MIN_ROWS` rows."""
+    if n < MIN_ROWS:
+        raise InputError(f"{n} data row{'s' if n != 1 else ''}; a measurement needs at least {MIN_ROWS} "
+                         "(error percentiles and a fit of one direction pair mean nothing)", path=path, line=line)
 
 
 def convert_rows(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: str, azimuth_sense: str,
@@ -300,14 +361,10 @@ def _parse_yaml_header(text_lines: list[str], first_line: int, path) -> _Header:
     """YAML mapping from header lines (already without their '#'); ``first_line`` is the file line of [0]."""
     text = "\n".join(text_lines)
     try:
-        data = yaml.safe_load(text) if text.strip() else {}
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-        line = first_line + mark.line if mark is not None else None
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise InputError(f"header is not valid YAML ({problem})", path=path, line=line) from None
-    except (ValueError, TypeError, RecursionError) as exc:  # e.g. an impossible date
-        raise InputError(f"header is not valid YAML ({exc})", path=path) from None
+        data = load_yaml_text(text, path=path) if text.strip() else {}
+    except InputError as exc:
+        line = None if exc.line is None else first_line + exc.line - 1
+        raise InputError(f"header is not valid YAML ({exc.detail})", path=path, line=line) from None
     if data is None:
         data = {}
     if not isinstance(data, dict):

@@ -57,6 +57,17 @@ import numpy as np
 from clothlab.errors import ConfigError
 
 SHAPES = ("flat", "cylinder")
+MAX_MAGNITUDE = 1e9
+"""Largest magnitude of a scene number or vector component (mm for lengths: 1000 km), so products of
+positions and directions cannot overflow."""
+MAX_COEFFICIENT = 1e6
+"""Largest kd / ks coefficient accepted in a scene (they scale a BRDF in 1/sr)."""
+RENDER_BYTES_PER_SAMPLE = 8 * 48
+"""Working memory of one camera sample while shading, besides 4 float64 per channel (about 48 float64 values:
+positions, normals, directions, texture coordinates, components); measured: 512 x 384 pixels at 1 and 4
+samples differ by about 440 bytes per sample with RGB."""
+MAX_RENDER_BYTES = 4 << 30
+"""Largest estimated working memory of a render (4 GiB); :func:`check_render_memory`."""
 LIGHT_TYPES = ("directional", "point")
 #: LoD thresholds (pixel footprint in weave tiles), chosen from the receding-plane error measurements
 #: (render_benchmark; docstring of :mod:`clothlab.render.shade`).
@@ -190,6 +201,8 @@ class _Reader:
             raise self.error(where, "missing value")
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise self.error(where, f"expected a finite number, got {value!r}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise self.error(where, f"expected a number within +-{MAX_MAGNITUDE:g}, got {value!r}")
         if minimum is not None and (value <= minimum if exclusive else value < minimum):
             raise self.error(where, f"expected a number {'>' if exclusive else '>='} {minimum}, got {value!r}")
         if maximum is not None and value > maximum:
@@ -207,6 +220,8 @@ class _Reader:
                 or not all(isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c)
                            for c in value)):
             raise self.error(where, f"expected a list of {n} finite numbers, got {value!r}")
+        if not all(abs(c) <= MAX_MAGNITUDE for c in value):
+            raise self.error(where, f"expected numbers within +-{MAX_MAGNITUDE:g} (mm), got {value!r}")
         if positive and not all(c > 0 for c in value):
             raise self.error(where, f"expected positive numbers, got {value!r}")
         if nonzero and not any(c != 0 for c in value):
@@ -234,6 +249,11 @@ def _coefficients(reader, value, where, channels=None):
         arr = np.atleast_1d(np.asarray(coef, dtype=object))
         if arr.ndim != 1 or not all(isinstance(c, int | float) and not isinstance(c, bool) for c in arr):
             raise reader.error(f"{where}.{name}", f"expected a number or a list of numbers, got {coef!r}")
+        for i, c in enumerate(arr.tolist()):
+            if not (math.isfinite(c) and 0.0 <= c <= MAX_COEFFICIENT):
+                spot = f"{where}.{name}" + (f"[{i}]" if isinstance(coef, list) else "")
+                raise reader.error(spot, f"expected a coefficient in [0, {MAX_COEFFICIENT:g}] (a negative one "
+                                   f"gives negative radiance), got {c!r}")
         out[str(name)] = arr.astype(np.float64)
     sizes = {len(c) for c in out.values()}
     if len(sizes - {1}) > 1 or (channels is not None and sizes - {1, len(channels)}):
@@ -250,6 +270,40 @@ def _path(base_dir, value, reader, where):
     if not path.is_dir():
         raise reader.error(where, f"fit directory '{path}' not found")
     return path
+
+
+def render_bytes(resolution, spp: int, channels: int = 3) -> int:
+    """Estimated working memory (bytes) of rendering ``resolution`` = (width, height) at ``spp`` samples."""
+    width, height = resolution
+    return int(width) * int(height) * int(spp) * (RENDER_BYTES_PER_SAMPLE + 8 * 4 * int(channels))
+
+
+def check_render_memory(resolution, spp: int, channels: int = 3, *, source=None) -> None:
+    """ConfigError naming ``camera.resolution`` and ``render.spp`` when :func:`render_bytes` exceeds
+    :data:`MAX_RENDER_BYTES`."""
+    need = render_bytes(resolution, spp, channels)
+    if need > MAX_RENDER_BYTES:
+        raise ConfigError(
+            f"rendering {resolution[0]}x{resolution[1]} pixels at {spp} samples per pixel needs about "
+            f"{need / 2**30:.1f} GiB (at most {MAX_RENDER_BYTES / 2**30:.0f} GiB); lower camera.resolution or "
+            "render.spp (--spp)", path=source, field="camera.resolution")
+
+
+def _check_params(r: _Reader, params: dict, where: str) -> dict:
+    """fabric.params: Irawan-Marschner parameter names and their declared physical ranges."""
+    from clothlab.errors import ParameterError
+    from clothlab.weave.parameters import IRAWAN_PARAMS
+
+    for name, value in params.items():
+        if name not in IRAWAN_PARAMS:
+            raise r.error(f"{where}.{name}", f"unknown parameter; expected one of {', '.join(IRAWAN_PARAMS.names())}")
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise r.error(f"{where}.{name}", f"expected a finite number, got {value!r}")
+        try:
+            IRAWAN_PARAMS[name].check(float(value), f"{where}.{name}")
+        except ParameterError as err:
+            raise r.error(f"{where}.{name}", err.detail) from None
+    return params
 
 
 def scene_from_dict(data: dict, *, source=None, base_dir=None) -> Scene:
@@ -314,8 +368,10 @@ def scene_from_dict(data: dict, *, source=None, base_dir=None) -> Scene:
 
     d = r.section(data, "render", required=False)
     r.known(d, "render", ("spp", "seed", "exposure"))
+    spp = r.integer(d, "render", "spp", 1)
+    check_render_memory(camera.resolution, spp, len(fabric.channels), source=source)
     return Scene(patch=patch, camera=camera, light=light, fabric=fabric, lod=lod,
-                 spp=r.integer(d, "render", "spp", 1), seed=r.integer(d, "render", "seed", 0, minimum=0),
+                 spp=spp, seed=r.integer(d, "render", "seed", 0, minimum=0),
                  exposure=r.number(d, "render", "exposure", 0.0), source=None if source is None else str(source))
 
 
@@ -327,6 +383,7 @@ def _fabric(r: _Reader, d: dict, base_dir) -> Fabric:
     params = d.get("params") or {}
     if not isinstance(params, dict):
         raise r.error("fabric.params", f"expected a mapping of parameter -> value, got {params!r}")
+    _check_params(r, params, "fabric.params")
     channels = d.get("channels", DEFAULT_CHANNELS)
     if (not isinstance(channels, list | tuple) or not channels
             or not all(isinstance(c, str) for c in channels)):
@@ -356,15 +413,8 @@ def _fabric(r: _Reader, d: dict, base_dir) -> Fabric:
 
 def load_scene(path) -> Scene:
     """Read a scene YAML file (see the module docstring); ConfigError / InputError name file and field."""
-    import yaml
+    from clothlab.strict import load_yaml_file
 
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError("scene file not found", path=path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}", path=path,
-                          line=None if mark is None else mark.line + 1) from None
+    data = load_yaml_file(path, error=ConfigError, what="scene file")
     return scene_from_dict(data, source=path, base_dir=path.parent)

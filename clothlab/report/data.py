@@ -18,7 +18,7 @@ relative error per fabric): ``(model - measured) / measured`` per sample and cha
 from __future__ import annotations
 
 import csv
-import json
+import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +28,7 @@ import numpy as np
 from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
 from clothlab.io.table import ANGLE_COLUMNS as DIRECTION_COLUMNS
+from clothlab.strict import MAX_TABLE_BYTES, load_json_file, parse_number, read_text
 
 SLICE_COLUMNS = ("theta_o", "phi_o", "signed_theta_i")
 TRACE_COLUMNS = ("evaluation", "time_s", "value", "best", "stage")
@@ -54,19 +55,19 @@ class FitRecord:
         return self.fit["name"]
 
 
-def read_csv_table(path, *, required=(), text_columns=()) -> dict[str, np.ndarray]:
+def read_csv_table(path, *, required=(), text_columns=(), finite: bool = True) -> dict[str, np.ndarray]:
     """Read a CSV with a header row into {column: (N,) float64 array} (``text_columns`` stay str).
 
-    Empty cells and 'nan' read as NaN.  Raises :class:`InputError` naming the file, line and column for a
-    missing file, a missing required column, a ragged row or a non-numeric value.
+    Numbers are plain decimal notation (:func:`clothlab.strict.parse_number`); with ``finite=False`` empty
+    cells and 'nan' / 'inf' are also read (as NaN / inf: an optimiser trace may hold them).  Raises
+    :class:`InputError` naming the file, line and column for a missing file, a missing required column, a
+    ragged row, an empty or non-numeric value.
     """
     path = Path(path)
+    text = read_text(path, limit=MAX_TABLE_BYTES, what="file")
     try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            rows = list(csv.reader(handle))
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
         raise InputError(f"cannot read the file ({exc})", path=path) from None
     rows = [(number, row) for number, row in enumerate(rows, start=1) if any(cell.strip() for cell in row)]
     if not rows:
@@ -89,10 +90,10 @@ def read_csv_table(path, *, required=(), text_columns=()) -> dict[str, np.ndarra
             if name in text_columns:
                 columns[name].append(cell)
                 continue
-            try:
+            if not finite and (not cell or cell.lower().lstrip("+-") in ("nan", "inf", "infinity")):
                 columns[name].append(float(cell) if cell else math.nan)
-            except ValueError:
-                raise InputError(f"value {cell!r} is not a number", path=path, line=number, field=name) from None
+                continue
+            columns[name].append(parse_number(cell, path=path, line=number, field=name))
     return {
         name: np.asarray(values, dtype=str if name in text_columns else np.float64)
         for name, values in columns.items()
@@ -102,16 +103,7 @@ def read_csv_table(path, *, required=(), text_columns=()) -> dict[str, np.ndarra
 def read_json(path) -> dict:
     """Read a JSON object; :class:`InputError` naming the file (and line) if missing or malformed."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the file ({exc})", path=path) from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"invalid JSON: {exc.msg} (column {exc.colno})", path=path, line=exc.lineno) from None
+    data = load_json_file(path, what="file")
     if not isinstance(data, dict):
         raise InputError(f"expected a JSON object, found {type(data).__name__}", path=path)
     return data
@@ -132,6 +124,25 @@ def is_usable_dir_name(name) -> bool:
         c in name for c in "/\\")
 
 
+def _finite(value, path: Path, field: str) -> float:
+    """``value`` if it is a finite JSON number, else InputError naming fit.json and the dotted field."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(f"expected a finite number, found {value!r}", path=path, field=field)
+    return float(value)
+
+
+def _check_predictions(predictions: dict, channels, path: Path) -> None:
+    """The measured and model columns the report shows: every value finite (read strictly already), model
+    values not all zero, at least two rows."""
+    n = len(next(iter(predictions.values())))
+    if n < 2:
+        raise InputError(f"{n} data row; a fit's predictions hold at least 2", path=path)
+    for c in channels:
+        if not np.any(predictions[f"model_{c}"]):
+            raise InputError(f"every value of model_{c} is 0: not the predictions of a fit", path=path,
+                             field=f"model_{c}")
+
+
 def _check_fit_json(fit: dict, path: Path) -> None:
     name = fit.get("name")
     if not is_usable_dir_name(name):
@@ -141,9 +152,22 @@ def _check_fit_json(fit: dict, path: Path) -> None:
                 "optimizer", "versions"):
         if key in fit and fit[key] is not None and not isinstance(fit[key], dict):
             raise InputError(f"expected an object, found {type(fit[key]).__name__}", path=path, field=key)
-    for pname, entry in (fit.get("parameters") or {}).items():
+    for key in ("parameters", "coefficients", "measurement"):  # a baseline may have no parameters
+        if key not in fit or not isinstance(fit[key], dict) or (key != "parameters" and not fit[key]):
+            raise InputError(f"the entry {key!r} is missing or empty", path=path, field=key)
+    for pname, entry in fit["parameters"].items():
         if not isinstance(entry, dict) or "value" not in entry:
             raise InputError("expected an object with at least a 'value'", path=path, field=f"parameters.{pname}")
+        _finite(entry["value"], path, f"parameters.{pname}.value")
+    channels = (fit.get("measurement") or {}).get("channels")
+    if not isinstance(channels, list) or not channels or not all(isinstance(c, str) for c in channels):
+        raise InputError(f"expected a non-empty list of channel names, found {channels!r}", path=path,
+                         field="measurement.channels")
+    for cname, per_channel in fit["coefficients"].items():
+        if not isinstance(per_channel, dict):
+            raise InputError("expected an object channel -> value", path=path, field=f"coefficients.{cname}")
+        for c in channels:
+            _finite(per_channel.get(c), path, f"coefficients.{cname}.{c}")
     if "warnings" in fit and not isinstance(fit["warnings"], list):
         raise InputError("expected a list of strings", path=path, field="warnings")
 
@@ -174,6 +198,7 @@ def load_fit_dir(fit_dir) -> FitRecord:
     else:
         raise InputError(f"no channel columns: expected pairs measured_<c>, model_<c>; the header has "
                          f"{list(predictions)}", path=pred_path, line=1)
+    _check_predictions(predictions, channels, pred_path)
 
     record = FitRecord(fit_dir, fit, predictions, channels)
     slices_path, trace_path, posterior_path = (fit_dir / n for n in ("slices.csv", "trace.csv", "posterior.json"))
@@ -182,14 +207,14 @@ def load_fit_dir(fit_dir) -> FitRecord:
     else:
         record.notes.append("slices.csv is absent: no incidence-plane slice plot.")
     if trace_path.exists():
-        record.trace = read_csv_table(trace_path, required=TRACE_COLUMNS, text_columns=("stage",))
+        record.trace = read_csv_table(trace_path, required=TRACE_COLUMNS, text_columns=("stage",), finite=False)
     else:
         record.notes.append("trace.csv is absent: no optimiser trace plot.")
     if posterior_path.exists():
         record.posterior = read_json(posterior_path)
         samples_path = fit_dir / "posterior_samples.csv"
         if samples_path.exists():
-            record.posterior_samples = read_csv_table(samples_path)
+            record.posterior_samples = read_csv_table(samples_path, finite=False)
     return record
 
 

@@ -94,20 +94,35 @@ def kang_yaml(name: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+EXAMPLE_FILES = ("clean.csv", "noisy.csv", "fabric.yaml", "fabric-clean.yaml", "kang.yaml", "README.md")
+"""The files written per fabric by :func:`write_paper_examples`."""
+
+
 def write_paper_examples(root, *, force: bool = False) -> list:
-    """Simulate the six paper fabrics into root/<fabric>/ (clean.csv, noisy.csv, fabric yaml files, README)."""
+    """Simulate the six paper fabrics into root/<fabric>/ (clean.csv, noisy.csv, fabric yaml files, README).
+
+    Every file of the set is checked first: without ``force`` an existing one is refused (ResultExistsError
+    naming all of them) before anything is written; an unwritable ``root`` is an OutputError."""
     import warnings
     from pathlib import Path
 
     import numpy as np
 
-    from clothlab.atomic import atomic_write_text
-    from clothlab.errors import GeometryWarning
+    from clothlab.atomic import atomic_write_text, check_output_dir
+    from clothlab.errors import GeometryWarning, ResultExistsError
     from clothlab.io.table import write_table
     from clothlab.models.irawan.model import IrawanModel
     from clothlab.simulate.gonio import NoiseModel, simulate
     from clothlab.weave.presets import get_preset
 
+    files = [Path(root) / name / f for name in YARN_COLOURS for f in EXAMPLE_FILES]
+    existing = [str(f) for f in files if f.exists()]
+    if existing and not force:
+        raise ResultExistsError(f"{len(existing)} file(s) of the example set exist already ({', '.join(existing[:3])}"
+                                f"{' ...' if len(existing) > 3 else ''}); use --force to replace them; nothing "
+                                "was written", path=root)
+    for name in YARN_COLOURS:
+        check_output_dir(Path(root) / name / EXAMPLE_FILES[0])
     written = []
     for name, colours in YARN_COLOURS.items():
         folder = Path(root) / name

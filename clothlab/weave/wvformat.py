@@ -61,7 +61,6 @@ checked against the physical ranges declared in :data:`clothlab.weave.parameters
 from __future__ import annotations
 
 import difflib
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,6 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import InputError, ParameterError
+from clothlab.strict import MAX_YAML_BYTES, parse_number, read_text
 from clothlab.weave.model import YARN_KINDS, Segment, Weave, YarnGeometry
 from clothlab.weave.parameters import IRAWAN_PARAMS
 
@@ -94,6 +94,19 @@ WEAVE_REQUIRED = ("tileWidth", "tileHeight", "pattern", "alpha", "beta", "warpAr
 WEAVE_DEFAULTS = {"ss": 0.0, "hWidth": 0.5, "fineness": 0.0, "period": 0.0} | dict.fromkeys(DUMAX_FIELDS, 0.0)
 YARN_REQUIRED = ("type", "umax", "width", "length", "centerU", "centerV")
 YARN_DEFAULTS = {"psi": 0.0, "kappa": 0.0}
+
+#: Plausible ranges (lo, hi, unit) of the fields IRAWAN_PARAMS does not declare: values outside them are
+#: typing or unit mistakes (a modulation amplitude beyond 90 deg, a noise fineness of 1e300 per cell).
+FIELD_RANGES = {
+    **dict.fromkeys(DUMAX_FIELDS, (-90.0, 90.0, "deg")),
+    "fineness": (0.0, 1e3, "1/cell"),
+    "period": (0.0, 1e6, "cells"),
+    "warpArea": (0.0, 1e6, "(relative weight)"),
+    "weftArea": (0.0, 1e6, "(relative weight)"),
+    "centerU": (-1e3, 1e3, "cells"),
+    "centerV": (-1e3, 1e3, "cells"),
+}
+MAX_TILE_DIGITS = 6
 
 _WEAVE_KEYS = ("name", *WEAVE_INT_FIELDS, *WEAVE_FLOAT_FIELDS, *DUMAX_FIELDS, "pattern", "yarn")
 _YARN_KEYS = ("type", *YARN_FLOAT_FIELDS)
@@ -273,7 +286,8 @@ class _Parser:
             tok = self.next()
             if tok.kind == "}" and ids:
                 return ids
-            if tok.kind != "word" or not _UINT_RE.fullmatch(tok.text) or int(tok.text) < 1:
+            if (tok.kind != "word" or not _UINT_RE.fullmatch(tok.text) or len(tok.text) > MAX_TILE_DIGITS
+                    or int(tok.text) < 1):
                 self.fail(f"pattern entries must be yarn numbers (integers >= 1), found {tok.describe()}",
                           tok, field="pattern")
             ids.append((int(tok.text), tok.line))
@@ -297,15 +311,23 @@ class _Parser:
 
 
 def _number(tok: _Token, field: str, source: str) -> float:
+    """A finite number in plain decimal notation (:func:`clothlab.strict.parse_number`), within the
+    plausible range of ``field`` where :data:`FIELD_RANGES` declares one."""
     if tok.kind != "word" or not _NUMBER_RE.fullmatch(tok.text):
         raise InputError(f"expected a number, found {tok.describe()}", path=source, line=tok.line, field=field)
-    value = float(tok.text)
-    if not math.isfinite(value):
-        raise InputError(f"number out of range: {tok.text}", path=source, line=tok.line, field=field)
+    value = parse_number(tok.text, path=source, line=tok.line, field=field)
+    if field in FIELD_RANGES:
+        lo, hi, unit = FIELD_RANGES[field]
+        if not lo <= value <= hi:
+            raise InputError(f"value {value:g} is outside the plausible range [{lo:g}, {hi:g}] {unit}",
+                             path=source, line=tok.line, field=field)
     return value
 
 
 def _positive_int(tok: _Token, field: str, source: str) -> int:
+    if tok.kind == "word" and _UINT_RE.fullmatch(tok.text) and len(tok.text) > MAX_TILE_DIGITS:
+        raise InputError(f"{field} of {len(tok.text)} digits; a tile has at most {10**MAX_TILE_DIGITS - 1} cells "
+                         "per side", path=source, line=tok.line, field=field)
     if tok.kind != "word" or not _UINT_RE.fullmatch(tok.text) or int(tok.text) < 1:
         raise InputError(f"expected a positive integer, found {tok.describe()}", path=source, line=tok.line,
                          field=field)
@@ -438,13 +460,7 @@ def parse_wv_text(text: str, source: str = "<string>") -> Weave:
 
 def parse_wv(path) -> Weave:
     """Read a ``.wv`` weave file (see the module docstring for the format and units)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("weave file not found", path=path) from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"cannot read the weave file: {err}", path=path) from None
+    text = read_text(path, limit=MAX_YAML_BYTES, what="weave file")
     return parse_wv_text(text, source=str(path))
 
 

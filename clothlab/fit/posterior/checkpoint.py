@@ -13,6 +13,7 @@ import hashlib
 import io
 import json
 import time
+import zipfile
 from dataclasses import dataclass, field
 from dataclasses import fields as dataclass_fields
 from pathlib import Path
@@ -114,15 +115,36 @@ def _save_checkpoint(path: Path, fingerprint: str, st: _ChainState) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
+_CHECKPOINT_KEYS = ("fingerprint", "initial", "chain", "log_prob", "coords", "last_log_prob", "rs_name", "rs_keys",
+                    "rs_pos", "rs_has_gauss", "rs_cached", "tau_steps", "tau_values", "elapsed")
+
+
+def _unreadable(path: Path, why) -> InputError:
+    return InputError(f"posterior checkpoint is unreadable ({why}): an empty, truncated or foreign file; "
+                      "delete it to start the posterior over", path=path)
+
+
 def _load_checkpoint(path: Path, fingerprint: str) -> _ChainState:
+    """The chain state of a checkpoint; InputError for an empty, truncated or malformed file (refused, so
+    nothing is silently discarded), :class:`_StaleCheckpoint` for another target distribution."""
     try:
-        with np.load(path, allow_pickle=False) as z:
+        if path.stat().st_size == 0:
+            raise _unreadable(path, "the file is empty")
+        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as z:
+            missing = [key for key in _CHECKPOINT_KEYS if key not in z.files]
+            if missing:
+                raise _unreadable(path, f"missing {', '.join(missing)}")
             stored = str(z["fingerprint"])
             data = {key: z[key] for key in z.files}
-    except (OSError, ValueError, KeyError) as exc:
-        raise InputError(f"posterior checkpoint is unreadable ({exc}); delete it to start over", path=path) from None
+        old = json.loads(stored)
+        if not isinstance(old, dict):
+            raise ValueError("the fingerprint is not a mapping")
+    except InputError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise _unreadable(path, exc) from None
     if stored != fingerprint:
-        old, new = json.loads(stored), json.loads(fingerprint)
+        new = json.loads(fingerprint)
         diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
         if set(diff) & (TARGET_KEYS | {"version"}):
             raise _StaleCheckpoint(diff)
