@@ -158,3 +158,23 @@ class Model(abc.ABC):
         noise realisation.  ConfigError for a model without one (:attr:`has_texture` False)."""
         raise ConfigError(f"model kind {self.kind!r} has no texture model (no evaluation at texture points u, v)",
                           field="model.kind")
+
+
+class ModelTexture:
+    """The texture (point) evaluation of a model as a texture model: weave, parameter declarations, defaults and
+    validation come from the model; subclasses add ``components(u, v, wi, wo, params, ...)``."""
+
+    #: the model attribute naming the point components
+    component_attribute: ClassVar[str] = "component_names"
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.weave = model.weave
+        self.params = model.params
+        self.component_names = getattr(model, self.component_attribute)
+
+    def default_parameters(self) -> dict[str, float]:
+        return self.model.default_parameters()
+
+    def resolve(self, params: dict | None) -> dict[str, float]:
+        return self.model.resolve(params)

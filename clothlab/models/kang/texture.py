@@ -9,23 +9,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from clothlab.models.base import ModelTexture
 from clothlab.models.components import combine
 
 
-class KangTexture:
+class KangTexture(ModelTexture):
     """The texture model of a :class:`~clothlab.models.kang.model.KangModel` (it filters itself: eq. 5)."""
 
-    def __init__(self, model):
-        self.model = model
-        self.weave = model.weave
-        self.params = model.params
-        self.component_names = model.point_component_names
-
-    def default_parameters(self) -> dict[str, float]:
-        return self.model.default_parameters()
-
-    def resolve(self, params: dict | None) -> dict[str, float]:
-        return self.model.resolve(params)
+    component_attribute = "point_component_names"
 
     def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
                    normalised: bool = True, warn: bool = True, footprint=None,

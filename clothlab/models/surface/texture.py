@@ -17,13 +17,14 @@ import numpy as np
 
 from clothlab.errors import ParameterError
 from clothlab.frames import to_yarn_frame
+from clothlab.models.base import ModelTexture
 from clothlab.models.components import combine
 from clothlab.models.surface.geometry import cylinder_angles, ply_frame
 from clothlab.weave.lookup import locate_segments
 from clothlab.weave.model import YARN_KINDS
 
 
-class SurfaceTexture:
+class SurfaceTexture(ModelTexture):
     """The texture model of a :class:`~clothlab.models.surface.model.SurfaceModel` (no noise, no filtering)."""
 
     kind = "surface-texture"
@@ -32,17 +33,8 @@ class SurfaceTexture:
     shared_directions = True
 
     def __init__(self, model):
-        self.model = model
-        self.weave = model.weave
-        self.params = model.params
-        self.component_names = model.component_names
+        super().__init__(model)
         self._is_weft = np.array([s.kind == "weft" for s in self.weave.segments])
-
-    def default_parameters(self) -> dict[str, float]:
-        return self.model.default_parameters()
-
-    def resolve(self, params: dict | None) -> dict[str, float]:
-        return self.model.resolve(params)
 
     def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
                    normalised: bool = True, warn: bool = True, footprint=None,
