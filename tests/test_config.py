@@ -451,7 +451,7 @@ def test_mangled_yaml_gives_a_config_or_a_config_error(tmp_path, start, length, 
 
 
 def test_reference_lists_every_key_choice_and_parameter():
-    from clothlab.config.choices import GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS
+    from clothlab.config.choices import CV_SCHEMES, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS
     from clothlab.io.loader import FORMAT_CHOICES
     from clothlab.models.irawan.parameters import IRAWAN_PARAMS
     from clothlab.models.irawan.quadrature import RULES
@@ -462,10 +462,10 @@ def test_reference_lists_every_key_choice_and_parameter():
             "model.weave", "model.quadrature.rule", "model.quadrature.nodes", "model.params", "fit.free",
             "fit.bounds", "fit.metric", "fit.optimizer.global", "fit.optimizer.local",
             "fit.optimizer.max_evals", "fit.optimizer.seed", "fit.optimizer.max_time", "fit.posterior.walkers",
-            "fit.posterior.steps", "fit.posterior.max_steps", "fit.cv_folds", "report.percentiles",
+            "fit.posterior.steps", "fit.posterior.max_steps", "fit.cv_folds", "fit.cv_scheme", "report.percentiles",
             "output.fits", "output.reports"]
     words = keys + [f"`{name}`" for name in IRAWAN_PARAMS.names()]
-    for group in (FORMAT_CHOICES, MODEL_KINDS, RULES, METRICS, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS):
+    for group in (FORMAT_CHOICES, MODEL_KINDS, RULES, METRICS, CV_SCHEMES, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS):
         words += [f"`{c}`" for c in group]
     missing = [w for w in words if w not in doc]
     assert not missing
@@ -618,3 +618,19 @@ def test_version_is_declared_once():
     declared = [str(f.relative_to(package)) for f in package.rglob("*.py")
                 if any(line.startswith("__version__") for line in f.read_text(encoding="utf-8").splitlines())]
     assert declared == ["__init__.py"]
+
+
+def test_cv_scheme_defaults_to_auto_and_keeps_the_config_hash(tmp_path):
+    """fit.cv_scheme: auto unless given; the default leaves the canonical form (and so older hashes) unchanged."""
+    from clothlab.fit import crossval
+
+    default = load_config(project(tmp_path, FULL))
+    assert default.fit.cv_scheme == "auto" and "cv_scheme" not in default.canonical()["fit"]
+    chosen = load_config(project(tmp_path, edit(FULL, "cv_folds: 4", "cv_folds: 4\n  cv_scheme: random")))
+    assert chosen.fit.cv_scheme == "random" and chosen.canonical()["fit"]["cv_scheme"] == "random"
+    assert chosen.hash != default.hash
+    assert crossval.SCHEMES == ("auto", "grouped", "random")
+    text = edit(FULL, "cv_folds: 4", "cv_folds: 4\n  cv_scheme: leave-one-out")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.cv_scheme" and err.line == line_of(text, "cv_scheme:")
+    assert "leave-one-out" in str(err) and "random" in str(err)

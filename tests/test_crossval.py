@@ -1,5 +1,6 @@
 """k-fold cross-validation: the split keeps every exitant direction in every fold, held-out predictions are
-computed from training rows only, and held-out errors are not below in-sample ones."""
+computed from training rows only, held-out errors are not below in-sample ones, scattered data fall back to a
+random split, and a CV that cannot run never costs the fit."""
 
 from __future__ import annotations
 
@@ -11,10 +12,11 @@ import pytest
 from scipy.optimize import nnls
 
 from clothlab.config import load_config
-from clothlab.fit.crossval import cross_validate, fold_labels
+from clothlab.fit.crossval import CrossValidationError, choose_scheme, cross_validate, fold_labels
 from clothlab.fit.metrics import relative_errors
 from clothlab.fit.problem import FitProblem
 from clothlab.fit.runner import build_problem
+from clothlab.simulate.gonio import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -89,3 +91,75 @@ def test_config_source_and_noisy_without_sigma():
     out = cross_validate(cfg, None, k=2, seed=0, max_evals=20)
     assert out["k"] == 2 and len(out["folds"]) == 2
     assert out["held_out"]["n"] == 1575 * 3
+
+
+def _scattered_problem(n=40, seed=5):
+    """n rows on random directions: every exitant direction has exactly one row."""
+    full, truth = _problem(every=1)
+    rng = np.random.default_rng(seed)
+    ti, to = rng.uniform(0, 75, n), rng.uniform(0, 75, n)
+    pi_, po = rng.uniform(0, 360, n), rng.uniform(0, 360, n)
+    m = simulate(full.model, truth, full.measurement.provenance["coefficients"], sampling=(ti, pi_, to, po))
+    return FitProblem(full.model, m, ("beta",), truth, None, "relative"), truth
+
+
+def test_scattered_data_one_row_per_exitant_direction_use_the_random_scheme():
+    problem, truth = _scattered_problem()
+    m = problem.measurement
+    assert len(set(zip(m.theta_o.tolist(), m.phi_o.tolist(), strict=True))) == m.n
+    with pytest.raises(CrossValidationError, match="fewer than k = 5"):
+        fold_labels(m, 5, seed=0, scheme="grouped")
+    labels = fold_labels(m, 5, seed=0, scheme="random")
+    assert np.bincount(labels).tolist() == [8] * 5
+    out = cross_validate(problem, truth, k=5, seed=0, max_evals=10)
+    assert out["scheme"] == "random" and "40 of 40 exitant directions" in out["scheme_reason"]
+    assert "random" in out["split"] and out["held_out"]["n"] == m.n * 3
+    assert [f["n_test"] for f in out["folds"]] == [8] * 5
+    with pytest.raises(CrossValidationError, match="use the random scheme"):  # before any refit
+        cross_validate(problem, truth, k=5, seed=0, max_evals=10, scheme="grouped")
+
+
+def test_auto_scheme_is_grouped_on_the_paper_grid():
+    problem, truth = _problem()
+    assert choose_scheme(problem.measurement, 5)[0] == "grouped"
+    assert choose_scheme(problem.measurement, 5, "random") == ("random", "random (requested)")
+    out = cross_validate(problem, truth, k=2, seed=0, max_evals=1)
+    assert out["scheme"] == "grouped" and "all 7 exitant directions" in out["scheme_reason"]
+    with pytest.raises(ValueError, match="unknown cross-validation scheme"):
+        choose_scheme(problem.measurement, 5, "leave-one-out")
+
+
+def test_too_few_rows_for_the_folds_still_saves_the_fit(tmp_path, capsys):
+    """3 rows, 5 folds: the fit is saved, fit.json and the fit report carry the note, the CLI exits 0."""
+    import json
+
+    from clothlab.cli.main import main
+
+    source = ROOT / "measurements" / "polyester-lining" / "noisy.csv"
+    lines = source.read_text().splitlines()
+    header = [line for line in lines if line.startswith("#")]
+    body = [line for line in lines if not line.startswith("#")]
+    (tmp_path / "tiny.csv").write_text("\n".join(header + body[:1] + body[1:200:70]) + "\n")
+    config = tmp_path / "fabric.yaml"
+    config.write_text("""name: tiny
+measurement: {path: tiny.csv}
+model:
+  kind: irawan
+  weave: preset:polyester-lining
+  quadrature: {rule: trapezoid, nodes: 5}
+  params: {warp.umax: 20, weft.umax: 20, warp.kappa: 0, weft.kappa: 0, alpha: 0.05, beta: 2}
+fit:
+  free: [beta]
+  metric: relative
+  cv_folds: 5
+  optimizer: {global: GN_CRS2_LM, local: LN_BOBYQA, max_evals: 30, starts: 1, seed: 1}
+output: {fits: fits, reports: reports}
+""")
+    assert main(["fit", str(config), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    fit = json.loads((tmp_path / "fits" / "tiny" / "fit.json").read_text())
+    assert "3 rows, fewer than k = 5 folds" in fit["cross_validation"]["failed"]
+    assert any("cross-validation (5-fold) not run" in w for w in fit["warnings"])
+    warned = [line for line in err.splitlines() if "not run" in line]
+    assert len(warned) == 1 and "Traceback" not in err  # one line on stderr
+    assert "cross-validation (5-fold) not run" in out  # the fit report printed after the fit

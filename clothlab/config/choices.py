@@ -1,4 +1,4 @@
-"""The closed vocabularies of fabric.yaml that no lower layer owns: fit metrics and nlopt algorithms.
+"""The closed vocabularies of fabric.yaml that no lower layer owns: fit metrics, CV schemes, nlopt algorithms.
 
 The fitter imports these lists from here (:mod:`clothlab.fit.metrics`, :mod:`clothlab.fit.optimize`), so
 what the validator accepts and what the fitter runs are the same names.  The other closed lists belong to
@@ -16,6 +16,9 @@ from __future__ import annotations
 
 METRICS = ("relative", "log", "cube-root")
 """What a fit minimises (``fit.metric``); defined in :mod:`clothlab.fit.metrics`."""
+
+CV_SCHEMES = ("auto", "grouped", "random")
+"""``fit.cv_scheme``: cross-validation fold schemes; defined in :mod:`clothlab.fit.crossval`."""
 
 GLOBAL_ALGORITHMS = ("GN_CRS2_LM", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH", "G_MLSL_LDS")
 """``fit.optimizer.global``: the global stages the optimiser driver supports."""

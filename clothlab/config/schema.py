@@ -102,7 +102,8 @@ class PosteriorConfig:
 
 @dataclass(frozen=True)
 class FitConfig:
-    """``fit``: free parameters, their fit bounds (declared units), metric, optimiser, posterior, CV folds."""
+    """``fit``: free parameters, their fit bounds (declared units), metric, optimiser, posterior, CV folds and
+    fold scheme."""
 
     free: tuple = ()
     bounds: dict = field(default_factory=dict)
@@ -110,6 +111,7 @@ class FitConfig:
     optimizer: OptimizerConfig = field(default_factory=OptimizerConfig)
     posterior: PosteriorConfig | None = None
     cv_folds: int = 0
+    cv_scheme: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -189,6 +191,7 @@ class Config:
                     "walkers": post.walkers, "steps": post.steps, "max_steps": post.max_steps,
                 },
                 "cv_folds": fit.cv_folds,
+                **({} if fit.cv_scheme == "auto" else {"cv_scheme": fit.cv_scheme}),  # hashes of older configs kept
             },
             "report": {"percentiles": list(self.report.percentiles)},
         }

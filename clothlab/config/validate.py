@@ -44,7 +44,7 @@ from clothlab.config.checks import (
     shown,
     suggest,
 )
-from clothlab.config.choices import GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS, MLSL_LOCAL, NEEDS_LOCAL
+from clothlab.config.choices import CV_SCHEMES, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS, MLSL_LOCAL, NEEDS_LOCAL
 from clothlab.config.linemap import LineMap, dotted, load_yaml_with_lines
 from clothlab.config.schema import (
     DEFAULT_MAX_STEPS,
@@ -278,7 +278,8 @@ class _Validator:
 
     def fit(self, value: Any, model: ModelConfig) -> FitConfig:
         p = ("fit",)
-        f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds"))
+        f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds",
+                                             "cv_scheme"))
         table = _param_table(model.kind)
         free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
@@ -299,8 +300,9 @@ class _Validator:
         as_int(cv_folds, at, 0)
         if cv_folds == 1:
             raise at.error("expected 0 (no cross-validation) or at least 2 folds, got 1")
+        cv_scheme = as_choice(f.get("cv_scheme", FitConfig.cv_scheme), self.at(p + ("cv_scheme",)), CV_SCHEMES)
         return FitConfig(free=free, bounds=bounds, metric=metric, optimizer=optimizer, posterior=posterior,
-                         cv_folds=cv_folds)
+                         cv_folds=cv_folds, cv_scheme=cv_scheme)
 
     def free(self, value: Any, table) -> tuple:
         p = ("fit", "free")

@@ -219,9 +219,13 @@ def _error_section(fit: dict) -> Section:
         rows.append(row(f"  channel {channel}", summary))
     lines = []
     cv = fit.get("cross_validation")
-    if cv:
+    if cv and cv.get("failed"):
+        lines.append(f"cross-validation ({cv.get('k')}-fold) not run: {cv['failed']}")
+    elif cv:
         rows.append(row(f"cross-validated ({cv.get('k')}-fold, held out)", cv.get("held_out") or {}))
         rows.append(row("  fold fits on their training rows", cv.get("train_folds") or {}))
+        if cv.get("scheme_reason"):
+            lines.append(f"cross-validation folds: {cv['scheme_reason']}")
         lines.append(f"cross-validation: {cv.get('refit')}")
     else:
         lines.append("no cross-validation (fit.cv_folds: 0)")

@@ -95,6 +95,24 @@ def _notes_at_optimum(problem, params, optimum, coefficients) -> list[str]:
     return notes
 
 
+def _cross_validate(result, problem, params, config) -> None:
+    """Cross-validation into ``result``; a data problem becomes a note and a warning, never an exception."""
+    k = config.fit.cv_folds
+    try:
+        cv = crossval.cross_validate(problem, params, k=k, seed=config.fit.optimizer.seed,
+                                     percentiles=config.report.percentiles, scheme=config.fit.cv_scheme)
+    except crossval.CrossValidationError as exc:
+        note = f"cross-validation ({k}-fold) not run: {exc}"
+        result.cross_validation = {"k": k, "failed": str(exc), "notes": [note]}
+        result.warnings.append(note)
+        log.warning("%s: %s", config.name, note)
+        return
+    result.cross_validation = cv
+    result.timings["cross_validation_s"] = cv["wall_time_s"]
+    log.debug("%s: cross-validation (%s) %.1f s, held-out median %.4g", config.name, cv["scheme"],
+              cv["wall_time_s"], cv["held_out"]["p50"])
+
+
 def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir=None,
             posterior_progress: bool = True) -> FitResult:
     """Fit the model of ``config`` to its measurement (or to ``measurement`` when given).
@@ -131,11 +149,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     result.timings["standard_errors_s"] = time.perf_counter() - tic
     result.evaluation_speed = evaluation_speed(problem, params)
     if config.fit.cv_folds >= 2:
-        result.cross_validation = crossval.cross_validate(problem, params, k=config.fit.cv_folds, seed=opt.seed,
-                                                           percentiles=config.report.percentiles)
-        result.timings["cross_validation_s"] = result.cross_validation["wall_time_s"]
-        log.debug("%s: cross-validation %.1f s, held-out median %.4g", config.name,
-                  result.timings["cross_validation_s"], result.cross_validation["held_out"]["p50"])
+        _cross_validate(result, problem, params, config)
     post = posterior or config.fit.posterior
     if post is not None and not problem.free:
         result.warnings.append(NOTHING_TO_SAMPLE)

@@ -150,7 +150,9 @@ def _error_section(fit: dict, errors: dict, percentiles) -> list[str]:
         cv_rows = [[esc(label)] + [("num", fmt_percent((entry or {}).get(percentile_key(q)))) for q in qs]
                    for label, entry in (("in-sample (full fit)", cv.get("in_sample")),
                                         (f"held out ({cv.get('k')}-fold cross-validation)", cv.get("held_out")))]
-        out += [f"<h3>In-sample vs cross-validated</h3><p class=\"note\">{esc(cv.get('split', ''))} "
+        reason = f"{cv['scheme_reason']}. " if cv.get("scheme_reason") else ""
+        out += [f"<h3>In-sample vs cross-validated</h3><p class=\"note\">{esc(reason)}"
+                f"{esc(cv.get('split', ''))} "
                 f"{esc(cv.get('refit', ''))}</p>",
                 _table(["", *[f"{q}th percentile" if q != 50 else "median" for q in qs]], cv_rows)]
     key = paper_fabric(fit)
