@@ -14,6 +14,7 @@ from a fit directory report from the same two documents - the content of ``fit.j
 
 from __future__ import annotations
 
+import abc
 import html
 import math
 from dataclasses import dataclass, field
@@ -313,12 +314,12 @@ def short_text(kind_of_object: str, fit: dict) -> str:
             f"{' (' + shown + ')' if free else ''}, median relative error {_percent(median)}>")
 
 
-class Reportable:
+class Reportable(abc.ABC):
     """Report methods of a fit (fresh or loaded): implementers provide :meth:`_report_sources`."""
 
+    @abc.abstractmethod
     def _report_sources(self) -> tuple[dict, dict | None]:
         """(fit summary as in fit.json, posterior summary as in posterior.json or None)."""
-        raise NotImplementedError
 
     def fit_report(self, correl_threshold: float = CORREL_THRESHOLD) -> str:
         """The fit report as text: statistics, parameters with uncertainty (posterior or Gauss-Newton),

@@ -169,11 +169,11 @@ def surface_models(fabric: FabricModels) -> FabricModels:
     cached = getattr(fabric, "_surface", None)
     if cached is not None:
         return cached
-    if fabric.reflectance.kind == "surface":
+    from clothlab.models.registry import build_model, model_class
+
+    if isinstance(fabric.reflectance, model_class("surface")):  # the scene's fabric is already the surface model
         surface = fabric
     else:
-        from clothlab.models.registry import build_model
-
         model = build_model("surface", fabric.weave)
         kd = fabric.coefficients.get("kd", np.zeros(len(fabric.channels)))
         coefficients = {"kd_warp": kd, "kd_weft": kd, **{k: v for k, v in fabric.coefficients.items()
