@@ -89,3 +89,28 @@ def test_ctrl_c_thirty_times_over_the_whole_run(tmp_path):
           f"{codes.count('committed')} after the new result was committed, {codes.count(None)} ended before the "
           "signal")
     assert codes.count(130) == 30
+
+
+
+def test_ctrl_c_while_the_command_line_loads(tmp_path):
+    """A Ctrl-C while clothlab's modules load (before main() installs its handler) - delivered
+    deterministically from inside the import of clothlab.cli - ends with exit 130 and one line, no
+    traceback (the provisional handler of clothlab.__main__)."""
+    code = """
+import builtins, os, signal, sys, time
+real_import = builtins.__import__
+def importing(name, *args, **kwargs):
+    if name == "clothlab.cli":
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+    return real_import(name, *args, **kwargs)
+builtins.__import__ = importing
+sys.argv = ["clothlab", "--version"]
+from clothlab.__main__ import run
+sys.exit(run())
+"""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == "clothlab: interrupted\n" and done.stdout == ""

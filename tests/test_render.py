@@ -363,3 +363,22 @@ def test_fabric_fits_are_checked_by_texture_capability():
     with pytest.raises(ConfigError, match="of kind 'irawan'") as info:
         fabric.kang()
     assert info.value.field == "fabric.kang.fit"
+
+
+def test_an_spp_override_is_memory_checked_before_any_work(tmp_path):
+    """`render --spp N` is held to the same memory bound as the scene's own render.spp (issue 11): the
+    estimate is refused with the option to change, before a sample is drawn or a file is written."""
+    import yaml
+
+    from clothlab.errors import ConfigError
+    from clothlab.render.scene import MAX_RENDER_BYTES, render_bytes
+
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(yaml.safe_dump({"patch": {"size_mm": [40, 40], "tile_mm": [1, 2]},
+                                     "camera": {"position": [0, -20, 20], "resolution": [64, 48]},
+                                     "light": {"direction": [0, 0, 1]}, "render": {"spp": 1}}))
+    too_many = MAX_RENDER_BYTES // render_bytes((64, 48), 1) + 1
+    with pytest.raises(ConfigError, match=r"--spp") as info:
+        render_to_files(scene, tmp_path / "r", "im-lod", int(too_many), False)
+    assert str(scene) in str(info.value)
+    assert not list(tmp_path.glob("r.*"))

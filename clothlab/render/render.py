@@ -20,7 +20,7 @@ import numpy as np
 from clothlab.errors import ConfigError, ResultExistsError
 from clothlab.render.camera import PinholeCamera
 from clothlab.render.geometry import make_surface
-from clothlab.render.scene import Scene
+from clothlab.render.scene import Scene, check_render_memory
 from clothlab.render.shade import SHADERS, Counter, FabricModels, Samples, lod_weight, shade
 
 
@@ -57,6 +57,8 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
     """
     spp = scene.spp if spp is None else spp
     _check(shader, spp)
+    if spp != scene.spp:  # the scene checked its own render.spp; an override is checked here, before any work
+        check_render_memory(scene.camera.resolution, spp, len(scene.fabric.channels), source=scene.source)
     start, cpu_start = time.perf_counter(), time.process_time()
     fabric = fabric or FabricModels.build(scene.fabric)
     t_build = time.perf_counter()
