@@ -5,7 +5,13 @@ Detection (first 200 lines of a file):
 - ``clothlab``: a ``# clothlab-table`` header line, or a sidecar ``<file>.yaml`` / ``<stem>.yaml``;
 - ``pabopto``: a ``#format:``, ``#intheta``, ``#inphi`` or ``#incident_angle`` header line; a directory is
   read as the pab-opto files of one sample;
-- ``astm``: a ``NUM_POINTS`` or ``VARS`` keyword line.
+- ``astm``: a ``NUM_POINTS`` or ``VARS`` keyword line;
+- binary tables, from their first bytes and size: ``bsdf`` (RGL-EPFL) the ``tensor_file`` magic; ``utia`` a
+  file of exactly 1,990,656 bytes named ``*.bin``; ``merl`` a ``*.binary`` file whose int32 dims header
+  matches its size.
+
+``text`` (a lab's own table, :func:`clothlab.io.generic.read_generic`) is never detected: name it with
+``format: text`` and give its column mapping and conventions as options.
 
 ``format=`` (other than ``"auto"``) skips detection; ``**options`` go to the reader
 (:func:`clothlab.io.astm.read_astm`'s conventions, :func:`clothlab.io.pabopto.read_pabopto`'s ``up``; the
@@ -20,20 +26,29 @@ from pathlib import Path
 
 from clothlab.errors import InputError
 from clothlab.io.astm import read_astm
+from clothlab.io.generic import DELIMITERS, HEADER_CHOICES, read_generic
 from clothlab.io.measurement import Measurement
+from clothlab.io.merl import HEADER_BYTES as MERL_HEADER_BYTES
+from clothlab.io.merl import read_merl
 from clothlab.io.pabopto import SAMPLE_UP, read_pabopto
+from clothlab.io.rglbsdf import MAGIC as TENSOR_MAGIC
+from clothlab.io.rglbsdf import read_bsdf
 from clothlab.io.table import CONVENTION_CHOICES, check_row_count, find_sidecar, read_table
+from clothlab.io.utia import NEGATIVE, UTIA_BYTES, read_utia
 from clothlab.strict import MAX_LINE_CHARS, MAX_TABLE_BYTES, check_regular_file
 
-READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto}
+READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto, "text": read_generic,
+           "merl": read_merl, "utia": read_utia, "bsdf": read_bsdf}
 FORMATS = tuple(READERS)
 """The measurement formats clothlab reads (fabric.yaml ``measurement.format`` names one, or ``auto``)."""
 AUTO = "auto"
 """``format="auto"`` (like None) detects the format with :func:`detect_format`."""
 FORMAT_CHOICES = (AUTO, *FORMATS)
 """Every value ``measurement.format`` accepts."""
-OPTION_CHOICES = {**{name: tuple(values) for name, values in CONVENTION_CHOICES.items()}, "up": tuple(SAMPLE_UP)}
-"""The allowed values of each reader option (the conventions of a table, the pab-opto sample ``up``)."""
+OPTION_CHOICES = {**{name: tuple(values) for name, values in CONVENTION_CHOICES.items()}, "up": tuple(SAMPLE_UP),
+                  "delimiter": tuple(DELIMITERS), "header": HEADER_CHOICES, "negative": NEGATIVE}
+"""The allowed values of each reader option (the conventions of a table, the pab-opto sample ``up``, the
+text importer's delimiter and header, UTIA's handling of negative values)."""
 _DETECT_LINES = 200
 _CLOTHLAB = re.compile(r"^#\s*clothlab-table\s*:")
 _PABOPTO = re.compile(r"^#\s*(format\s*:|intheta\b|inphi\b|incident_angle\b)", re.IGNORECASE)
@@ -62,9 +77,14 @@ def detect_format(path) -> str:
     check_regular_file(path, limit=MAX_TABLE_BYTES, what="measurement file")
     try:
         with open(path, "rb") as handle:
+            first = handle.read(len(TENSOR_MAGIC))
+            handle.seek(0)
             head = [handle.readline(MAX_LINE_CHARS) for _ in range(_DETECT_LINES)]
     except OSError as exc:
         raise InputError(f"cannot read the measurement file: {exc.strerror or exc}", path=path) from None
+    binary = _binary_format(path, first)
+    if binary is not None:
+        return binary
     text = b"".join(head).decode("utf-8", errors="replace").removeprefix("\ufeff")
     if not text.strip():
         if find_sidecar(path) is not None:
@@ -79,8 +99,28 @@ def detect_format(path) -> str:
         return "astm"
     raise InputError(
         "unknown measurement format: expected a clothlab table ('# clothlab-table: 1' header or a sidecar "
-        f"{path.name}.yaml), an ASTM E1392 file (NUM_POINTS / VARS keywords) or pab-opto files ('#format:', "
-        "'#intheta' or '#incident_angle' lines); or pass format= one of " + ", ".join(FORMATS), path=path)
+        f"{path.name}.yaml), an ASTM E1392 file (NUM_POINTS / VARS keywords), pab-opto files ('#format:', "
+        "'#intheta' or '#incident_angle' lines) or a MERL / UTIA / RGL-EPFL binary; or pass format= one of "
+        + ", ".join(FORMATS) + " (text: a lab's own table with its column mapping)", path=path)
+
+
+def _binary_format(path: Path, first: bytes) -> str | None:
+    """``bsdf``, ``utia`` or ``merl`` when the first bytes, size and name say so, else None."""
+    if first == TENSOR_MAGIC:
+        return "bsdf"
+    size = path.stat().st_size
+    suffix = path.suffix.lower()
+    if suffix == ".bin" and size == UTIA_BYTES:
+        return "utia"
+    if suffix == ".binary" and len(first) >= MERL_HEADER_BYTES:
+        dims = [int.from_bytes(first[k:k + 4], "little", signed=True) for k in (0, 4, 8)]
+        if all(n > 0 for n in dims) and size == MERL_HEADER_BYTES + 24 * dims[0] * dims[1] * dims[2]:
+            return "merl"
+    if suffix in (".binary", ".bin", ".bsdf"):
+        raise InputError(f"a {suffix} file that is not a MERL .binary (int32 dims header matching the size), a "
+                         f"UTIA .bin ({UTIA_BYTES} bytes) or a tensor file ({TENSOR_MAGIC!r} magic); or pass "
+                         "format= one of " + ", ".join(FORMATS), path=path)
+    return None
 
 
 def check_reader_options(path, format: str, options: dict) -> None:  # noqa: A002

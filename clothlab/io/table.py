@@ -7,6 +7,7 @@ Layout (docs/formats.md, "clothlab's own table")::
     # quantity: brdf             # brdf [1/sr] | reflectance_factor [= pi BRDF] | cosine_weighted [= BRDF cos theta_i]
     # azimuth_zero: weft         # weft | warp (also x | y): where phi = 0 points
     # azimuth_sense: ccw         # ccw | cw, seen from above the fabric
+    # azimuth_offset: 0          # optional, deg counter-clockwise, added once at loading (phi = 0 -> weft)
     # channels: [R, G, B]
     # provenance: {instrument: ..., reference_standard: Spectralon, sample_name: ...}
     theta_i,phi_i,theta_o,phi_o,R,G,B,sigma_R,sigma_G,sigma_B
@@ -16,7 +17,13 @@ The header is the block of ``#`` lines at the top of the file: with the leading 
 it is a YAML mapping (YAML comments and multi-line values allowed).  It may instead live in a sidecar
 ``<file>.yaml`` (e.g. ``brdf.csv.yaml``) or ``<stem>.yaml`` (``brdf.yaml``) with the same keys; if both
 the file and a sidecar declare a key they must agree (a conflict is an error), keys found in only one are
-taken from it.  All keys but ``provenance`` are required, so no convention is ever guessed.
+taken from it.  All keys but ``azimuth_offset`` (default 0) and ``provenance`` are required, so no
+convention is ever guessed.
+
+``azimuth_offset`` (degrees, counter-clockwise seen from above, |offset| <= 360) rotates the file's azimuths
+once, at loading, after the zero/sense conversion: phi_clothlab = phi(azimuth_zero, azimuth_sense) + offset
+(mod 360), so that phi = 0 lies along the weft.  It is for a sample whose weft lies at -offset in the file's
+converted azimuth (an unknown or turned warp direction, issue 14 item 2).
 
 Columns may come in any order: the four angles, one column per channel, and optionally ``sigma_<channel>``
 (one-standard-deviation uncertainty, same quantity and unit as the value) for all channels or none.
@@ -70,9 +77,12 @@ _QUANTITY_NOUN = {"brdf": "BRDF", "reflectance_factor": "reflectance factor",
                   "cosine_weighted": "cosine-weighted BRDF", DSF: "DSF"}
 SIGMA_PREFIX = "sigma_"
 CLOTHLAB_CONVENTIONS = {"angle_unit": "deg", "quantity": "brdf", "azimuth_zero": "weft", "azimuth_sense": "ccw"}
-HEADER_KEYS = ("clothlab-table", "angle_unit", "quantity", "azimuth_zero", "azimuth_sense", "channels",
-               "provenance")
-_REQUIRED_KEYS = HEADER_KEYS[:-1]
+HEADER_KEYS = ("clothlab-table", "angle_unit", "quantity", "azimuth_zero", "azimuth_sense", "azimuth_offset",
+               "channels", "provenance")
+_OPTIONAL_KEYS = ("azimuth_offset", "provenance")
+_REQUIRED_KEYS = tuple(key for key in HEADER_KEYS if key not in _OPTIONAL_KEYS)
+MAX_AZIMUTH_OFFSET = 360.0
+"""Largest |azimuth_offset| (deg) a header or an importer accepts (one turn)."""
 _ALLOWED = {
     "angle_unit": ANGLE_UNITS,
     "quantity": tuple(QUANTITIES),
@@ -319,22 +329,49 @@ def check_unique_directions(theta_i, phi_i, theta_o, phi_o, locations) -> None:
                 path=path, line=line, field="theta_i,phi_i,theta_o,phi_o")
 
 
+def file_azimuth_offset(offset_deg: float, *, angle_unit: str, azimuth_sense: str) -> float:
+    """The offset in file units (for :func:`convert_rows`) equivalent to adding ``offset_deg`` (deg,
+    counter-clockwise) after the zero/sense conversion: a clockwise file subtracts it."""
+    signed = offset_deg if azimuth_sense == "ccw" else -offset_deg
+    return signed if angle_unit == "deg" else math.radians(signed)
+
+
+def check_azimuth_offset(value, *, error=InputError, **where) -> float:
+    """``value`` as a float if it is a finite number (not a bool) with |value| <= 360 deg, else ``error``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise error(f"azimuth_offset must be a number of degrees, got {value!r}", field="azimuth_offset", **where)
+    value = float(value)
+    if not math.isfinite(value) or abs(value) > MAX_AZIMUTH_OFFSET:
+        raise error(f"azimuth_offset {value!r} is not a finite angle within [-{MAX_AZIMUTH_OFFSET:g}, "
+                    f"{MAX_AZIMUTH_OFFSET:g}] deg", field="azimuth_offset", **where)
+    return value
+
+
 def rows_to_measurement(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: str,
-                        azimuth_sense: str, provenance: dict, source=None) -> Measurement:
-    """Validate ``raw`` (:func:`check_rows`, duplicates) and convert it to a :class:`Measurement`."""
+                        azimuth_sense: str, provenance: dict, source=None,
+                        azimuth_offset: float = 0.0) -> Measurement:
+    """Validate ``raw`` (:func:`check_rows`, duplicates) and convert it to a :class:`Measurement`.
+
+    ``azimuth_offset`` : degrees counter-clockwise added to both azimuths after the zero/sense conversion.
+    """
     check_rows(raw, angle_unit=angle_unit, quantity=quantity)
     theta_i, phi_i, theta_o, phi_o, values, sigma = convert_rows(
-        raw, angle_unit=angle_unit, quantity=quantity, azimuth_zero=azimuth_zero, azimuth_sense=azimuth_sense)
+        raw, angle_unit=angle_unit, quantity=quantity, azimuth_zero=azimuth_zero, azimuth_sense=azimuth_sense,
+        azimuth_offset=file_azimuth_offset(azimuth_offset, angle_unit=angle_unit, azimuth_sense=azimuth_sense))
     check_unique_directions(theta_i, phi_i, theta_o, phi_o, [(raw.path, int(n)) for n in raw.lines])
     return Measurement(theta_i, phi_i, theta_o, phi_o, values, raw.channels, sigma, provenance,
                        None if source is None else str(source))
 
 
-def conventions_provenance(conventions: dict) -> dict:
-    """``{'source_header': conventions}`` when they differ from clothlab's own, else ``{}``."""
-    if all(conventions.get(k) == v for k, v in CLOTHLAB_CONVENTIONS.items()):
+def conventions_provenance(conventions: dict, azimuth_offset: float = 0.0) -> dict:
+    """``{'source_header': conventions}`` when they (or a non-zero ``azimuth_offset``, deg) differ from
+    clothlab's own, else ``{}``."""
+    if azimuth_offset == 0.0 and all(conventions.get(k) == v for k, v in CLOTHLAB_CONVENTIONS.items()):
         return {}
-    return {"source_header": {k: conventions[k] for k in CLOTHLAB_CONVENTIONS}}
+    header = {k: conventions[k] for k in CLOTHLAB_CONVENTIONS}
+    if azimuth_offset != 0.0:
+        header["azimuth_offset"] = float(azimuth_offset)
+    return {"source_header": header}
 
 
 def check_choice(name: str, value, *, error=ConfigError, **where) -> None:
@@ -461,7 +498,9 @@ def _validate_header(header: _Header, path) -> dict:
         raise InputError(f"provenance must be a mapping (key: value), got {provenance!r}",
                          field="provenance", **at("provenance"))
     checked = {key: values[key] for key in _ALLOWED}
-    checked.update(channels=tuple(names), provenance=provenance)
+    offset = values.get("azimuth_offset", 0.0)
+    checked.update(channels=tuple(names), provenance=provenance,
+                   azimuth_offset=check_azimuth_offset(offset, **at("azimuth_offset")))
     return checked
 
 
@@ -535,8 +574,9 @@ def _parse_table_lines(lines: list[str], path, sidecar: _Header | None) -> Measu
         sigma=table[:, [index[SIGMA_PREFIX + c] for c in channels]] if has_sigma else None,
     )
     conventions = {key: header[key] for key in _ALLOWED}
-    provenance = {**header["provenance"], **conventions_provenance(conventions)}
-    return rows_to_measurement(raw, **conventions, provenance=provenance, source=path)
+    offset = header["azimuth_offset"]
+    provenance = {**header["provenance"], **conventions_provenance(conventions, offset)}
+    return rows_to_measurement(raw, **conventions, provenance=provenance, source=path, azimuth_offset=offset)
 
 
 def read_table(path) -> Measurement:
@@ -579,14 +619,20 @@ def _header_text(header: dict) -> list[str]:
 
 
 def format_table(m: Measurement, *, quantity: str = "brdf", angle_unit: str = "deg",
-                 azimuth_zero: str = "weft", azimuth_sense: str = "ccw") -> str:
-    """The text of a clothlab table holding ``m`` in the requested conventions (floats as repr, exact)."""
+                 azimuth_zero: str = "weft", azimuth_sense: str = "ccw", azimuth_offset: float = 0.0) -> str:
+    """The text of a clothlab table holding ``m`` in the requested conventions (floats as repr; exact with
+    ``azimuth_offset=0``, which is then not written)."""
     for name, value in (("quantity", quantity), ("angle_unit", angle_unit), ("azimuth_zero", azimuth_zero),
                         ("azimuth_sense", azimuth_sense)):
         check_choice(name, value)
+    azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
     theta_i, theta_o = m.theta_i, m.theta_o
-    phi_i = azimuth_from_clothlab(m.phi_i, zero=azimuth_zero, sense=azimuth_sense)
-    phi_o = azimuth_from_clothlab(m.phi_o, zero=azimuth_zero, sense=azimuth_sense)
+
+    def file_azimuth(phi):
+        return azimuth_from_clothlab(np.mod(phi - azimuth_offset, 360.0) if azimuth_offset else phi,
+                                     zero=azimuth_zero, sense=azimuth_sense)
+
+    phi_i, phi_o = file_azimuth(m.phi_i), file_azimuth(m.phi_o)
     angles = [theta_i, phi_i, theta_o, phi_o]
     if angle_unit == "rad":
         angles = [np.deg2rad(a) for a in angles]
@@ -599,7 +645,10 @@ def format_table(m: Measurement, *, quantity: str = "brdf", angle_unit: str = "d
         values = values * cos
         sigma = None if sigma is None else sigma * cos
     header = {"clothlab-table": TABLE_VERSION, "angle_unit": angle_unit, "quantity": quantity,
-              "azimuth_zero": azimuth_zero, "azimuth_sense": azimuth_sense, "channels": list(m.channels)}
+              "azimuth_zero": azimuth_zero, "azimuth_sense": azimuth_sense}
+    if azimuth_offset:
+        header["azimuth_offset"] = azimuth_offset
+    header["channels"] = list(m.channels)
     if m.provenance:
         header["provenance"] = _plain(dict(m.provenance))
     names = [*ANGLE_COLUMNS, *m.channels]
@@ -613,7 +662,8 @@ def format_table(m: Measurement, *, quantity: str = "brdf", angle_unit: str = "d
 
 
 def write_table(m: Measurement, path, *, overwrite: bool = False, quantity: str = "brdf",
-                angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw") -> Path:
+                angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw",
+                azimuth_offset: float = 0.0) -> Path:
     """Write ``m`` as a clothlab table, atomically; returns the path.
 
     With the defaults, ``read_table(write_table(m, p))`` reproduces ``m`` exactly (floats are written with
@@ -626,7 +676,7 @@ def write_table(m: Measurement, path, *, overwrite: bool = False, quantity: str 
     if path.exists() and not overwrite:
         raise ResultExistsError(f"{path} already exists; pass overwrite=True (--force) to replace it", path=path)
     text = format_table(m, quantity=quantity, angle_unit=angle_unit, azimuth_zero=azimuth_zero,
-                        azimuth_sense=azimuth_sense)
+                        azimuth_sense=azimuth_sense, azimuth_offset=azimuth_offset)
     try:
         _parse_table_lines(text.split("\n")[:-1], path, None)
     except InputError as exc:

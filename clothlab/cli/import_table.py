@@ -1,0 +1,94 @@
+"""``clothlab import SOURCE -o TABLE``: a lab's text/CSV table (column mapping and conventions on the command
+line) or any file clothlab reads (``--format merl|utia|astm|...``) -> a clothlab table.
+
+The reading and conversion live in :mod:`clothlab.io.generic` (text) and :mod:`clothlab.io.loader` (the other
+formats); this module parses the options and prints what was written.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from clothlab.cli.options import add_force, add_output
+
+_TEXT = "text"
+
+
+def add_parser(sub):
+    p = sub.add_parser(
+        "import", help="convert a text/CSV table (or a MERL/UTIA/ASTM/pab-opto file) to a clothlab table",
+        description="Read a reflectance table with the column mapping and conventions given here, convert it "
+                    "once into clothlab's convention (degrees, phi counter-clockwise from the weft, BRDF in "
+                    "1/sr) and write it as a clothlab table (atomically; an existing file only with --force). "
+                    "See docs/formats.md, 'Importing a lab's table'.")
+    p.add_argument("source", type=Path, help="the file to import")
+    add_output(p, "the clothlab table to write (CSV with a YAML header)", metavar="TABLE", required=True)
+    p.add_argument("--format", default=_TEXT, dest="source_format", metavar="FORMAT",
+                   help="text (default: the options below) or a loader format: clothlab, astm, pabopto, merl, "
+                        "utia, bsdf (their options with --option)")
+    p.add_argument("--columns", metavar="MAP",
+                   help="column mapping: positional theta_i,phi_i,theta_o,phi_o,R,G,B ('-' skips a column) or by "
+                        "header name theta_i=ti,phi_i=pi,...,R=red (default: the file's header row names them)")
+    p.add_argument("--delimiter", default="auto", choices=("auto", "whitespace", "comma", "semicolon", "tab"),
+                   help="field separator (default auto: semicolon, comma, tab or whitespace from the first rows)")
+    p.add_argument("--comment", default="#", metavar="CHAR",
+                   help="comment character: lines (and line ends) after it are skipped (default '#'; '' none)")
+    p.add_argument("--header", default="auto", choices=("auto", "yes", "no"),
+                   help="whether the first non-comment line names the columns (default auto: if not numeric)")
+    p.add_argument("--angle-unit", default="deg", choices=("deg", "rad"), help="unit of the four angles")
+    p.add_argument("--azimuth-zero", default="weft", choices=("weft", "warp", "x", "y"),
+                   help="where the file's phi = 0 points (default weft)")
+    p.add_argument("--azimuth-sense", default="ccw", choices=("ccw", "cw"),
+                   help="sense of the file's azimuths seen from above the fabric (default ccw)")
+    p.add_argument("--azimuth-offset", type=float, default=0.0, metavar="DEG",
+                   help="degrees counter-clockwise added to both azimuths after the zero/sense conversion, so "
+                        "that phi = 0 lies along the weft (default 0; recorded in the provenance)")
+    p.add_argument("--quantity", default="brdf", choices=("brdf", "reflectance_factor", "cosine_weighted"),
+                   help="what the values are: BRDF (1/sr), pi BRDF, or BRDF cos(theta_i) (default brdf)")
+    p.add_argument("--channels", metavar="NAMES", help="names of the value channels in order, e.g. grey or R,G,B")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="an option of the --format reader (e.g. theta_step=5 for merl); repeatable")
+    add_force(p, "output table")
+    return p
+
+
+def _reader_options(items):
+    from clothlab.errors import ConfigError
+    from clothlab.strict import load_yaml_text
+
+    options = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--option expects KEY=VALUE, got {item!r}", field="--option")
+        options[key.strip()] = load_yaml_text(value, error=ConfigError) if value.strip() else ""
+    return options
+
+
+def run(args) -> int:
+    from clothlab.errors import ConfigError, ResultExistsError
+
+    if args.output.exists() and not args.force:
+        raise ResultExistsError("already exists; pass --force to replace it", path=args.output)
+    if args.source_format == _TEXT:
+        if args.option:
+            raise ConfigError("--option is for the readers of --format; the text importer takes the options "
+                              "above", field="--option")
+        from clothlab.io.generic import import_table
+
+        path, m = import_table(
+            args.source, args.output, overwrite=args.force, columns=args.columns, delimiter=args.delimiter,
+            comment=args.comment, header=args.header, angle_unit=args.angle_unit, azimuth_zero=args.azimuth_zero,
+            azimuth_sense=args.azimuth_sense, azimuth_offset=args.azimuth_offset, quantity=args.quantity,
+            channels=args.channels)
+    else:
+        from clothlab.io.loader import FORMATS, load_measurement
+        from clothlab.io.table import write_table
+
+        if args.source_format not in FORMATS:
+            raise ConfigError(f"unknown format {args.source_format!r}; expected text or one of "
+                              f"{', '.join(FORMATS)}", field="--format")
+        m = load_measurement(args.source, args.source_format, **_reader_options(args.option))
+        path = write_table(m, args.output, overwrite=args.force)
+    print(f"{path}: {m.n} direction pairs, channels {', '.join(m.channels)}")
+    return 0

@@ -1,0 +1,228 @@
+"""Generic text / CSV reflectance tables with the conventions given by the user (``clothlab import``).
+
+A lab's own export - whitespace, comma or semicolon separated, optional comment lines and an optional row of
+column names - is read with a column mapping and the file's conventions stated explicitly (nothing is
+guessed but the delimiter when ``delimiter='auto'``), validated like every other table
+(:func:`clothlab.io.table.rows_to_measurement`: finite numbers, 0 <= theta <= 90 deg, values >= 0, sigma > 0,
+no repeated direction pair) and converted once into clothlab's convention (docs/design.md principle 1).
+
+Column mapping (``columns``), one entry per clothlab column:
+
+- positional: ``theta_i,phi_i,theta_o,phi_o,R,G,B`` names the file's columns in order (``-`` skips one);
+- by header name: ``theta_i=ti,phi_i=pi,theta_o=tv,phi_o=pv,R=red`` maps clothlab names to the names in the
+  file's header row;
+- omitted: the file's header row must name ``theta_i, phi_i, theta_o, phi_o`` itself; every other column is
+  a channel (``sigma_<channel>`` columns are uncertainties).
+
+Every name other than the four angles and ``sigma_<channel>`` is a value channel, named as given (or renamed
+in order with ``channels``).  The result is a :class:`~clothlab.io.measurement.Measurement`;
+:func:`import_table` writes it as a clothlab table (atomically, never over an existing file without
+``overwrite``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from clothlab.errors import ConfigError, InputError
+from clothlab.io.measurement import Measurement
+from clothlab.io.table import (
+    ANGLE_COLUMNS,
+    SIGMA_PREFIX,
+    RawRows,
+    check_azimuth_offset,
+    check_choice,
+    conventions_provenance,
+    parse_rows,
+    read_text_lines,
+    rows_to_measurement,
+    write_table,
+)
+
+DELIMITERS = {"auto": None, "whitespace": None, "comma": ",", "semicolon": ";", "tab": "\t"}
+"""``delimiter`` choices and their separator (whitespace: runs of blanks and tabs)."""
+HEADER_CHOICES = ("auto", "yes", "no")
+"""``header``: whether the first non-comment line names the columns (auto: it does if it is not numeric)."""
+SKIP = "-"
+_NUMERIC_START = re.compile(r"^\s*[+-]?(\d|\.\d)")
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which file column holds each clothlab column: ``positions`` (index per name) or ``names`` (header name
+    per name)."""
+
+    order: tuple[str, ...]
+    positions: dict | None = None
+    names: dict | None = None
+
+
+def parse_columns(spec) -> ColumnMap | None:
+    """A :class:`ColumnMap` from ``"theta_i,phi_i,..."`` / ``"theta_i=ti,..."`` (or a list of entries); None
+    for None.  ConfigError (field ``columns``) for a malformed mapping."""
+    if spec is None:
+        return None
+    entries = [e.strip() for e in (spec.split(",") if isinstance(spec, str) else list(spec))]
+    if not entries or any(not isinstance(e, str) or not e for e in entries):
+        raise ConfigError(f"columns must be comma-separated names, got {spec!r}", field="columns")
+    by_name = [e for e in entries if "=" in e]
+    if by_name and len(by_name) != len(entries):
+        raise ConfigError("columns mixes positional names and name=header entries; use one form",
+                          field="columns")
+    if by_name:
+        pairs = [tuple(part.strip() for part in e.split("=", 1)) for e in entries]
+        order = tuple(p[0] for p in pairs)
+        _check_names(order)
+        if any(not header for _, header in pairs):
+            raise ConfigError(f"columns entry with an empty header name in {spec!r}", field="columns")
+        return ColumnMap(order, names=dict(pairs))
+    order = tuple(e for e in entries if e != SKIP)
+    _check_names(order)
+    return ColumnMap(order, positions={name: k for k, name in enumerate(entries) if name != SKIP})
+
+
+def _check_names(order) -> None:
+    seen = set()
+    for name in order:
+        if name in seen:
+            raise ConfigError(f"column {name!r} is mapped twice", field="columns")
+        seen.add(name)
+        if re.search(r"[\s,#'\"]", name):
+            raise ConfigError(f"column name {name!r} holds a space, comma or quote", field="columns")
+    missing = [a for a in ANGLE_COLUMNS if a not in seen]
+    if missing:
+        raise ConfigError(f"columns must map {', '.join(missing)} (the four angles theta_i, phi_i, theta_o, "
+                          "phi_o and at least one channel)", field="columns")
+    if not [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]:
+        raise ConfigError("columns map no value channel after the four angles", field="columns")
+
+
+def _splitter(delimiter: str, sample: str):
+    """(split function, separator name) for a delimiter choice; ``auto`` looks at ``sample``."""
+    if delimiter == "auto":
+        delimiter = "semicolon" if ";" in sample else "comma" if "," in sample else "tab" if "\t" in sample \
+            else "whitespace"
+    separator = DELIMITERS[delimiter]
+    if separator is None:
+        return str.split, "whitespace"
+    return (lambda text: [f.strip() for f in text.split(separator)]), delimiter
+
+
+def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = "#", header: str = "auto",
+                 angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw",
+                 azimuth_offset: float = 0.0, quantity: str = "brdf", channels=None) -> Measurement:
+    """Load a text table with the given column mapping and conventions into clothlab's convention.
+
+    delimiter : auto | whitespace | comma | semicolon | tab.   comment : lines starting with it are skipped
+    (``""`` for none; text after it on a data line is dropped too).   header : auto | yes | no.
+    angle_unit : deg | rad.   azimuth_zero : weft | warp (x | y).   azimuth_sense : ccw | cw (seen from above).
+    azimuth_offset : degrees counter-clockwise added after the zero/sense conversion (phi = 0 -> weft).
+    quantity : brdf | reflectance_factor | cosine_weighted.   channels : new names for the value channels,
+    in order (comma-separated or a list).
+    """
+    conventions = {"angle_unit": angle_unit, "quantity": quantity, "azimuth_zero": azimuth_zero,
+                   "azimuth_sense": azimuth_sense}
+    for name, value in conventions.items():
+        check_choice(name, value)
+    azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
+    if delimiter not in DELIMITERS:
+        raise ConfigError(f"unknown delimiter {delimiter!r}; expected one of {' | '.join(DELIMITERS)}",
+                          field="delimiter")
+    if header not in HEADER_CHOICES:
+        raise ConfigError(f"unknown header {header!r}; expected one of {' | '.join(HEADER_CHOICES)}",
+                          field="header")
+    if not isinstance(comment, str) or len(comment) > 1 or comment.isalnum() or comment in "+-.":
+        raise ConfigError(f"comment must be one character that cannot start a number, or empty; got {comment!r}",
+                          field="comment")
+    mapping = parse_columns(columns)
+    path = Path(path)
+    rows = []
+    for lineno, line in enumerate(read_text_lines(path), 1):
+        text = line.split(comment, 1)[0] if comment else line
+        if text.strip():
+            rows.append((lineno, text.strip()))
+    if not rows:
+        raise InputError("no data rows (only blank or comment lines)", path=path)
+    split, separator = _splitter(delimiter, rows[0][1] if len(rows) == 1 else rows[1][1])
+    has_header = header == "yes" or (header == "auto" and not _NUMERIC_START.match(rows[0][1]))
+    file_names = None
+    if has_header:
+        header_line, header_text = rows.pop(0)
+        file_names = [n.strip().strip('"').strip("'") for n in split(header_text)]
+        if not rows:
+            raise InputError("no data rows after the header row", path=path, line=header_line)
+    order, index, names_for_messages = _resolve(mapping, file_names, path, rows[0][0] - (1 if has_header else 0))
+    width = len(file_names) if file_names is not None else max(index.values()) + 1
+    field_names = list(file_names) if file_names is not None else [
+        next((n for n, k in index.items() if k == j), f"column {j + 1}") for j in range(width)]
+    table = parse_rows(rows, field_names, path=path, split=split, separator=" " if separator == "whitespace"
+                       else DELIMITERS[separator])
+    value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
+    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]
+    for name in sigma_names:
+        if name[len(SIGMA_PREFIX):] not in value_names:
+            raise ConfigError(f"column {name!r} names no channel ({', '.join(value_names)})", field="columns")
+    if sigma_names and len(sigma_names) != len(value_names):
+        raise ConfigError("sigma columns must be given for every channel or none", field="columns")
+    new_names = _channel_names(channels, value_names)
+    raw = RawRows(
+        path=str(path), lines=np.array([lineno for lineno, _ in rows]),
+        angles=table[:, [index[a] for a in ANGLE_COLUMNS]],
+        values=table[:, [index[n] for n in value_names]], channels=tuple(new_names),
+        sigma=table[:, [index[SIGMA_PREFIX + n] for n in value_names]] if sigma_names else None,
+        angle_names=tuple(names_for_messages[a] for a in ANGLE_COLUMNS))
+    provenance = {"source_format": "text", "source_file": path.name,
+                  **conventions_provenance(conventions, azimuth_offset)}
+    return rows_to_measurement(raw, **conventions, provenance=provenance, source=path,
+                               azimuth_offset=azimuth_offset)
+
+
+def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
+    """(clothlab names in order, file column index per name, file column name per name for messages)."""
+    if mapping is None:
+        if file_names is None:
+            raise ConfigError("the file has no header row naming its columns; give columns "
+                              "(e.g. theta_i,phi_i,theta_o,phi_o,R,G,B)", field="columns")
+        mapping = ColumnMap(tuple(file_names), names={n: n for n in file_names})
+        try:
+            _check_names(mapping.order)
+        except ConfigError as exc:
+            raise InputError(f"header row: {exc.detail}; or give columns", path=path, line=header_line) from None
+    if mapping.names is not None:
+        if file_names is None:
+            raise ConfigError("columns map header names (name=header) but the file has no header row "
+                              "(header: no)", field="columns")
+        index = {}
+        for name, wanted in mapping.names.items():
+            hits = [k for k, n in enumerate(file_names) if n == wanted]
+            if len(hits) != 1:
+                raise InputError(f"header row has {len(hits)} columns named {wanted!r} (for {name}); expected "
+                                 f"one, among {', '.join(file_names)}", path=path, line=header_line,
+                                 field=wanted)
+            index[name] = hits[0]
+        return mapping.order, index, {n: mapping.names[n] for n in mapping.order}
+    if file_names is not None and max(mapping.positions.values()) >= len(file_names):
+        raise InputError(f"columns name {max(mapping.positions.values()) + 1} columns but the header row has "
+                         f"{len(file_names)}", path=path, line=header_line, field="columns")
+    return mapping.order, dict(mapping.positions), {n: n for n in mapping.order}
+
+
+def _channel_names(channels, value_names):
+    if channels is None:
+        return value_names
+    names = [c.strip() for c in (channels.split(",") if isinstance(channels, str) else list(channels))]
+    if len(names) != len(value_names) or len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"channels must give {len(value_names)} distinct names (for {', '.join(value_names)}), "
+                          f"got {channels!r}", field="channels")
+    return names
+
+
+def import_table(source, output, *, overwrite: bool = False, **options) -> tuple[Path, Measurement]:
+    """Read ``source`` with :func:`read_generic` (``options``) and write it as a clothlab table at ``output``
+    (atomic; ResultExistsError unless ``overwrite``).  Returns the path written and the measurement."""
+    measurement = read_generic(source, **options)
+    return write_table(measurement, output, overwrite=overwrite), measurement
