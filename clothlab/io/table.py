@@ -161,10 +161,11 @@ def parse_rows(rows: list[tuple[int, str]], columns, *, path, split=_split_csv, 
             table = None
         if table is not None and np.isfinite(table).all():
             return table
-    for row, (lineno, _) in zip(fields, rows, strict=True):
-        for text, column in zip(row, columns, strict=True):
-            parse_number(text, path=path, line=lineno, column=column)
-    raise AssertionError("unreachable: a field failed the fast path but passed parse_number")
+    # rows with other characters (a ';' separator, tabs) or a bad field: the strict per-field parse
+    return np.array([[parse_number(text, path=path, line=lineno, column=column)
+                      for text, column in zip(row, columns, strict=True)]
+                     for row, (lineno, _) in zip(fields, rows, strict=True)], dtype=np.float64).reshape(
+        len(rows), len(columns))
 
 
 def _first(mask: np.ndarray) -> tuple[int, int] | None:
