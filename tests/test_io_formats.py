@@ -233,7 +233,7 @@ def test_detects_each_format(tmp_path):
     np.testing.assert_array_equal(load_measurement(table).values, sample_measurement().values)
     assert load_measurement(astm).n == 3
     assert load_measurement(pab).n == len(INCIDENT) * len(EXITANT)
-    assert set(FORMATS) == {"clothlab", "astm", "pabopto"}
+    assert set(FORMATS) == {"clothlab", "astm", "pabopto", "text", "merl", "utia", "bsdf"}
 
 
 def test_detects_table_with_sidecar(tmp_path):
@@ -252,8 +252,8 @@ def test_explicit_format_and_options(tmp_path):
     with pytest.raises(InputError, match="option 'angle_units'") as info:
         load_measurement(path, angle_units="deg")
     assert info.value.field == "angle_units"
-    with pytest.raises(InputError, match="unknown measurement format 'merl'"):
-        load_measurement(path, format="merl")
+    with pytest.raises(InputError, match="unknown measurement format 'bonn'"):
+        load_measurement(path, format="bonn")
 
 
 @pytest.mark.parametrize("content, fragment", [

@@ -48,7 +48,14 @@ DELIMITERS = {"auto": None, "whitespace": None, "comma": ",", "semicolon": ";", 
 HEADER_CHOICES = ("auto", "yes", "no")
 """``header``: whether the first non-comment line names the columns (auto: it does if it is not numeric)."""
 SKIP = "-"
-_NUMERIC_START = re.compile(r"^\s*[+-]?(\d|\.\d)")
+_NAME_START = re.compile(r"^[\"']?[A-Za-z_]")
+_NOT_NAMES = ("nan", "inf", "infinity", "+inf", "-inf")
+
+
+def _is_header(fields) -> bool:
+    """True when every field of a row looks like a column name (starts with a letter or '_', and is not a
+    spelling of NaN or infinity, which are bad numbers in a data row)."""
+    return all(_NAME_START.match(f) and f.lower().strip("\"'") not in _NOT_NAMES for f in fields)
 
 
 @dataclass(frozen=True)
@@ -118,7 +125,8 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     """Load a text table with the given column mapping and conventions into clothlab's convention.
 
     delimiter : auto | whitespace | comma | semicolon | tab.   comment : lines starting with it are skipped
-    (``""`` for none; text after it on a data line is dropped too).   header : auto | yes | no.
+    (``""`` for none; text after it on a data line is dropped too).   header : auto | yes | no (auto: a
+    header when every field of the first row starts with a letter).
     angle_unit : deg | rad.   azimuth_zero : weft | warp (x | y).   azimuth_sense : ccw | cw (seen from above).
     azimuth_offset : degrees counter-clockwise added after the zero/sense conversion (phi = 0 -> weft).
     quantity : brdf | reflectance_factor | cosine_weighted.   channels : new names for the value channels,
@@ -148,7 +156,7 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     if not rows:
         raise InputError("no data rows (only blank or comment lines)", path=path)
     split, separator = _splitter(delimiter, rows[0][1] if len(rows) == 1 else rows[1][1])
-    has_header = header == "yes" or (header == "auto" and not _NUMERIC_START.match(rows[0][1]))
+    has_header = header == "yes" or (header == "auto" and _is_header(split(rows[0][1])))
     file_names = None
     if has_header:
         header_line, header_text = rows.pop(0)
