@@ -472,3 +472,57 @@ def test_corrupted_files_give_input_error_or_a_valid_measurement(tmp_path, data,
     assert m.n >= 1
     assert np.all(np.isfinite(m.values)) and np.all(m.values >= 0)
     assert np.all((m.theta_i >= 0) & (m.theta_i <= 90) & (m.theta_o >= 0) & (m.theta_o <= 90))
+
+
+# ---------------------------------------------------------------------------------------- azimuth_offset
+
+@pytest.mark.parametrize("options", [
+    {"azimuth_offset": 45.0},
+    {"azimuth_offset": -37.5, "azimuth_zero": "warp", "azimuth_sense": "cw", "angle_unit": "rad"},
+    {"azimuth_offset": 360.0, "azimuth_sense": "cw"},
+])
+def test_azimuth_offset_round_trip(tmp_path, options):
+    m = random_measurement(np.random.default_rng(9), provenance={"sample_name": "x"})
+    path = write_table(m, tmp_path / "o.csv", **options)
+    assert f"# azimuth_offset: {options['azimuth_offset']}" in path.read_text(encoding="utf-8")
+    back = read_table(path)
+    np.testing.assert_allclose(back.wi, m.wi, atol=1e-13)
+    np.testing.assert_allclose(back.wo, m.wo, atol=1e-13)
+    np.testing.assert_array_equal(back.values, m.values)
+    assert back.provenance["source_header"]["azimuth_offset"] == options["azimuth_offset"]
+
+
+@pytest.mark.parametrize("sense", ["ccw", "cw"])
+def test_azimuth_offset_is_added_once_counter_clockwise(tmp_path, sense):
+    """phi_clothlab = phi(zero, sense) + offset: the file's weft azimuth 0 ends at +offset."""
+    rows = [(30.0, 0.0, 40.0, 100.0, 0.1, 0.2, 0.3), (50.0, 10.0, 20.0, 350.0, 0.2, 0.3, 0.4)]
+    plain = read_table(write(tmp_path, table_text(rows, azimuth_sense=sense), "p.csv"))
+    text = table_text(rows, azimuth_sense=sense).replace("# channels:", "# azimuth_offset: 45\n# channels:")
+    turned = read_table(write(tmp_path, text, "t.csv"))
+    np.testing.assert_allclose(np.mod(turned.phi_i - plain.phi_i, 360.0), 45.0, atol=1e-12)
+    np.testing.assert_allclose(np.mod(turned.phi_o - plain.phi_o, 360.0), 45.0, atol=1e-12)
+    np.testing.assert_array_equal(turned.theta_o, plain.theta_o)
+
+
+def test_zero_azimuth_offset_is_not_written_and_reads_exactly(tmp_path):
+    m = random_measurement(np.random.default_rng(2))
+    path = write_table(m, tmp_path / "z.csv")
+    assert "azimuth_offset" not in path.read_text(encoding="utf-8")
+    assert_same(read_table(path), m)
+
+
+@pytest.mark.parametrize("value, words", [
+    ("'45'", "must be a number"), ("true", "must be a number"), (".nan", "not a finite angle"),
+    ("400", "not a finite angle"), ("[1]", "must be a number"),
+])
+def test_bad_azimuth_offset_names_line_and_field(tmp_path, value, words):
+    text = table_text(ROWS).replace("# channels:", f"# azimuth_offset: {value}\n# channels:")
+    with pytest.raises(InputError, match=words) as info:
+        read_table(write(tmp_path, text))
+    assert info.value.field == "azimuth_offset" and info.value.line == 6
+
+
+def test_write_rejects_bad_azimuth_offset(tmp_path):
+    with pytest.raises(ConfigError, match="azimuth_offset"):
+        write_table(random_measurement(np.random.default_rng(1)), tmp_path / "x.csv", azimuth_offset=float("nan"))
+    assert not (tmp_path / "x.csv").exists()
