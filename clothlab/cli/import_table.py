@@ -9,9 +9,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output
+from clothlab.cli.options import LazyText, add_force, add_output, names_of, one_of
 
 _TEXT = "text"
+_TABLE, _GENERIC, _LOADER = "clothlab.io.table", "clothlab.io.generic", "clothlab.io.loader"
+
+
+def _choice(parser, flag, module, attribute, what, default, help_text):
+    """An option whose choices are ``module.attribute`` (imported only when given or when help is shown)."""
+    names = names_of(module, attribute)
+    parser.add_argument(flag, default=default, type=one_of(names, what), metavar=what.split()[-1].upper(),
+                        help=LazyText(lambda: f"{help_text}: {' | '.join(names())} (default {default})"))
+
+
+def _conventions(name):
+    return lambda: tuple(__import__(_TABLE, fromlist=["CONVENTION_CHOICES"]).CONVENTION_CHOICES[name])
 
 
 def add_parser(sub):
@@ -23,28 +35,32 @@ def add_parser(sub):
                     "See docs/formats.md, 'Importing a lab's table'.")
     p.add_argument("source", type=Path, help="the file to import")
     add_output(p, "the clothlab table to write (CSV with a YAML header)", metavar="TABLE", required=True)
+    formats = names_of(_LOADER, "FORMATS")
     p.add_argument("--format", default=_TEXT, dest="source_format", metavar="FORMAT",
-                   help="text (default: the options below) or a loader format: clothlab, astm, pabopto, merl, "
-                        "utia, bsdf (their options with --option)")
+                   type=one_of(formats, "measurement format"),
+                   help=LazyText(lambda: f"text (default: the options below) or another format clothlab reads: "
+                                         f"{', '.join(f for f in formats() if f != _TEXT)} (their options with "
+                                         "--option)"))
     p.add_argument("--columns", metavar="MAP",
                    help="column mapping: positional theta_i,phi_i,theta_o,phi_o,R,G,B ('-' skips a column) or by "
                         "header name theta_i=ti,phi_i=pi,...,R=red (default: the file's header row names them)")
-    p.add_argument("--delimiter", default="auto", choices=("auto", "whitespace", "comma", "semicolon", "tab"),
-                   help="field separator (default auto: semicolon, comma, tab or whitespace from the first rows)")
+    _choice(p, "--delimiter", _GENERIC, "DELIMITERS", "delimiter", "auto",
+            "field separator (auto: semicolon, comma, tab or whitespace, from the first data row)")
     p.add_argument("--comment", default="#", metavar="CHAR",
                    help="comment character: lines (and line ends) after it are skipped (default '#'; '' none)")
-    p.add_argument("--header", default="auto", choices=("auto", "yes", "no"),
-                   help="whether the first non-comment line names the columns (default auto: if not numeric)")
-    p.add_argument("--angle-unit", default="deg", choices=("deg", "rad"), help="unit of the four angles")
-    p.add_argument("--azimuth-zero", default="weft", choices=("weft", "warp", "x", "y"),
-                   help="where the file's phi = 0 points (default weft)")
-    p.add_argument("--azimuth-sense", default="ccw", choices=("ccw", "cw"),
-                   help="sense of the file's azimuths seen from above the fabric (default ccw)")
+    _choice(p, "--header", _GENERIC, "HEADER_CHOICES", "header", "auto",
+            "whether the first non-comment line names the columns (auto: when every field starts with a letter)")
+    for flag, key, default, text in (
+            ("--angle-unit", "angle_unit", "deg", "unit of the four angles"),
+            ("--azimuth-zero", "azimuth_zero", "weft", "where the file's phi = 0 points"),
+            ("--azimuth-sense", "azimuth_sense", "ccw", "sense of the file's azimuths seen from above the fabric"),
+            ("--quantity", "quantity", "brdf", "what the values are: BRDF (1/sr), pi BRDF, or BRDF cos(theta_i)")):
+        names = _conventions(key)
+        p.add_argument(flag, default=default, type=one_of(names, key.replace("_", " ")), metavar=key.upper(),
+                       help=LazyText(lambda n=names, d=default, t=text: f"{t}: {' | '.join(n())} (default {d})"))
     p.add_argument("--azimuth-offset", type=float, default=0.0, metavar="DEG",
                    help="degrees counter-clockwise added to both azimuths after the zero/sense conversion, so "
                         "that phi = 0 lies along the weft (default 0; recorded in the provenance)")
-    p.add_argument("--quantity", default="brdf", choices=("brdf", "reflectance_factor", "cosine_weighted"),
-                   help="what the values are: BRDF (1/sr), pi BRDF, or BRDF cos(theta_i) (default brdf)")
     p.add_argument("--channels", metavar="NAMES", help="names of the value channels in order, e.g. grey or R,G,B")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an option of the --format reader (e.g. theta_step=5 for merl); repeatable")
@@ -82,12 +98,9 @@ def run(args) -> int:
             azimuth_sense=args.azimuth_sense, azimuth_offset=args.azimuth_offset, quantity=args.quantity,
             channels=args.channels)
     else:
-        from clothlab.io.loader import FORMATS, load_measurement
+        from clothlab.io.loader import load_measurement
         from clothlab.io.table import write_table
 
-        if args.source_format not in FORMATS:
-            raise ConfigError(f"unknown format {args.source_format!r}; expected text or one of "
-                              f"{', '.join(FORMATS)}", field="--format")
         m = load_measurement(args.source, args.source_format, **_reader_options(args.option))
         path = write_table(m, args.output, overwrite=args.force)
     print(f"{path}: {m.n} direction pairs, channels {', '.join(m.channels)}")
