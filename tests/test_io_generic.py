@@ -186,3 +186,13 @@ def test_bad_file_exits_2_with_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{path}:2" in err[0] and "'Y'" in err[0]
     assert not (tmp_path / "t.csv").exists()
+
+
+@pytest.mark.parametrize("offset", ["nan", "inf", "1_0", "ten"])
+def test_cli_azimuth_offset_is_a_plain_finite_number(tmp_path, capsys, offset):
+    source = tmp_path / "lab.csv"
+    source.write_text("theta_i,phi_i,theta_o,phi_o,Y\n10,0,20,30,0.5\n40,10,20,60,0.7\n", encoding="utf-8")
+    with pytest.raises(SystemExit) as info:
+        main(["import", str(source), "-o", str(tmp_path / "t.csv"), "--azimuth-offset", offset])
+    assert info.value.code == 2 and "--azimuth-offset" in capsys.readouterr().err
+    assert not (tmp_path / "t.csv").exists()

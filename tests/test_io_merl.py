@@ -102,7 +102,7 @@ def test_read_merl_converts_once_isotropic_flag_and_unmeasured(tmp_path):
     m = read_merl(path, theta_step=15.0, phi_step=30.0)
     ti, pi_, to, po = merl_directions(15.0, 30.0)
     assert len(ti) == 6 * 6 * 7
-    assert m.provenance["isotropic"] is True and m.provenance["source_format"] == "merl"
+    assert m.provenance["isotropic"] is True and m.provenance["source_format"] == "merl" and m.isotropic
     dropped = m.provenance["merl_unmeasured_pairs"]
     assert dropped > 0 and m.n == len(ti) - dropped
     assert (m.phi_i == 0).all() and set(np.unique(m.theta_i)) <= set(ti)
@@ -128,6 +128,10 @@ def test_loader_detects_merl_and_fabric_yaml_points_at_it(tmp_path, capsys):
     assert m.provenance["isotropic"] is True
     with pytest.raises(InputError, match="theta_stepp"):
         load_measurement(path, theta_stepp=30.0)
+    with pytest.raises(InputError, match="theta_step must be") as info:
+        load_measurement(path, theta_step="coarse")
+    assert info.value.field == "theta_step" and str(path) in str(info.value)
+    assert load_measurement(write_merl(small_stored(rng), tmp_path / "b.binary"), "merl").subset([0, 1]).isotropic
     (tmp_path / "fabric.yaml").write_text(
         "name: red\nmeasurement:\n  path: red-fabric.binary\n  format: merl\n  options: {theta_step: 15}\n"
         "model:\n  kind: irawan\n  weave: preset:Polyester_Lining\n", encoding="utf-8")

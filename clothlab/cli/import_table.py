@@ -22,6 +22,19 @@ def _choice(parser, flag, module, attribute, what, default, help_text):
                         help=LazyText(lambda: f"{help_text}: {' | '.join(names())} (default {default})"))
 
 
+def _degrees(text: str) -> float:
+    """An argparse type: a finite angle in plain decimal notation (no ``nan``, ``inf`` or ``1_0``)."""
+    import argparse
+
+    from clothlab.errors import ConfigError
+    from clothlab.strict import parse_number
+
+    try:
+        return parse_number(text, error=ConfigError)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.detail) from None
+
+
 def _conventions(name):
     return lambda: tuple(__import__(_TABLE, fromlist=["CONVENTION_CHOICES"]).CONVENTION_CHOICES[name])
 
@@ -58,7 +71,7 @@ def add_parser(sub):
         names = _conventions(key)
         p.add_argument(flag, default=default, type=one_of(names, key.replace("_", " ")), metavar=key.upper(),
                        help=LazyText(lambda n=names, d=default, t=text: f"{t}: {' | '.join(n())} (default {d})"))
-    p.add_argument("--azimuth-offset", type=float, default=0.0, metavar="DEG",
+    p.add_argument("--azimuth-offset", type=_degrees, default=0.0, metavar="DEG",
                    help="degrees counter-clockwise added to both azimuths after the zero/sense conversion, so "
                         "that phi = 0 lies along the weft (default 0; recorded in the provenance)")
     p.add_argument("--channels", metavar="NAMES", help="names of the value channels in order, e.g. grey or R,G,B")

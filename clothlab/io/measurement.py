@@ -59,6 +59,13 @@ class Measurement:
         return len(self.theta_i)
 
     @property
+    def isotropic(self) -> bool:
+        """True when the data were measured as isotropic (``provenance['isotropic']``, e.g. a MERL table):
+        they constrain only the BRDF averaged over the fabric's orientation about the normal, so the model to
+        fit is the orientation-averaged one (docs/formats.md, "MERL")."""
+        return self.provenance.get("isotropic") is True
+
+    @property
     def wi(self) -> np.ndarray:
         """(N, 3) incident directions (towards the light), fabric frame."""
         return spherical_to_vector(self.theta_i, self.phi_i)

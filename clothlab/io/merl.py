@@ -194,7 +194,10 @@ def read_merl(path, *, theta_step: float = DEFAULT_THETA_STEP, phi_step: float =
 
     The provenance records ``isotropic: true``, the sampling and the count of unmeasured pairs dropped.
     """
-    directions = merl_directions(theta_step, phi_step, theta_max)
+    try:
+        directions = merl_directions(theta_step, phi_step, theta_max)
+    except ConfigError as exc:
+        raise InputError(exc.detail, path=path, field=exc.field) from None
     table = read_merl_table(path)
     sampling = {"theta_step": float(theta_step), "phi_step": float(phi_step), "theta_max": float(theta_max)}
     return sample_merl(table, *directions, provenance={"merl_sampling": sampling,
