@@ -187,3 +187,14 @@ def test_negative_means_unmeasured_but_all_negative_is_refused(tmp_path, capsys)
     assert main(["import", str(path), "--format", "merl", "-o", str(tmp_path / "o.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0]
+
+
+def test_detection_sends_a_broken_binary_to_its_reader(tmp_path):
+    """A truncated .binary is still detected as MERL, so the message names the byte offset; text is not."""
+    path = write_merl(small_stored(np.random.default_rng(0)), tmp_path / "cut.binary")
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(InputError, match="ends at byte offset 100"):
+        load_measurement(path)
+    text = tmp_path / "table.binary"
+    text.write_text("NUM_POINTS 2\nVARS theta_i,phi_i,theta_s,phi_s,R\n0.1,0,0.2,1,0.5\n0.2,0,0.2,1,0.5\n")
+    assert detect_format(text) == "astm"

@@ -6,9 +6,10 @@ Detection (first 200 lines of a file):
 - ``pabopto``: a ``#format:``, ``#intheta``, ``#inphi`` or ``#incident_angle`` header line; a directory is
   read as the pab-opto files of one sample;
 - ``astm``: a ``NUM_POINTS`` or ``VARS`` keyword line;
-- binary tables, from their first bytes and size: ``bsdf`` (RGL-EPFL) the ``tensor_file`` magic; ``utia`` a
-  file of exactly 1,990,656 bytes named ``*.bin``; ``merl`` a ``*.binary`` file whose int32 dims header
-  matches its size.
+- binary tables, from their first bytes, size and name: ``bsdf`` (RGL-EPFL) the ``tensor_file`` magic;
+  ``utia`` a ``*.bin`` file of 1,990,656 bytes; ``merl`` a ``*.binary`` file with a plausible int32 dims
+  header; a ``.bsdf`` / ``.bin`` / ``.binary`` file that is not text goes to that reader, which names the
+  fault at its byte offset.
 
 ``text`` (a lab's own table, :func:`clothlab.io.generic.read_generic`) is never detected: name it with
 ``format: text`` and give its column mapping and conventions as options.
@@ -29,6 +30,7 @@ from clothlab.io.astm import read_astm
 from clothlab.io.generic import DELIMITERS, HEADER_CHOICES, read_generic
 from clothlab.io.measurement import Measurement
 from clothlab.io.merl import HEADER_BYTES as MERL_HEADER_BYTES
+from clothlab.io.merl import MAX_DIM as MAX_MERL_DIM
 from clothlab.io.merl import read_merl
 from clothlab.io.pabopto import SAMPLE_UP, read_pabopto
 from clothlab.io.rglbsdf import MAGIC as TENSOR_MAGIC
@@ -77,12 +79,12 @@ def detect_format(path) -> str:
     check_regular_file(path, limit=MAX_TABLE_BYTES, what="measurement file")
     try:
         with open(path, "rb") as handle:
-            first = handle.read(len(TENSOR_MAGIC))
+            first = handle.read(4096)
             handle.seek(0)
             head = [handle.readline(MAX_LINE_CHARS) for _ in range(_DETECT_LINES)]
     except OSError as exc:
         raise InputError(f"cannot read the measurement file: {exc.strerror or exc}", path=path) from None
-    binary = _binary_format(path, first)
+    binary = _binary_format(path, first[:len(TENSOR_MAGIC)], first)
     if binary is not None:
         return binary
     text = b"".join(head).decode("utf-8", errors="replace").removeprefix("\ufeff")
@@ -104,22 +106,34 @@ def detect_format(path) -> str:
         + ", ".join(FORMATS) + " (text: a lab's own table with its column mapping)", path=path)
 
 
-def _binary_format(path: Path, first: bytes) -> str | None:
-    """``bsdf``, ``utia`` or ``merl`` when the first bytes, size and name say so, else None."""
+def _looks_binary(head: bytes) -> bool:
+    """True when the first bytes hold a NUL or are not UTF-8 (a truncated multi-byte end allowed)."""
+    if b"\x00" in head:
+        return True
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return exc.start < len(head) - 3
+    return False
+
+
+def _binary_format(path: Path, first: bytes, head: bytes) -> str | None:
+    """``bsdf``, ``utia`` or ``merl`` when the first bytes, size and name say so, else None (a text file).
+
+    A ``.binary`` / ``.bin`` file that is binary but does not match its layout is still given to the MERL /
+    UTIA reader, so that the message names what is wrong (truncated, bad dims header) at its byte offset.
+    """
     if first == TENSOR_MAGIC:
         return "bsdf"
-    size = path.stat().st_size
     suffix = path.suffix.lower()
-    if suffix == ".bin" and size == UTIA_BYTES:
+    if suffix == ".bsdf" and _looks_binary(head):
+        return "bsdf"
+    if suffix == ".bin" and (path.stat().st_size == UTIA_BYTES or _looks_binary(head)):
         return "utia"
     if suffix == ".binary" and len(first) >= MERL_HEADER_BYTES:
         dims = [int.from_bytes(first[k:k + 4], "little", signed=True) for k in (0, 4, 8)]
-        if all(n > 0 for n in dims) and size == MERL_HEADER_BYTES + 24 * dims[0] * dims[1] * dims[2]:
+        if all(0 < n <= MAX_MERL_DIM for n in dims) or _looks_binary(head):
             return "merl"
-    if suffix in (".binary", ".bin", ".bsdf"):
-        raise InputError(f"a {suffix} file that is not a MERL .binary (int32 dims header matching the size), a "
-                         f"UTIA .bin ({UTIA_BYTES} bytes) or a tensor file ({TENSOR_MAGIC!r} magic); or pass "
-                         "format= one of " + ", ".join(FORMATS), path=path)
     return None
 
 
