@@ -301,10 +301,12 @@ def test_point_kernels_are_the_quadrature_integrands():
         h, _ = ref._half_vector(tuple(wi[i]), tuple(wo[i]))
         assert v_spec[i] == pytest.approx(ref._staple_v(float(u[i]), h, psi), abs=1e-10)
     v = rng.uniform(-0.5 * math.pi, 0.5 * math.pi, len(wi))
-    value, u_spec = kernels.filament_points(wi, wo, v, umax_n, kappa, w, l, delta)
-    single = np.array([kernels.filament_quadrature(wi[i:i + 1], wo[i:i + 1], np.array([[v[i]]]), np.ones((1, 1)), umax,
-                                                   kappa, w, l, delta, False)[0] for i in range(len(wi))])
-    np.testing.assert_allclose(value, single, rtol=1e-15, atol=0)
+    for shortened in (False, True):  # both filament arcs (kernels.spine_arc)
+        value, u_spec = kernels.filament_points(wi, wo, v, umax_n, kappa, w, l, delta, shortened)
+        single = np.array([kernels.filament_quadrature(wi[i:i + 1], wo[i:i + 1], np.array([[v[i]]]), np.ones((1, 1)),
+                                                       umax, kappa, w, l, delta, False, shortened)[0]
+                           for i in range(len(wi))])
+        np.testing.assert_allclose(value, single, rtol=1e-15, atol=0)
     assert np.count_nonzero(value) > 10
     for i in range(len(wi)):
         h, _ = ref._half_vector(tuple(wi[i]), tuple(wo[i]))

@@ -40,7 +40,8 @@ def quad_reference(wi, wo, params, kind):
                 return kernels.staple_quadrature(a, b, np.array([[u]]), one, psi, umax, kappa, w, l)[0]
         else:
             def f(v, a=a, b=b):
-                return kernels.filament_quadrature(a, b, np.array([[v]]), one, umax, kappa, w, l, delta, False)[0]
+                return kernels.filament_quadrature(a, b, np.array([[v]]), one, umax, kappa, w, l, delta, False,
+                                                   False)[0]
         edges = np.unique(breaks[n])
         total = 0.0
         for lo_, hi_ in zip(edges[:-1], edges[1:], strict=True):

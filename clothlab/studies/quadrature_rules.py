@@ -96,4 +96,4 @@ def split_yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, n=4, psi_t
 
     t, wt = unit_rule("gauss", int(n))
     return filament_quadrature(wi, wo, t[None, :], wt[None, :], float(umax), float(kappa), float(w), float(l),
-                               float(delta), True)
+                               float(delta), True, False)

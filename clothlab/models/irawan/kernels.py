@@ -58,6 +58,17 @@ def spine_radius_at(c, s, scale, q):
 
 
 @njit(cache=True, inline="always")
+def spine_arc(umax, delta, shortened):
+    """The half arc on which R(u) of a *filament* spine is evaluated (sec. 5.4 with eq. 9's smoothing).
+
+    ``shortened`` False: umax, the paper's text (sec. 5.4 defines R(u) on the whole segment |u| <= umax;
+    eq. 9 only fades A over the last delta umax).  ``shortened`` True: (1 - delta) umax, the Mitsuba 0.5/0.6
+    ``irawan`` plugin's form (r_hat, L and t_max use the shortened arc and |u| is clamped to it, so
+    R(u) = R((1 - delta) umax) on the faded ends).  Equal when delta = 0."""
+    return (1.0 - delta) * umax if shortened else umax
+
+
+@njit(cache=True, inline="always")
 def spine_radius(u, umax, kappa, w, l):
     """R(u) = L sqrt(cot^2 umax + q) / (cos^2 u + q sin^2 u)^(3/2), q = r_hat |r_hat| (sec. 5.4).
 
@@ -309,17 +320,19 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
 
 
 @njit(cache=True)
-def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc):
+def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc, shortened):
     """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eq. 2 without f_c) for each direction pair n (yarn frame).
 
     ``nodes`` / ``weights`` of shape (1, K) are shared by all directions (sin v, cos v computed once).
     ``on_arc``: the nodes are unit nodes in [0, 1] mapped per direction onto the closed-form arc where both
-    clamped cosines of eq. 8 are positive (the only place the integrand is non-zero, and analytic inside)."""
+    clamped cosines of eq. 8 are positive (the only place the integrand is non-zero, and analytic inside).
+    ``shortened``: R(u) on the arc of :func:`spine_arc` (the renderer's form) instead of the full one."""
     n_dir = wi.shape[0]
     n_nodes = nodes.shape[1]
     shared = nodes.shape[0] == 1
     out = np.zeros(n_dir)
     a = 0.5 * w
+    arc = spine_arc(umax, delta, shortened)  # sec. 5.4: the arc R(u) is fitted to
     sv_shared = np.empty(n_nodes)
     cv_shared = np.empty(n_nodes)
     if shared and not on_arc:
@@ -331,7 +344,7 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc
         ok, u, scale, ci0, cr0 = filament_direction(wix, wi[n, 1], wi[n, 2], wox, wo[n, 1], wo[n, 2], umax, delta)
         if not ok:
             continue
-        radius = spine_radius(u, umax, kappa, w, l)
+        radius = spine_radius(u, arc, kappa, w, l)  # |u| clamped to the arc
         row = 0 if shared else n
         acc = 0.0
         if on_arc:
@@ -443,12 +456,12 @@ def staple_points(wi, wo, u, umax, psi, kappa, w, l):
 
 
 @njit(cache=True)
-def filament_points(wi, wo, v, umax, kappa, w, l, delta):
+def filament_points(wi, wo, v, umax, kappa, w, l, delta, shortened):
     """G_u A_s at v[n] and the specular u of eq. 4 for each point n (Algorithm 4).
 
     wi, wo: (N, 3) or (1, 3) yarn-frame directions (one row: shared); v, umax: (N,) radians.
     Returns (value, u): value 0 where |v| > pi/2, |u| >= umax or a cosine is <= 0 (u is returned anyway).
-    Same integrand as :func:`filament_quadrature` (eqs. 4, 6, 8, 9, bounded form).
+    Same integrand as :func:`filament_quadrature` (eqs. 4, 6, 8, 9, bounded form; ``shortened`` as there).
     """
     n_pts = v.shape[0]
     value = np.zeros(n_pts)
@@ -463,7 +476,7 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta):
         upos[n] = uu
         if not ok or abs(v[n]) > 0.5 * math.pi:
             continue
-        radius = spine_radius(uu, umax[n], kappa, w, l)
+        radius = spine_radius(uu, spine_arc(umax[n], delta, shortened), kappa, w, l)
         value[n] = filament_integrand(wix, ci0, wox, cr0, math.sin(v[n]), math.cos(v[n]), a, radius) * scale
     return value, upos
 
@@ -583,10 +596,11 @@ def staple_quadrature_sets(wi, wo, unit_nodes, unit_weights, psi, umax, kappa, w
 
 
 @njit(cache=True, error_model="numpy")
-def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta):
+def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta, shortened):
     """(J, N) filament I_j (eq. 2) from the moments of :func:`filament_moments` for J parameter sets (umax in
     radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of eq. 9 is 0.  Branch-free
-    over the directions (the cuts applied as a select), so the loop vectorises."""
+    over the directions (the cuts applied as a select), so the loop vectorises.  ``shortened``: R on the arc
+    of :func:`spine_arc`, |u| clamped to it."""
     n_sets = umax.shape[0]
     n_dir = u.shape[0]
     out = np.zeros((n_sets, n_dir))
@@ -594,11 +608,14 @@ def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta):
     su = np.sin(u)
     for j in range(n_sets):
         a = 0.5 * w[j]
-        scale, q = spine_radius_factors(umax[j], kappa[j], w[j], l[j])  # sec. 5.4
+        arc = spine_arc(umax[j], delta[j], shortened)
+        scale, q = spine_radius_factors(arc, kappa[j], w[j], l[j])  # sec. 5.4
+        c_arc, s_arc = math.cos(arc), math.sin(arc)
         row = out[j]
         for n in range(n_dir):
             fade = filament_fade(u[n], umax[j], delta[j])  # eq. 9
-            radius = spine_radius_at(cu[n], su[n], scale, q)  # R(u), |u| < umax where lit
+            inside = abs(u[n]) <= arc  # R is even in u: |u| clamped to the arc
+            radius = spine_radius_at(cu[n] if inside else c_arc, su[n] if inside else s_arc, scale, q)  # R(u)
             value = inv[n] * fade * (a * radius * s0[n] + a * a * s1[n])  # eq. 2 (eq. 6 numerator x eq. 8)
             row[n] = value if ok[n] and abs(u[n]) < umax[j] and fade > 0.0 else 0.0
     return out

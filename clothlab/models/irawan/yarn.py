@@ -50,14 +50,15 @@ def _filament_breaks(wi, wo, h):
         np.ascontiguousarray(wi), np.ascontiguousarray(wo), np.ascontiguousarray(h)))
 
 
-def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
+def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta, shortened):
     from clothlab.models.irawan import kernels
 
     def staple_sum(rows, nodes, weights):
         return kernels.staple_quadrature(wi[rows], wo[rows], nodes, weights, psi, umax, kappa, w, l)
 
     def filament_sum(rows, nodes, weights, on_arc=False):
-        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta, on_arc)
+        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta, on_arc,
+                                           shortened)
 
     every = slice(None)
     if rule in ("trapezoid", "gauss"):
@@ -105,11 +106,13 @@ def staple_path(psi, umax, rule, n, psi_threshold) -> bool:
     return abs(psi) >= threshold
 
 
-def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid", n=11, psi_threshold=1e-3):
+def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid", n=11, psi_threshold=1e-3,
+                  shortened=False):
     """I(wi, wo) = integral of G A (eq. 10) for one segment type; (N,) for (N, 3) yarn-frame directions.
 
     Staple path when |psi| >= psi_threshold (radians), filament path otherwise (sec. 6.2); see
-    :func:`staple_path`.
+    :func:`staple_path`.  ``shortened``: the filament spine's R(u) on the arc (1 - delta) umax (the renderer's
+    form, :func:`clothlab.models.irawan.kernels.spine_arc`); staple yarns are not smoothed (eq. 9) and ignore it.
     """
     wi = np.ascontiguousarray(wi, dtype=np.float64)
     wo = np.ascontiguousarray(wo, dtype=np.float64)
@@ -118,5 +121,5 @@ def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid"
     if front.size:
         staple = staple_path(psi, umax, rule, n, psi_threshold)
         out[front] = _integrate(wi[front], wo[front], rule, n, staple, float(psi), float(umax), float(kappa),
-                                float(w), float(l), float(delta))
+                                float(w), float(l), float(delta), bool(shortened))
     return out
