@@ -135,12 +135,13 @@ def tradeoff_study(quick: bool, figures_dir=None, fabrics=None, n_reference=None
 
 
 def _staple_pieces(wi, wo, params) -> dict:
-    """Per staple yarn type: the pieces the ``support`` rule cuts [-umax, umax] into on these directions
-    (front-facing pairs; "max" is what every direction carries, the rule being vectorised, "mean" the non-empty
-    ones), from the same closed-form breakpoints (:func:`clothlab.models.irawan.yarn._staple_breaks`)."""
+    """Per staple yarn type: the lit pieces (those the ``support`` rule integrates; the integrand is 0 on the
+    others) into which its breakpoints cut [-umax, umax] on these directions (front-facing pairs; "max" and
+    "mean" over the directions), from the same breakpoints (:func:`clothlab.models.irawan.yarn.staple_breaks`:
+    support ends, visibility cuts, zeros of eq. 8's cosines)."""
     from clothlab.frames import to_yarn_frame
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
-    from clothlab.models.irawan.yarn import _staple_breaks, half_vectors
+    from clothlab.models.irawan.yarn import staple_breaks
 
     out = {}
     for kind in ("warp", "weft"):
@@ -149,9 +150,8 @@ def _staple_pieces(wi, wo, params) -> dict:
             continue
         lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
         front = (lw[:, 2] > 0) & (lo[:, 2] > 0)
-        breaks = _staple_breaks(half_vectors(lw[front], lo[front])[0], psi, umax)
-        out[kind] = {"max": int(breaks.shape[1] - 1), "mean": float(np.mean(np.sum(np.diff(breaks, axis=1) > 0,
-                                                                                       axis=1)))}
+        _, lit = staple_breaks(lw[front], lo[front], psi, umax)
+        out[kind] = {"max": int(lit.max(initial=0)), "mean": float(lit.mean()) if lit.size else 0.0}
     return out
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -157,6 +157,20 @@ class YarnTerms:
     wi: np.ndarray  # (N, 3) yarn frame
     wo: np.ndarray
     filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
+    #: psi (radians) -> the staple integrand's lit pieces (lo, hi) (:func:`clothlab.models.irawan.yarn.staple_pieces`,
+    #: for the support / adaptive rules; they depend on the directions and psi only), the last few psi
+    staple: dict = field(default_factory=dict)
+
+    def staple_pieces(self, psi: float) -> tuple[np.ndarray, np.ndarray]:
+        """The lit pieces for twist ``psi`` (radians), computed once per psi."""
+        from clothlab.models.irawan.yarn import staple_pieces
+
+        hit = self.staple.get(psi)
+        if hit is None:
+            if len(self.staple) >= 8:
+                self.staple.pop(next(iter(self.staple)))
+            hit = self.staple[psi] = staple_pieces(self.wi, self.wo, psi)
+        return hit
 
 
 def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
@@ -187,7 +201,7 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
     call for all of them (bit-identical), the rest :func:`clothlab.models.irawan.yarn.yarn_integral` per set.
     ``filament_arc``: one of :data:`FILAMENT_ARCS`."""
     from clothlab.models.irawan import kernels
-    from clothlab.models.irawan.quadrature import unit_rule
+    from clothlab.models.irawan.quadrature import cosine_mapped_unit_rule, unit_rule
 
     geometry = np.atleast_2d(np.asarray(geometry, dtype=np.float64))
     cols = np.ascontiguousarray(geometry.T)  # rows: psi, umax, kappa, w, l, delta
@@ -209,8 +223,12 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
         elif on_staple and fixed:
             out[j] = kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n),
                                                     *cols[:5, j:j + 1])[0]
+        elif on_staple and rule == "support":  # the lit pieces of these directions, kept per psi
+            out[j] = kernels.staple_support_sum(terms.wi, terms.wo, *terms.staple_pieces(float(psi[j])),
+                                                *cosine_mapped_unit_rule(n), psi[j], umax[j], kappa[j], w[j], l[j])
         else:
+            pieces = terms.staple_pieces(float(psi[j])) if on_staple and rule in ("support", "adaptive") else None
             out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
                                    delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD,
-                                   shortened=shortened)
+                                   shortened=shortened, pieces=pieces)
     return out
