@@ -12,8 +12,8 @@ The ``support`` and ``adaptive`` rules split the staple integral where its integ
 of eq. 3's support |D| <= 1 and the visibility cut |v| = pi/2 in closed form, the zeros of eq. 8's clamped
 cosines c_i, c_r on the specular curve as roots of a quartic), found per direction inside the compiled loop
 (:func:`clothlab.models.irawan.kernels.staple_lit_pieces`; parameter-free, so a model keeps them per direction
-set) and integrate only the lit pieces (:func:`clothlab.models.irawan.kernels.staple_support_sum`), and integrate the filament one over the
-closed-form arc where both clamped cosines of eq. 8 are positive.
+set) and integrate only the lit pieces (:func:`clothlab.models.irawan.kernels.staple_support_sum`); they
+integrate the filament one over the closed-form arc where both clamped cosines of eq. 8 are positive.
 """
 
 from __future__ import annotations
