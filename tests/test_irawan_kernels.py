@@ -365,3 +365,21 @@ def test_quartic_roots_finds_every_real_root_in_the_interval():
         got = roots(np.ascontiguousarray(c, dtype=np.float64), -1.0, 1.0)
         for r in expected:  # every real root is found (critical points may be returned as well)
             assert np.min(np.abs(got - r)) < 1e-7, (c, expected, got)
+
+
+def test_support_pieces_kept_per_direction_set_give_the_uncached_values():
+    """The model keeps the staple lit pieces per direction set and psi, cut on umax + a headroom; a fit moving
+    umax (also beyond the headroom, which recomputes them) or psi gets what the uncached yarn integral gives."""
+    from clothlab.models.irawan.model import Quadrature, yarn_specular
+
+    weave = get_preset("cotton-denim")
+    q = Quadrature("support", 6)
+    model = IrawanModel(weave, q)
+    wi, wo = _random_pairs(np.random.default_rng(5), 300, max_theta=85.0)
+    for changes in ({"warp.umax": 12.0}, {"warp.umax": 20.0}, {"warp.umax": 70.0}, {"warp.umax": 15.0},
+                    {"warp.psi": -10.0}, {"warp.psi": -30.0, "warp.umax": 40.0}):
+        params = model.resolve(changes)
+        got = model.components(wi, wo, changes, normalised=False, warn=False)["specular_warp"]
+        expected = yarn_specular(wi, wo, params, "warp", q)
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15 * expected.max())
+        assert np.count_nonzero(expected) > 50

@@ -24,6 +24,7 @@ PSI_FILAMENT_THRESHOLD = 1e-3  # radians
 ALBEDO_SAMPLES = 2**16
 ALBEDO_SEED = 20120101
 COMPONENTS = ("diffuse", "specular_warp", "specular_weft")
+PIECE_HEADROOM = math.radians(10.0)  # the lit pieces of the support rule are cut on umax + this (YarnTerms)
 FILAMENT_ARCS = ("full", "shortened")
 """``model.options.filament_arc``: the arc a smoothed filament spine's R(u) is evaluated on (sec. 5.4, eq. 9).
 ``full`` (default) is the paper's text: R(u) of sec. 5.4 on the whole segment |u| <= umax, eq. 9 fading A over
@@ -157,20 +158,23 @@ class YarnTerms:
     wi: np.ndarray  # (N, 3) yarn frame
     wo: np.ndarray
     filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
-    #: psi (radians) -> the staple integrand's lit pieces (lo, hi) (:func:`clothlab.models.irawan.yarn.staple_pieces`,
-    #: for the support / adaptive rules; they depend on the directions and psi only), the last few psi
+    #: psi (radians) -> (domain, lo, hi): the staple integrand's lit pieces on [-domain, domain]
+    #: (:func:`clothlab.models.irawan.yarn.staple_pieces`, for the support / adaptive rules; they depend on the
+    #: directions and psi only), the last few psi
     staple: dict = field(default_factory=dict)
 
-    def staple_pieces(self, psi: float) -> tuple[np.ndarray, np.ndarray]:
-        """The lit pieces for twist ``psi`` (radians), computed once per psi."""
+    def staple_pieces(self, psi: float, umax: float) -> tuple[np.ndarray, np.ndarray]:
+        """The lit pieces for twist ``psi`` valid up to ``umax`` (radians): computed once per psi on umax plus
+        PIECE_HEADROOM (a fit moving umax up within it reuses them), again only for a larger umax."""
         from clothlab.models.irawan.yarn import staple_pieces
 
         hit = self.staple.get(psi)
-        if hit is None:
-            if len(self.staple) >= 8:
+        if hit is None or hit[0] < umax:
+            if hit is None and len(self.staple) >= 8:
                 self.staple.pop(next(iter(self.staple)))
-            hit = self.staple[psi] = staple_pieces(self.wi, self.wo, psi)
-        return hit
+            domain = min(umax + PIECE_HEADROOM, 0.5 * math.pi)
+            hit = self.staple[psi] = (domain, *staple_pieces(self.wi, self.wo, psi, domain))
+        return hit[1], hit[2]
 
 
 def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
@@ -224,10 +228,12 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
             out[j] = kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n),
                                                     *cols[:5, j:j + 1])[0]
         elif on_staple and rule == "support":  # the lit pieces of these directions, kept per psi
-            out[j] = kernels.staple_support_sum(terms.wi, terms.wo, *terms.staple_pieces(float(psi[j])),
-                                                *cosine_mapped_unit_rule(n), psi[j], umax[j], kappa[j], w[j], l[j])
+            lo, hi = terms.staple_pieces(float(psi[j]), float(umax[j]))
+            out[j] = kernels.staple_support_sum(terms.wi, terms.wo, lo, hi, *cosine_mapped_unit_rule(n), psi[j],
+                                                umax[j], kappa[j], w[j], l[j])
         else:
-            pieces = terms.staple_pieces(float(psi[j])) if on_staple and rule in ("support", "adaptive") else None
+            staple_rule = on_staple and rule in ("support", "adaptive")
+            pieces = terms.staple_pieces(float(psi[j]), float(umax[j])) if staple_rule else None
             out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
                                    delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD,
                                    shortened=shortened, pieces=pieces)

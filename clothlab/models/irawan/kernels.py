@@ -557,16 +557,17 @@ def sincos(x):
     return s, c
 
 
-PIECE_DOMAIN = 0.5 * math.pi - 1e-7  # the lit pieces are cut on [-PIECE_DOMAIN, PIECE_DOMAIN] (umax < 90 deg)
+PIECE_DOMAIN = 0.5 * math.pi - 1e-7  # the widest domain of the lit pieces (umax < 90 deg)
 
 
 @njit(cache=True)
-def staple_lit_pieces(wi, wo, psi):
+def staple_lit_pieces(wi, wo, psi, domain):
     """The lit pieces of the staple integrand (eq. 1) per direction pair (yarn frame), as (lo, hi), each (P, N):
-    the intervals of u between consecutive :func:`staple_breakpoints` (on |u| < pi/2, so for any umax) on which
-    the integrand is not 0 (one test at the midpoint decides: between breakpoints it is 0 everywhere or
-    nowhere); P is the most any pair has, unused slots are empty (lo = hi = 0).  They depend on the directions
-    and psi only, so a fit computes them once per direction set (:class:`.integrals.YarnTerms`)."""
+    the intervals of u between consecutive :func:`staple_breakpoints` on [-domain, domain] (valid for every
+    umax <= domain) on which the integrand is not 0 (one test at the midpoint decides: between breakpoints it
+    is 0 everywhere or nowhere); P is the most any pair has, unused slots are empty (lo = hi = 0).  They depend
+    on the directions and psi only, so a fit computes them once per direction set (:class:`.integrals.YarnTerms`).
+    The cost grows with the domain (the quartic's roots are bracketed on [-tan domain, tan domain])."""
     n_dir = wi.shape[0]
     cot_psi = math.cos(psi) / math.sin(psi)
     abs_sin_psi = abs(math.sin(psi))
@@ -582,8 +583,8 @@ def staple_lit_pieces(wi, wo, psi):
         hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
         if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
             continue
-        m = staple_breakpoints(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, psi, cot_psi, abs_sin_psi, PIECE_DOMAIN,
-                               breaks, knots, crit)
+        m = staple_breakpoints(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, psi, cot_psi, abs_sin_psi,
+                               min(domain, PIECE_DOMAIN), breaks, knots, crit)
         count = 0
         for p in range(m - 1):
             a, b = breaks[p], breaks[p + 1]

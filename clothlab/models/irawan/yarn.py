@@ -57,13 +57,13 @@ def _filament_breaks(wi, wo, h):
         np.ascontiguousarray(wi), np.ascontiguousarray(wo), np.ascontiguousarray(h)))
 
 
-def staple_pieces(wi, wo, psi) -> tuple[np.ndarray, np.ndarray]:
-    """The lit pieces (lo, hi), each (P, N), of the staple integrand for yarn-frame pairs (N, 3)
-    (:func:`clothlab.models.irawan.kernels.staple_lit_pieces`)."""
+def staple_pieces(wi, wo, psi, domain) -> tuple[np.ndarray, np.ndarray]:
+    """The lit pieces (lo, hi), each (P, N), of the staple integrand on [-domain, domain] (radians) for
+    yarn-frame pairs (N, 3) (:func:`clothlab.models.irawan.kernels.staple_lit_pieces`)."""
     from clothlab.models.irawan import kernels
 
     return kernels.staple_lit_pieces(np.ascontiguousarray(wi, dtype=np.float64),
-                                     np.ascontiguousarray(wo, dtype=np.float64), float(psi))
+                                     np.ascontiguousarray(wo, dtype=np.float64), float(psi), float(domain))
 
 
 def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta, shortened, pieces=None):
@@ -84,7 +84,7 @@ def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta, shortened
     if rule not in ("support", "adaptive"):
         raise ValueError(f"unknown quadrature rule {rule!r}")
     if staple:
-        lo, hi = pieces if pieces is not None else staple_pieces(wi, wo, psi)
+        lo, hi = pieces if pieces is not None else staple_pieces(wi, wo, psi, umax)
 
         def evaluate(rows, m):  # the lit pieces, clipped to [-umax, umax]
             s, ws = cosine_mapped_unit_rule(m)
