@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -199,3 +200,43 @@ def test_fit_note_says_the_renderer_uses_the_other_arc():
     assert not any("irawan plugin" in n for n in IrawanModel(weave, filament_arc="shortened").geometry_warnings(params))
     assert not any("irawan plugin" in n for n in IrawanModel(get_preset("cotton-denim")).geometry_warnings(
         IrawanModel(get_preset("cotton-denim")).default_parameters()))
+
+
+def test_fabric_yaml_option_is_checked_at_its_line(tmp_path):
+    from clothlab.config import load_config
+
+    data = Path(__file__).resolve().parents[1] / "measurements" / "polyester-lining" / "noisy.csv"
+    text = ("name: pl\n"
+            f"measurement: {{path: {data}}}\n"
+            "model:\n"
+            "  kind: irawan\n"
+            "  weave: preset:polyester-lining\n"
+            "  options: {filament_arc: %s}\n")
+    (tmp_path / "ok.yaml").write_text(text % "shortened")
+    assert load_config(tmp_path / "ok.yaml").model.options == {"filament_arc": "shortened"}
+    (tmp_path / "bad.yaml").write_text(text % "half")
+    with pytest.raises(ConfigError) as err:
+        load_config(tmp_path / "bad.yaml")
+    assert "bad.yaml:6" in str(err.value) and "model.options.filament_arc" in str(err.value)
+    assert "filament_arc must be one of full, shortened, got 'half'" in str(err.value)
+
+
+def test_a_saved_fit_is_rebuilt_with_its_arc(tmp_path):
+    """fit.json's model settings (options) and weave.wv rebuild the model with the arc it was fitted with."""
+    import json
+
+    from clothlab.fit.store import load_fitted
+
+    weave = get_preset("polyester-lining")
+    model = IrawanModel(weave, filament_arc="shortened")
+    params = model.default_parameters()
+    fit = {"model": {"kind": "irawan", **model.settings()},
+           "parameters": {k: {"value": v} for k, v in params.items()},
+           "measurement": {"channels": ["grey"]},
+           "coefficients": {"kd": {"grey": 0.1}, "ks_warp": {"grey": 0.2}, "ks_weft": {"grey": 0.2}}}
+    (tmp_path / "fit.json").write_text(json.dumps(fit))
+    (tmp_path / "weave.wv").write_text(format_wv(model.fitted_weave(params)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the recorded arc matches: no mismatch warning
+        rebuilt, *_ = load_fitted(tmp_path)
+    assert rebuilt.filament_arc == "shortened" and rebuilt.weave.filament_arc == "shortened"
