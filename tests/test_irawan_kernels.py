@@ -350,7 +350,7 @@ def test_quartic_roots_finds_every_real_root_in_the_interval():
     """Against numpy's companion-matrix roots, including close pairs and a double root (a critical point)."""
     from numba import njit
 
-    @njit
+    @njit(cache=True)
     def roots(c, lo, hi):
         out = np.empty(8)
         m = kernels.quartic_roots(c[0], c[1], c[2], c[3], c[4], lo, hi, np.empty(5), np.empty(5), out, 0)
