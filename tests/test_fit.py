@@ -125,7 +125,7 @@ def test_saved_fit_directory(tmp_path):
     # the stages are timed apart: the optimisation alone is what the comparison table shows as fit time
     assert 0.0 < fit["timings"]["optimisation_s"] <= fit["timings"]["total_s"] == fit["wall_time_s"]
     assert fit["model"] == {"kind": "irawan", "weave": "preset:polyester-lining",
-                            "quadrature": {"rule": "trapezoid", "nodes": 11}}
+                            "quadrature": {"rule": "trapezoid", "nodes": 11}, "options": {"filament_arc": "full"}}
     # an existing result is not overwritten without force, and stays intact
     before = (out / "fit.json").read_bytes()
     from clothlab.errors import ResultExistsError

@@ -75,7 +75,7 @@ def _mirror_pairs(theta):
     return wi, wi * np.array([-1.0, -1.0, 1.0])
 
 
-# Up to 65 deg the lit window (both cosines of eq. 8 > 0) is wide enough for every rule; see the xfail below.
+# Up to 65 deg the lit window (both cosines of eq. 8 > 0) is wide enough for every rule; grazing pairs: below.
 MIRROR_WI, MIRROR_WO = _mirror_pairs([5.0, 20.0, 35.0, 50.0, 65.0])
 RULES = [Quadrature("trapezoid", 11), Quadrature("support", 8), Quadrature("adaptive", 4)]
 
@@ -138,14 +138,37 @@ def test_extreme_cases_trapezoid_is_the_reference_sum(case):
     np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-12 * expected.max())
 
 
-@pytest.mark.xfail(strict=True, reason="known gap: the support rule splits the staple integral at the ends of "
-                   "eq. 3's support and at |v| = pi/2 but not at the zeros of c_i, c_r (eq. 8); at grazing mirror "
-                   "pairs the lit window is narrower than the node spacing and the rule returns a silent 0")
 def test_support_rule_sees_the_narrow_lit_window_at_grazing():
+    """At grazing mirror pairs the lit window (both cosines of eq. 8 > 0) is a few degrees of u wide (+-0.5 deg at
+    89 deg); the support rule splits at the zeros of c_i and c_r (roots of a quartic in tan u), so it agrees with
+    the independent quad reference there (which locates those zeros by scanning; 0.0712 at 80 deg, phi 290 deg)."""
     wi, wo = _mirror_pairs([80.0, 89.0])
-    expected = _reference_sum(wi, wo, BASE)  # the trapezoid has a node at u = 0, inside the window
+    expected = np.array([ref.specular_reference(
+        a, b, psi=math.radians(BASE["warp.psi"]), umax=math.radians(BASE["warp.umax"]), kappa=BASE["warp.kappa"],
+        w=BASE["warp.w"], l=BASE["warp.l"], alpha=BASE["alpha"], beta=BASE["beta"], delta=BASE["delta"],
+        psi_threshold=PSI_FILAMENT_THRESHOLD)[0] for a, b in zip(wi, wo, strict=True)])
     assert np.all(expected > 0.0)
-    assert np.all(_quiet_specular(wi, wo, BASE, Quadrature("support", 8)) > 0.0)
+    assert expected[10] == pytest.approx(0.0712, abs=5e-5)  # 80 deg, phi 290 deg: the value in issue 12
+    for n in (8, 16):
+        got = _quiet_specular(wi, wo, BASE, Quadrature("support", n))
+        np.testing.assert_allclose(got, expected, rtol=1e-4 if n == 8 else 1e-7)
+
+
+def test_support_breakpoints_contain_the_zeros_of_both_cosines():
+    """The compiled breakpoints (:func:`clothlab.models.irawan.yarn.staple_breaks`) include every zero of c_i
+    and c_r on the specular curve that the literal reference finds by scanning (tests/im_reference.py)."""
+    from clothlab.models.irawan.yarn import staple_breaks
+
+    psi, umax = math.radians(BASE["warp.psi"]), math.radians(BASE["warp.umax"])
+    front = (WI[:, 2] > 0) & (WO[:, 2] > 0)
+    wi, wo = WI[front][:150], WO[front][:150]
+    table, _ = staple_breaks(wi, wo, psi, umax)
+    found = 0
+    for n in range(len(wi)):
+        for point in ref._staple_breakpoints(tuple(wi[n]), tuple(wo[n]), psi, umax):
+            assert np.min(np.abs(table[n] - point)) < 1e-7, (n, point, table[n])
+            found += 1
+    assert found > 100
 
 
 def test_continuity_across_r_hat_zero_and_kappa():

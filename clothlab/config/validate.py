@@ -204,6 +204,12 @@ class _Validator:
                 as_number(value, at)
             elif isinstance(default, str):
                 as_str(value, at)
+            check = getattr(model_class(kind), "check_option", None)  # a model's own value check, if it has one
+            if check is not None:
+                try:
+                    check(name, value)
+                except ConfigError as exc:
+                    raise at.error(exc.detail) from None
 
     def model(self, value: Any) -> ModelConfig:
         p = ("model",)

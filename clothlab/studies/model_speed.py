@@ -2,6 +2,9 @@
 eq. 10 for warp and weft, phase function eq. 7, diffuse term), RGB, trapezoid 11, on the paper's 1,575
 directions (best of repeats), next to a per-direction scipy.integrate.quad loop (their ratio).
 
+Beside it, per preset, the ``support`` rule (4 and 8 Gauss-Legendre nodes per lit piece) against trapezoid-11,
+timed call by call in alternation (:func:`support_vs_trapezoid`): the issue-12 target is support within 1.5x.
+
 When :mod:`clothlab.studies.kernels_speed` is present its ``compare_kernels`` runs too, in the same run: the
 yarn-integral speed of the previous and the current kernels per preset and their ratio (a ratio near 1 means
 no slowdown beyond noise).
@@ -18,9 +21,12 @@ import numpy as np
 
 from clothlab.studies.data import paper_directions
 from clothlab.studies.quad_reference import quad_reference
-from clothlab.studies.timing import best_time, clear_memo
+from clothlab.studies.timing import best_time, clear_memo, paired_timings
 
 FABRICS = ("polyester-lining", "cotton-denim")
+SUPPORT_NODES = (4, 8)
+SUPPORT_TARGET = 1.5
+"""The issue-12 target: the support rule's time on 1,575 directions within this factor of trapezoid-11's."""
 KERNELS_MODULE = "clothlab.studies.kernels_speed"
 
 
@@ -59,6 +65,63 @@ def model_speed(quick: bool, fabrics=FABRICS) -> dict:
     return out
 
 
+def support_vs_trapezoid(quick: bool, fabrics=None) -> dict:
+    """Per preset: the whole model (both yarns, raw components) on the 1,575 directions with trapezoid-11 and
+    with support-n (n in :data:`SUPPORT_NODES`), each support rule timed in alternation with trapezoid-11
+    (:func:`clothlab.studies.timing.paired_timings`).
+
+    ``warm``: a fit's evaluation - the direction set's parameter-free terms kept (for support the staple
+    integrand's lit pieces, for both rules the filament moments), the integrals recomputed (memo cleared);
+    ``cold``: a new direction set every call (those terms computed too, as for a single evaluation)."""
+    from clothlab.models.irawan.model import IrawanModel, Quadrature
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
+
+    wi, wo = paper_directions()
+    rounds = 3 if quick else 9
+    out = {}
+    for name in fabrics or PRESET_NAMES:
+        weave = get_preset(name)
+        row = {}
+        for mode in ("warm", "cold"):
+            def runner(q, weave=weave, mode=mode):
+                model = IrawanModel(weave, q)
+                p = model.default_parameters()
+
+                def evaluate():
+                    if mode == "cold":
+                        model._directions = None  # forget the direction set's terms
+                    clear_memo(model)
+                    return model.components(wi, wo, p, normalised=False, warn=False)
+                evaluate()
+                return evaluate
+            base = runner(Quadrature("trapezoid", 11))
+            fns = [runner(Quadrature("support", n)) for n in SUPPORT_NODES]
+            base_s, timed = paired_timings(base, fns, rounds)
+            row[mode] = {"trapezoid11_ms": 1e3 * base_s,
+                         **{f"support{n}_ms": 1e3 * t for n, (t, _) in zip(SUPPORT_NODES, timed, strict=True)},
+                         **{f"support{n}_ratio": r for n, (_, r) in zip(SUPPORT_NODES, timed, strict=True)}}
+        row["within_target"] = {n: row["warm"][f"support{n}_ratio"] <= SUPPORT_TARGET for n in SUPPORT_NODES}
+        out[name] = row
+    return out
+
+
+def support_lines(result: dict) -> list[str]:
+    """The support-vs-trapezoid-11 table (ms per 1,575 directions and the paired ratio)."""
+    heads = "".join(f" {'support-' + str(n):>10s} {'x t11':>6s}" for n in SUPPORT_NODES)
+    out = ["", f"  support rule vs trapezoid-11, whole model, 1,575 directions (target <= {SUPPORT_TARGET}x; warm: "
+           "a fit's evaluation, lit pieces kept; cold: new directions every call)",
+           f"  {'fabric':18s} {'mode':5s} {'t11 ms':>7s}{heads}"]
+    for name, row in result.items():
+        for mode in ("warm", "cold"):
+            r = row[mode]
+            cells = "".join(f" {r[f'support{n}_ms']:10.3f} {r[f'support{n}_ratio']:6.2f}" for n in SUPPORT_NODES)
+            out.append(f"  {name:18s} {mode:5s} {r['trapezoid11_ms']:7.3f}{cells}")
+    met = {n: sum(bool(row["within_target"][n]) for row in result.values()) for n in SUPPORT_NODES}
+    out.append("  within the target (warm): " + ", ".join(f"support-{n} on {k} of {len(result)} fabrics"
+                                                         for n, k in met.items()))
+    return out
+
+
 def kernels_available() -> bool:
     """True when the kernels before/after comparison module is installed."""
     return importlib.util.find_spec(KERNELS_MODULE) is not None
@@ -72,7 +135,7 @@ def kernels_comparison(quick: bool) -> dict | None:
 
 
 def run(context) -> dict:
-    result = {"model": model_speed(context.quick)}
+    result = {"model": model_speed(context.quick), "support": support_vs_trapezoid(context.quick)}
     kernels = kernels_comparison(context.quick)
     if kernels is not None:
         result["kernels"] = kernels
@@ -104,6 +167,8 @@ def lines(result: dict) -> list[str]:
     for name, s in result["model"].items():
         out.append(f"  {name:18s} {s['pairs_per_second']:12,.0f} pairs/s ({1e3 * s['seconds_1575']:.2f} ms per set); "
                    f"quad loop {s['quad_pairs_per_second']:8,.1f} pairs/s; ratio {s['speedup_vs_quad']:,.0f}x")
+    if "support" in result:
+        out += support_lines(result["support"])
     if "kernels" in result:
         out += kernel_lines(result["kernels"])
     else:

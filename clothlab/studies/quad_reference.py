@@ -22,7 +22,7 @@ def quad_reference(wi, wo, params, kind):
     from clothlab.models.irawan import kernels
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
     from clothlab.models.irawan.phase import phase_function
-    from clothlab.models.irawan.yarn import _filament_breaks, _staple_breaks, half_vectors
+    from clothlab.models.irawan.yarn import _filament_breaks, half_vectors, staple_breaks
 
     psi = math.radians(params[f"{kind}.psi"])
     umax = math.radians(params[f"{kind}.umax"])
@@ -30,7 +30,7 @@ def quad_reference(wi, wo, params, kind):
     lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
     staple = abs(psi) >= PSI_FILAMENT_THRESHOLD
     h, _ = half_vectors(lw, lo)
-    breaks = _staple_breaks(h, psi, umax) if staple else _filament_breaks(lw, lo, h)
+    breaks = staple_breaks(lw, lo, psi, umax)[0] if staple else _filament_breaks(lw, lo, h)
     one = np.ones((1, 1))
     out = np.zeros(len(wi))
     for n in range(len(wi)):
@@ -40,7 +40,8 @@ def quad_reference(wi, wo, params, kind):
                 return kernels.staple_quadrature(a, b, np.array([[u]]), one, psi, umax, kappa, w, l)[0]
         else:
             def f(v, a=a, b=b):
-                return kernels.filament_quadrature(a, b, np.array([[v]]), one, umax, kappa, w, l, delta, False)[0]
+                return kernels.filament_quadrature(a, b, np.array([[v]]), one, umax, kappa, w, l, delta, False,
+                                                   False)[0]
         edges = np.unique(breaks[n])
         total = 0.0
         for lo_, hi_ in zip(edges[:-1], edges[1:], strict=True):

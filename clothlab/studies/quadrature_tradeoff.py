@@ -22,37 +22,26 @@ from clothlab.studies.quad_reference import converged_reference
 from clothlab.studies.quadrature_accuracy import RULES
 from clothlab.studies.timing import paired_timings
 
-TRADEOFF_RULES = RULES + (("split", 4), ("split", 6), ("split", 8))
-"""Rules of the error-against-time study; ``split`` is the experimental rule of
-:mod:`clothlab.studies.quadrature_rules` (benchmark only)."""
+TRADEOFF_RULES = RULES
+"""Rules of the error-against-time study (the former experimental ``split`` rule, breakpoints inside the
+compiled loop, became the ``support`` rule)."""
 
 
-def _split_integral(wi, wo, params, kind, nodes):
-    from clothlab.frames import to_yarn_frame
-    from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
-    from clothlab.studies.quadrature_rules import split_yarn_integral
-
-    return split_yarn_integral(
-        to_yarn_frame(wi, kind), to_yarn_frame(wo, kind), psi=math.radians(params[f"{kind}.psi"]),
-        umax=math.radians(params[f"{kind}.umax"]), kappa=params[f"{kind}.kappa"], w=params[f"{kind}.w"],
-        l=params[f"{kind}.l"], delta=params["delta"], n=nodes, psi_threshold=PSI_FILAMENT_THRESHOLD)
-
-
-def model_value(wi, wo, params, rule, nodes, coefficients, scale):
+def model_value(model, wi, wo, params, coefficients, scale, *, cold=False):
     """The whole IM model (eq. 10 for both yarn types, phase function eq. 7, diffuse term), (N, C):
-    kd / pi + sum_j ks_j f_c I_j / scale_j, with I_j by ``rule`` / ``nodes`` (also ``split``)."""
-    from clothlab.models.irawan.model import Quadrature, yarn_integral_fabric
-    from clothlab.models.irawan.phase import phase_function
+    kd / pi + sum_j ks_j f_c I_j / scale_j, with f_c I_j the raw components of ``model`` (an IrawanModel with the
+    rule under study).  Its memo of integrals is cleared (every call integrates); ``cold`` also forgets the
+    direction set's parameter-free terms (filament moments, staple lit pieces), which a fit keeps."""
+    from clothlab.studies.timing import clear_memo
 
-    phase = phase_function(wi, wo, params["alpha"], params["beta"])
-    front = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).astype(np.float64)
-    total = front[:, None] * np.asarray(coefficients["kd"])[None, :] / np.pi
+    if cold:
+        model._directions = None
+    clear_memo(model)
+    comps = model.components(wi, wo, params, normalised=False, warn=False)
+    total = comps["diffuse"][:, None] * np.asarray(coefficients["kd"])[None, :]
     for kind in ("warp", "weft"):
-        if rule == "split":
-            integral = _split_integral(wi, wo, params, kind, nodes)
-        else:
-            integral = yarn_integral_fabric(wi, wo, params, kind, Quadrature(rule, nodes))
-        total = total + (phase * integral / scale[kind])[:, None] * np.asarray(coefficients[f"ks_{kind}"])[None, :]
+        total = total + (comps[f"specular_{kind}"] / scale[kind])[:, None] * \
+            np.asarray(coefficients[f"ks_{kind}"])[None, :]
     return total
 
 
@@ -70,14 +59,16 @@ def pareto_front(times, errors) -> list[int]:
 def tradeoff_study(quick: bool, figures_dir=None, fabrics=None, n_reference=None, repeats=None) -> dict:
     """Error against run time of the whole model per preset (see the module docstring).
 
-    The time is for the full 1,575-direction set: each rule's fastest of many calls, timed in strict alternation
+    The time is for the full 1,575-direction set as a fit evaluates it (the model's parameter-free terms of the
+    direction set kept, the integrals recomputed): each rule's fastest of many calls, timed in strict alternation
     with trapezoid-11 (:func:`clothlab.studies.timing.paired_timings`, ``repeats`` rounds); ``time_ratio`` is
     the ratio to trapezoid-11 from that alternation, which the verdict uses (p80_ratio <= 0.1 and
-    time_ratio <= 1).  Errors are relative errors of the model value (all channels) against the converged
+    time_ratio <= 1).  ``cold_time_ratio``: the same with those terms computed in every call (a one-off
+    evaluation at new directions).  Errors are relative errors of the model value (all channels) against the converged
     reference on ``n_reference`` seeded directions (all 1,575 in the full run).  The specular normalisations
     scale_j are fixed (pi x the mean reference f_c I_j over the set) so that only the quadrature differs
     between rules."""
-    from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD, IrawanModel
+    from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD, IrawanModel, Quadrature
     from clothlab.simulate.examples import YARN_COLOURS
     from clothlab.weave.presets import PRESET_NAMES, get_preset
 
@@ -98,11 +89,13 @@ def tradeoff_study(quick: bool, figures_dir=None, fabrics=None, n_reference=None
             scale = {kind: np.pi * float(refs[kind].mean()) for kind in refs}
             total = np.asarray(coef["kd"])[None, :] / np.pi + sum(
                 (refs[k] / scale[k])[:, None] * np.asarray(coef[f"ks_{k}"])[None, :] for k in refs)
-            rows, runs = [], []
+            rows, runs, cold_runs = [], [], []
             for rule, nodes in TRADEOFF_RULES:
-                model_value(wi[:4], wo[:4], p, rule, nodes, coef, scale)  # compile / warm up
-                runs.append(lambda r=rule, n=nodes, p=p, c=coef, s=scale: model_value(wi, wo, p, r, n, c, s))
-                got = model_value(wi[subset], wo[subset], p, rule, nodes, coef, scale)
+                model = IrawanModel(get_preset(name), Quadrature(rule, nodes))
+                got = model_value(model, wi[subset], wo[subset], p, coef, scale)  # also compiles
+                model_value(model, wi, wo, p, coef, scale)
+                runs.append(lambda m=model, p=p, c=coef, s=scale: model_value(m, wi, wo, p, c, s))
+                cold_runs.append(lambda m=model, p=p, c=coef, s=scale: model_value(m, wi, wo, p, c, s, cold=True))
                 rel = (np.abs(got - total) / total).ravel()
                 rows.append({"rule": rule, "nodes": nodes, "p50": float(np.median(rel)),
                              "p80": float(np.percentile(rel, 80)), "max": float(rel.max())})
@@ -110,6 +103,9 @@ def tradeoff_study(quick: bool, figures_dir=None, fabrics=None, n_reference=None
             _, timed = paired_timings(runs[i_base], runs, repeats)
             for r, (seconds, ratio) in zip(rows, timed, strict=True):
                 r["seconds_1575"], r["time_ratio"] = seconds, ratio
+            _, timed = paired_timings(cold_runs[i_base], cold_runs, max(2, repeats // 3))
+            for r, (seconds, ratio) in zip(rows, timed, strict=True):
+                r["cold_seconds_1575"], r["cold_time_ratio"] = seconds, ratio
             pieces = _staple_pieces(wi, wo, p)
         times = np.array([r["seconds_1575"] for r in rows])
         front = pareto_front(times, np.array([r["p80"] for r in rows]))
@@ -135,12 +131,13 @@ def tradeoff_study(quick: bool, figures_dir=None, fabrics=None, n_reference=None
 
 
 def _staple_pieces(wi, wo, params) -> dict:
-    """Per staple yarn type: the pieces the ``support`` rule cuts [-umax, umax] into on these directions
-    (front-facing pairs; "max" is what every direction carries, the rule being vectorised, "mean" the non-empty
-    ones), from the same closed-form breakpoints (:func:`clothlab.models.irawan.yarn._staple_breaks`)."""
+    """Per staple yarn type: the lit pieces (those the ``support`` rule integrates; the integrand is 0 on the
+    others) into which its breakpoints cut [-umax, umax] on these directions (front-facing pairs; "max" and
+    "mean" over the directions), from the same breakpoints (:func:`clothlab.models.irawan.yarn.staple_breaks`:
+    support ends, visibility cuts, zeros of eq. 8's cosines)."""
     from clothlab.frames import to_yarn_frame
     from clothlab.models.irawan.model import PSI_FILAMENT_THRESHOLD
-    from clothlab.models.irawan.yarn import _staple_breaks, half_vectors
+    from clothlab.models.irawan.yarn import staple_breaks
 
     out = {}
     for kind in ("warp", "weft"):
@@ -149,9 +146,8 @@ def _staple_pieces(wi, wo, params) -> dict:
             continue
         lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
         front = (lw[:, 2] > 0) & (lo[:, 2] > 0)
-        breaks = _staple_breaks(half_vectors(lw[front], lo[front])[0], psi, umax)
-        out[kind] = {"max": int(breaks.shape[1] - 1), "mean": float(np.mean(np.sum(np.diff(breaks, axis=1) > 0,
-                                                                                       axis=1)))}
+        _, lit = staple_breaks(lw[front], lo[front], psi, umax)
+        out[kind] = {"max": int(lit.max(initial=0)), "mean": float(lit.mean()) if lit.size else 0.0}
     return out
 
 
@@ -222,8 +218,9 @@ def explain_tradeoff(result: dict) -> str | None:
                          f"positive, found in closed form per direction) reaches 10x with "
                          f"{_range([s['nodes'] for s in sup], 'd')} nodes (p80 "
                          f"{_range([s['p80_ratio'] for s in sup], '.2g', 'x')} trapezoid-11's) but takes "
-                         f"{_range([s['time_ratio'] for s in sup], '.2f', 'x')} the time{_on(sup, n)}: finding the "
-                         f"arc per direction costs {_range(extra, '.2f')} ms more than the nodes it saves.")
+                         f"{_range([s['time_ratio'] for s in sup], '.2f', 'x')} the time{_on(sup, n)} "
+                         f"({_range(extra, '.2f')} ms more per 1,575 directions; the arc itself is found once per "
+                         "direction set, with the filament moments).")
             else:
                 text += "no support rule of the study reaches 10x."
         else:
@@ -231,10 +228,11 @@ def explain_tradeoff(result: dict) -> str | None:
             s4 = [(rs["support-4"], rs.get("split-4"), q, f) for rs, q, f in zip(rows, pieces, fabs, strict=True)
                   if "support-4" in rs and q]
             if s4:
-                text += (f"the closed-form support split cuts [-umax, umax] into up to "
-                         f"{_range([q for _, _, q, _ in s4], 'd')} pieces per direction (support ends and visibility "
-                         "cuts; the vectorised rule gives every direction the maximum), so support-4 evaluates "
-                         f"{_range([4 * q for _, _, q, _ in s4], 'd')} integrand nodes against trapezoid-11's 11 and "
+                text += (f"the support split leaves up to {_range([q for _, _, q, _ in s4], 'd')} pieces per "
+                         "direction on which the integrand is not 0 (cut at the support ends, the visibility cuts and "
+                         "the zeros of eq. 8's cosines; the others are skipped), so support-4 evaluates "
+                         f"{_range([4 * q for _, _, q, _ in s4], 'd')} integrand nodes at most against "
+                         "trapezoid-11's 11 and "
                          f"takes {_range([a['time_ratio'] for a, *_ in s4], '.1f', 'x')} its time at p80 "
                          f"{_range([a['p80_ratio'] for a, *_ in s4], '.2g', 'x')} trapezoid-11's")
                 split = [(a, b, f) for a, b, _, f in s4 if b is not None]
@@ -310,15 +308,18 @@ def run(context) -> dict:
 
 def lines(result: dict) -> list[str]:
     out = [f"== error against run time: whole IM model, 1,575 directions, error on {result['n_reference']} "
-           "directions vs converged reference (* = Pareto front) =="]
+           "directions vs converged reference (* = Pareto front; ms and x t11: a fit's evaluation, the direction "
+           "set's parameter-free terms kept; cold x: computed in every call) =="]
     for name, f in result["fabrics"].items():
         kinds = "/".join("staple" if s else "filament" for s in f["staple"])
         out += ["", f"  {name} (warp/weft {kinds}; quad IntegrationWarnings replaced by adaptive: "
                 f"warp {f['quad_warnings']['warp']}, weft {f['quad_warnings']['weft']})",
-                f"  {'rule':10s} {'n':>3s} {'ms/1575':>9s} {'x t11':>7s} {'median':>10s} {'p80':>10s} {'max':>10s}"]
+                f"  {'rule':10s} {'n':>3s} {'ms/1575':>9s} {'x t11':>7s} {'cold x':>7s} {'median':>10s} {'p80':>10s} "
+                f"{'max':>10s}"]
         for r in f["rows"]:
+            cold = f"{r['cold_time_ratio']:7.2f}" if "cold_time_ratio" in r else f"{'-':>7s}"
             out.append(f"  {r['rule']:10s} {r['nodes']:3d} {1e3 * r['seconds_1575']:9.2f} {r['time_ratio']:7.2f} "
-                       f"{r['p50']:10.2e} {r['p80']:10.2e} {r['max']:10.2e} {'*' if r['pareto'] else ''}")
+                       f"{cold} {r['p50']:10.2e} {r['p80']:10.2e} {r['max']:10.2e} {'*' if r['pareto'] else ''}")
     out += ["", "  claim: a rule with p80 <= trapezoid-11's / 10 at no more than trapezoid-11's run time (x t11: "
             "time ratio from calls alternating with trapezoid-11's)"]
     for name, f in result["fabrics"].items():

@@ -60,6 +60,9 @@ class Weave:
     dumax: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # warp<-warp, warp<-weft, weft<-warp, weft<-weft
     period: float = 0.0  # Perlin period of the umax modulation; 0 = none
     source: str | None = field(default=None, compare=False)
+    #: the IM model's ``filament_arc`` a fit used (``full`` | ``shortened``), recorded by the ``.wv`` export of a
+    #: fit (a comment the format's readers skip); None when not recorded (presets, hand-written files)
+    filament_arc: str | None = field(default=None, compare=False)
 
     def __eq__(self, other) -> bool:
         if not isinstance(other, Weave):

@@ -29,6 +29,15 @@ tile fractions with V measured from the *bottom* of the tile (values outside [0,
 When the pattern spans several lines, each line must hold exactly one row (``tileWidth`` numbers);
 a one-line pattern (as Mitsuba's own writer emits) is accepted too.
 
+The ``.wv`` of a fit records the IM model's ``filament_arc`` (:data:`clothlab.models.irawan.integrals.FILAMENT_ARCS`)
+in a comment, which Mitsuba and this reader skip as any comment, and this reader also recognises::
+
+    /* clothlab: filament_arc = shortened */
+
+(:data:`FILAMENT_ARC_RE`; read into ``Weave.filament_arc``, None when absent).  When the weave has a smoothed
+filament yarn (psi = 0, ss > 0) and the arc is ``full`` (the paper's text), the comment says that the
+Mitsuba 0.5/0.6 ``irawan`` plugin renders it with the shortened arc instead.
+
 Units and field mapping onto :class:`~clothlab.weave.model.Weave` (no unit conversion: the file's angles are
 degrees and so are clothlab's; Mitsuba converts psi, umax and the dUmax fields to radians on reading):
 
@@ -111,6 +120,8 @@ MAX_TILE_DIGITS = 6
 _WEAVE_KEYS = ("name", *WEAVE_INT_FIELDS, *WEAVE_FLOAT_FIELDS, *DUMAX_FIELDS, "pattern", "yarn")
 _YARN_KEYS = ("type", *YARN_FLOAT_FIELDS)
 
+FILAMENT_ARC_RE = re.compile(r"/\*\s*clothlab:\s*filament_arc\s*=\s*(full|shortened)\b")
+"""The comment that records a fit's ``filament_arc`` (see the module docstring)."""
 _NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _UINT_RE = re.compile(r"\+?\d+")
 _TOKEN_RE = re.compile(r'(?P<nl>\n)|(?P<ws>[ \t\r\f\v]+)|(?P<comment>/\*)|(?P<string>"[^"\n]*")|'
@@ -450,10 +461,14 @@ def parse_wv_text(text: str, source: str = "<string>") -> Weave:
         name = Path(source).stem
 
     segments = tuple(Segment(n, v["type"], v["centerU"], v["centerV"]) for n, _, v in yarns)
+    arcs = set(FILAMENT_ARC_RE.findall(text))
+    if len(arcs) > 1:
+        raise InputError(f"the file records filament_arc twice with different values ({', '.join(sorted(arcs))})",
+                         path=source, field="filament_arc")
     return Weave(
         name=name, pattern=pattern, segments=segments, warp=warp, weft=weft,
         dumax=tuple(values[name] for name in DUMAX_FIELDS),
-        source=source,
+        source=source, filament_arc=next(iter(arcs), None),
         **{attr: values[key] for key, attr in WEAVE_FLOAT_FIELDS.items()},
     )
 
@@ -476,11 +491,31 @@ def _fmt(x: float) -> str:
     return repr(x)
 
 
+def _smoothed_filaments(weave: Weave) -> list[str]:
+    """The segment types on which ``filament_arc`` matters: filament (psi = 0, as the renderer decides) with
+    smoothing ss > 0."""
+    return [kind for kind in YARN_KINDS if weave.delta > 0.0 and weave.geometry(kind).psi == 0.0]
+
+
+def _filament_arc_lines(weave: Weave) -> list[str]:
+    """The comment recording ``weave.filament_arc`` (none when not recorded)."""
+    if weave.filament_arc is None:
+        return []
+    out = [f"  /* clothlab: filament_arc = {weave.filament_arc} */"]
+    kinds = _smoothed_filaments(weave)
+    if weave.filament_arc == "full" and kinds:
+        out.append(f"  /* note: fitted on the full arc (the paper's text); the Mitsuba 0.5/0.6 irawan plugin "
+                   f"evaluates the {'/'.join(kinds)} spine on the shortened arc (1 - ss) umax, so its highlight "
+                   "shape differs from the fit's (refit with model.options.filament_arc: shortened) */")
+    return out
+
+
 def format_wv(weave: Weave) -> str:
     """The ``.wv`` text of ``weave``; ``parse_wv_text(format_wv(w))`` gives back the same weave.
 
     Segments are written in the order of their yarn numbers and renumbered 1..n (pattern remapped) if
-    their numbers are not already consecutive.
+    their numbers are not already consecutive.  ``weave.filament_arc``, when set, is written as a comment
+    (module docstring).
     """
     if '"' in weave.name or "\n" in weave.name:
         raise InputError(f"a weave name cannot contain '\"' or a line break: {weave.name!r}", field="name")
@@ -504,6 +539,7 @@ def format_wv(weave: Weave) -> str:
         "",
         "  /* Filament smoothing (eq. 9, the paper's delta) */",
         f"  ss = {_fmt(weave.delta)},",
+        *_filament_arc_lines(weave),
         "",
         "  /* Highlight width as a fraction of the segment (eq. 12) */",
         f"  hWidth = {_fmt(weave.hwidth)},",

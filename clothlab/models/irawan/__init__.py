@@ -10,6 +10,8 @@ paper          meaning                                                    code
 sec. 5.3       L = l/2 - a sin umax, the spine's half extent              ``kernels.half_length``
 sec. 5.4       r_hat = 1 + kappa (1 + cot umax), the axis ratio           ``kernels.axis_ratio``
 sec. 5.4       R(u), spine radius of curvature (three branches in one)    ``kernels.spine_radius`` (``spine``)
+sec. 5.4, 9    the arc a smoothed filament's R(u) is fitted to            ``kernels.spine_arc``
+               (``filament_arc``: full = paper, shortened = renderer)
 sec. 5.2       n(u, v) and its cosines w . n with wi, wo                  ``kernels.spine_normal_cosine``,
                                                                           ``kernels.normal_cosine``
 sec. 6.2       h = (wi + wo) / |wi + wo|, the half vector                 ``kernels.half_vector``
@@ -25,6 +27,11 @@ eq. 7          f_c = alpha + g(-wi . wo, beta), the von Mises lobe g      ``phas
                                                                           ``phase.von_mises``
 eq. 8          A = c_i c_r / (c_i + c_r), Seeliger's law                  ``kernels.seeliger``
 eq. 8          v-arc where a clamped cosine of A is positive              ``kernels.lit_arc``
+eqs. 3 x 8     u where c_i or c_r crosses 0 on the staple's specular       ``kernels.cosine_zero_quartic``,
+               curve (roots of a quartic in tan u)                        ``kernels.quartic_roots``
+sec. 7.3       the support rule's breakpoints and lit pieces              ``kernels.staple_breakpoints``,
+                                                                          ``kernels.staple_lit_pieces``,
+                                                                          ``kernels.staple_support_sum``
 eq. 9          s(x), the smooth step, and the fade 1 - s(...) of A_s      ``kernels.smoothstep``,
                                                                           ``kernels.filament_fade``
 Algorithm 1    the staple integrand G_v A (without f_c)                   ``kernels.staple_integrand``

@@ -6,13 +6,14 @@ geometry checks of sec. 5.3.  Used by the reflectance model (:mod:`.model`) and 
 
 from __future__ import annotations
 
+import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
-from clothlab.errors import GeometryWarning, ParameterError
+from clothlab.errors import ConfigError, GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
 from clothlab.models.irawan.phase import phase_function
 from clothlab.models.irawan.quadrature import RULES, interval_rule
@@ -23,6 +24,26 @@ PSI_FILAMENT_THRESHOLD = 1e-3  # radians
 ALBEDO_SAMPLES = 2**16
 ALBEDO_SEED = 20120101
 COMPONENTS = ("diffuse", "specular_warp", "specular_weft")
+PIECE_HEADROOM = math.radians(10.0)  # the lit pieces of the support rule are cut on umax + this (YarnTerms)
+FILAMENT_ARCS = ("full", "shortened")
+"""``model.options.filament_arc``: the arc a smoothed filament spine's R(u) is evaluated on (sec. 5.4, eq. 9).
+``full`` (default) is the paper's text: R(u) of sec. 5.4 on the whole segment |u| <= umax, eq. 9 fading A over
+the last delta umax.  ``shortened`` is the Mitsuba 0.5/0.6 ``irawan`` plugin's form, which users render
+the exported ``.wv`` in: r_hat, L and t_max of sec. 5.4 on (1 - delta) umax and |u| clamped to it
+(:func:`clothlab.models.irawan.kernels.spine_arc`).  The two agree for staple yarns and for delta = 0."""
+
+
+def check_filament_arc(value) -> str:
+    """``value`` if it is one of :data:`FILAMENT_ARCS`, else ConfigError at ``model.options.filament_arc``."""
+    if value not in FILAMENT_ARCS:
+        raise ConfigError(f"filament_arc must be one of {', '.join(FILAMENT_ARCS)}, got {value!r}",
+                          field="model.options.filament_arc")
+    return value
+
+
+def arc_matters(params: dict, kind: str) -> bool:
+    """Whether ``filament_arc`` changes segment type ``kind``: a filament yarn (sec. 6.2) with smoothing."""
+    return abs(math.radians(params[f"{kind}.psi"])) < PSI_FILAMENT_THRESHOLD and params["delta"] > 0.0
 
 
 @dataclass(frozen=True)
@@ -42,11 +63,14 @@ class Quadrature:
                                  field="model.quadrature.nodes")
 
 
-def geometry_warnings(params: dict, fabric: str = "") -> list[str]:
-    """Messages for segment types whose rectangle cannot hold the segment (sec. 5.3: w sin umax < l)."""
+def geometry_warnings(params: dict, fabric: str = "", filament_arc: str = "full") -> list[str]:
+    """Messages for segment types whose rectangle cannot hold the segment (sec. 5.3: w sin umax < l); with
+    ``filament_arc`` ``shortened`` a smoothed filament spine is checked on its arc (1 - delta) umax."""
     out = []
     for kind in YARN_KINDS:
         w, l, umax = params[f"{kind}.w"], params[f"{kind}.l"], params[f"{kind}.umax"]
+        if filament_arc == "shortened" and arc_matters(params, kind):
+            umax = (1.0 - params["delta"]) * umax  # the arc the renderer fits the spine to
         if w * np.sin(np.deg2rad(umax)) >= l:
             out.append(
                 f"{fabric + ' ' if fabric else ''}{kind}: w sin(umax) = {w:g} * sin({umax:g} deg) = "
@@ -64,21 +88,23 @@ def yarn_geometry_key(params: dict, kind: str) -> tuple:
     return tuple(params[f"{kind}.{k}"] for k in GEOMETRY_KEYS) + (params["delta"],)
 
 
-def yarn_integral_fabric(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
-    """I_j (eq. 10 without f_c) for segment type ``kind`` at fabric-frame directions (N, 3)."""
+def yarn_integral_fabric(wi, wo, params: dict, kind: str, quadrature: Quadrature,
+                         filament_arc: str = "full") -> np.ndarray:
+    """I_j (eq. 10 without f_c) for segment type ``kind`` at fabric-frame directions (N, 3); ``filament_arc``
+    one of :data:`FILAMENT_ARCS`."""
     lw, lo = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
     return yarn_integral(
         lw, lo,
         psi=np.deg2rad(params[f"{kind}.psi"]), umax=np.deg2rad(params[f"{kind}.umax"]),
         kappa=params[f"{kind}.kappa"], w=params[f"{kind}.w"], l=params[f"{kind}.l"],
         delta=params["delta"], rule=quadrature.rule, n=int(quadrature.nodes),
-        psi_threshold=PSI_FILAMENT_THRESHOLD,
+        psi_threshold=PSI_FILAMENT_THRESHOLD, shortened=check_filament_arc(filament_arc) == "shortened",
     )
 
 
-def yarn_specular(wi, wo, params: dict, kind: str, quadrature: Quadrature) -> np.ndarray:
+def yarn_specular(wi, wo, params: dict, kind: str, quadrature: Quadrature, filament_arc: str = "full") -> np.ndarray:
     """Raw f_c I_j for segment type ``kind`` at fabric-frame directions (N, 3); params in declared units."""
-    integral = yarn_integral_fabric(wi, wo, params, kind, quadrature)
+    integral = yarn_integral_fabric(wi, wo, params, kind, quadrature, filament_arc)
     return phase_function(wi, wo, params["alpha"], params["beta"]) * integral
 
 
@@ -96,9 +122,11 @@ def _albedo_directions(samples: int) -> tuple[np.ndarray, np.ndarray]:
     return cosine_hemisphere(xi[:, 0], xi[:, 1]), cosine_hemisphere(xi[:, 2], xi[:, 3])
 
 
-def specular_albedo(params: dict, kind: str, quadrature: Quadrature, samples: int = ALBEDO_SAMPLES) -> float:
+def specular_albedo(params: dict, kind: str, quadrature: Quadrature, samples: int = ALBEDO_SAMPLES,
+                    filament_arc: str = "full") -> float:
     """a_j = (1/pi) int int f_c I_j cos cos dwi dwo (deterministic Sobol estimate; see module docstring)."""
-    key = (kind, quadrature, samples) + tuple(
+    arc = check_filament_arc(filament_arc) if params["delta"] > 0.0 else "full"  # delta = 0: the same R(u)
+    key = (kind, quadrature, samples, arc) + tuple(
         params[k] for k in ("alpha", "beta", "delta", f"{kind}.psi", f"{kind}.umax", f"{kind}.kappa",
                             f"{kind}.w", f"{kind}.l"))
     return _specular_albedo_cached(key, samples)
@@ -108,11 +136,11 @@ def specular_albedo(params: dict, kind: str, quadrature: Quadrature, samples: in
 def _specular_albedo_cached(key, samples):
     kind, quadrature = key[0], key[1]
     names = ("alpha", "beta", "delta", f"{kind}.psi", f"{kind}.umax", f"{kind}.kappa", f"{kind}.w", f"{kind}.l")
-    params = dict(zip(names, key[3:], strict=True))
+    params = dict(zip(names, key[4:], strict=True))
     wi, wo = _albedo_directions(samples)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
-        values = yarn_specular(wi, wo, params, kind, quadrature)
+        values = yarn_specular(wi, wo, params, kind, quadrature, key[3])
     # E[f] under cosine-weighted sampling of both directions times pi^2, divided by pi.
     return float(np.pi * values.mean())
 
@@ -130,6 +158,23 @@ class YarnTerms:
     wi: np.ndarray  # (N, 3) yarn frame
     wo: np.ndarray
     filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
+    #: psi (radians) -> (domain, lo, hi): the staple integrand's lit pieces on [-domain, domain]
+    #: (:func:`clothlab.models.irawan.yarn.staple_pieces`, for the support / adaptive rules; they depend on the
+    #: directions and psi only), the last few psi
+    staple: dict = field(default_factory=dict)
+
+    def staple_pieces(self, psi: float, umax: float) -> tuple[np.ndarray, np.ndarray]:
+        """The lit pieces for twist ``psi`` valid up to ``umax`` (radians): computed once per psi on umax plus
+        PIECE_HEADROOM (a fit moving umax up within it reuses them), again only for a larger umax."""
+        from clothlab.models.irawan.yarn import staple_pieces
+
+        hit = self.staple.get(psi)
+        if hit is None or hit[0] < umax:
+            if hit is None and len(self.staple) >= 8:
+                self.staple.pop(next(iter(self.staple)))
+            domain = min(umax + PIECE_HEADROOM, 0.5 * math.pi)
+            hit = self.staple[psi] = (domain, *staple_pieces(self.wi, self.wo, psi, domain))
+        return hit[1], hit[2]
 
 
 def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
@@ -150,36 +195,46 @@ def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
     return YarnTerms(kind, lw, lo, moments)
 
 
-def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature) -> np.ndarray:
+def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature,
+                   filament_arc: str = "full") -> np.ndarray:
     """I_j (eq. 10 without f_c) for J parameter sets at once: (J, N).
 
     ``geometry`` (J, 6) holds each set's psi, umax (deg), kappa, w, l and delta (:func:`yarn_geometry_key`
     order).  The path per set is :func:`clothlab.models.irawan.yarn.staple_path`'s; filament sets use the
     moments (equal to :func:`yarn_integral_fabric` to rounding), staple sets under a fixed rule one compiled
-    call for all of them (bit-identical), the rest :func:`clothlab.models.irawan.yarn.yarn_integral` per set."""
+    call for all of them (bit-identical), the rest :func:`clothlab.models.irawan.yarn.yarn_integral` per set.
+    ``filament_arc``: one of :data:`FILAMENT_ARCS`."""
     from clothlab.models.irawan import kernels
-    from clothlab.models.irawan.quadrature import unit_rule
+    from clothlab.models.irawan.quadrature import cosine_mapped_unit_rule, unit_rule
 
     geometry = np.atleast_2d(np.asarray(geometry, dtype=np.float64))
     cols = np.ascontiguousarray(geometry.T)  # rows: psi, umax, kappa, w, l, delta
     cols[:2] = np.deg2rad(cols[:2])
     psi, umax, kappa, w, l, delta = cols
     rule, n = quadrature.rule, int(quadrature.nodes)
+    shortened = check_filament_arc(filament_arc) == "shortened"
     staple = [staple_path(p, u, rule, n, PSI_FILAMENT_THRESHOLD) for p, u in zip(psi.tolist(), umax.tolist(),
                                                                                    strict=True)]
     fixed = rule in ("trapezoid", "gauss")
     if not any(staple) and terms.filament is not None:
-        return kernels.filament_from_moments(*terms.filament, umax, kappa, w, l, delta)
+        return kernels.filament_from_moments(*terms.filament, umax, kappa, w, l, delta, shortened)
     if all(staple) and fixed:
         return kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n), psi, umax, kappa, w, l)
     out = np.empty((len(geometry), len(terms.wi)))
     for j, on_staple in enumerate(staple):  # mixed paths, or a rule without a batched form
         if not on_staple and terms.filament is not None:
-            out[j] = kernels.filament_from_moments(*terms.filament, *cols[[1, 2, 3, 4, 5], j:j + 1])[0]
+            out[j] = kernels.filament_from_moments(*terms.filament, *cols[[1, 2, 3, 4, 5], j:j + 1], shortened)[0]
         elif on_staple and fixed:
             out[j] = kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n),
                                                     *cols[:5, j:j + 1])[0]
+        elif on_staple and rule == "support":  # the lit pieces of these directions, kept per psi
+            lo, hi = terms.staple_pieces(float(psi[j]), float(umax[j]))
+            out[j] = kernels.staple_support_sum(terms.wi, terms.wo, lo, hi, *cosine_mapped_unit_rule(n), psi[j],
+                                                umax[j], kappa[j], w[j], l[j])
         else:
+            staple_rule = on_staple and rule in ("support", "adaptive")
+            pieces = terms.staple_pieces(float(psi[j]), float(umax[j])) if staple_rule else None
             out[j] = yarn_integral(terms.wi, terms.wo, psi=psi[j], umax=umax[j], kappa=kappa[j], w=w[j], l=l[j],
-                                   delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD)
+                                   delta=delta[j], rule=rule, n=n, psi_threshold=PSI_FILAMENT_THRESHOLD,
+                                   shortened=shortened, pieces=pieces)
     return out

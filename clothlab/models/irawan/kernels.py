@@ -58,6 +58,17 @@ def spine_radius_at(c, s, scale, q):
 
 
 @njit(cache=True, inline="always")
+def spine_arc(umax, delta, shortened):
+    """The half arc on which R(u) of a *filament* spine is evaluated (sec. 5.4 with eq. 9's smoothing).
+
+    ``shortened`` False: umax, the paper's text (sec. 5.4 defines R(u) on the whole segment |u| <= umax;
+    eq. 9 only fades A over the last delta umax).  ``shortened`` True: (1 - delta) umax, the Mitsuba 0.5/0.6
+    ``irawan`` plugin's form (r_hat, L and t_max use the shortened arc and |u| is clamped to it, so
+    R(u) = R((1 - delta) umax) on the faded ends).  Equal when delta = 0."""
+    return (1.0 - delta) * umax if shortened else umax
+
+
+@njit(cache=True, inline="always")
 def spine_radius(u, umax, kappa, w, l):
     """R(u) = L sqrt(cot^2 umax + q) / (cos^2 u + q sin^2 u)^(3/2), q = r_hat |r_hat| (sec. 5.4).
 
@@ -309,17 +320,19 @@ def staple_quadrature(wi, wo, nodes, weights, psi, umax, kappa, w, l):
 
 
 @njit(cache=True)
-def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc):
+def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc, shortened):
     """sum_k weights[n, k] G_u A_s(nodes[n, k]) (eq. 2 without f_c) for each direction pair n (yarn frame).
 
     ``nodes`` / ``weights`` of shape (1, K) are shared by all directions (sin v, cos v computed once).
     ``on_arc``: the nodes are unit nodes in [0, 1] mapped per direction onto the closed-form arc where both
-    clamped cosines of eq. 8 are positive (the only place the integrand is non-zero, and analytic inside)."""
+    clamped cosines of eq. 8 are positive (the only place the integrand is non-zero, and analytic inside).
+    ``shortened``: R(u) on the arc of :func:`spine_arc` (the renderer's form) instead of the full one."""
     n_dir = wi.shape[0]
     n_nodes = nodes.shape[1]
     shared = nodes.shape[0] == 1
     out = np.zeros(n_dir)
     a = 0.5 * w
+    arc = spine_arc(umax, delta, shortened)  # sec. 5.4: the arc R(u) is fitted to
     sv_shared = np.empty(n_nodes)
     cv_shared = np.empty(n_nodes)
     if shared and not on_arc:
@@ -331,7 +344,7 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc
         ok, u, scale, ci0, cr0 = filament_direction(wix, wi[n, 1], wi[n, 2], wox, wo[n, 1], wo[n, 2], umax, delta)
         if not ok:
             continue
-        radius = spine_radius(u, umax, kappa, w, l)
+        radius = spine_radius(u, arc, kappa, w, l)  # |u| clamped to the arc
         row = 0 if shared else n
         acc = 0.0
         if on_arc:
@@ -360,6 +373,318 @@ def filament_quadrature(wi, wo, nodes, weights, umax, kappa, w, l, delta, on_arc
 
 
 # ------------------------------------------------------------------ breakpoints of the support rule
+# Where the staple integrand of eq. 1 jumps or kinks along u: the ends of eq. 3's support and the visibility
+# cut (closed form, :func:`staple_break_angles`) and the zeros of the clamped cosines c_i, c_r of eq. 8 on the
+# specular curve v(u) (roots of a quartic in tan u, :func:`cosine_zero_quartic`).  Between consecutive
+# breakpoints the integrand is either 0 or smooth, so the rule tests each piece once (:func:`staple_lit_pieces`,
+# parameter-free: once per direction set) and integrates the lit ones with Gauss-Legendre after the cosine end
+# map (:func:`staple_support_sum`).
+
+STAPLE_MAX_BREAKS = 40  # 2 ends + 20 closed-form candidates + up to 2 x (4 roots + 3 critical points)
+COSINE_ZERO_TOL = 1e-6  # |c| at an accepted root of the quartic (spurious roots of the squaring are far larger)
+
+
+@njit(cache=True, inline="always")
+def quadratic_product(a0, a1, a2, b0, b1, b2):
+    """Coefficients (t^0 .. t^4) of (a0 + a1 t + a2 t^2)(b0 + b1 t + b2 t^2)."""
+    return a0 * b0, a0 * b1 + a1 * b0, a0 * b2 + a1 * b1 + a2 * b0, a1 * b2 + a2 * b1, a2 * b2
+
+
+@njit(cache=True, inline="always")
+def cosine_zero_quartic(hx, hy, hz, wx, wy, wz, cot_psi):
+    """Coefficients (t^0 .. t^4) of Q(t), t = tan u, whose real roots contain every u where the clamped cosine
+    w . n(u, v(u)) of eq. 8 crosses 0 on eq. 3's specular curve (w = wi or wo).
+
+    On the curve h_x cos v - B sin v = E cot psi (eq. 3: D = cos(v - atan2(-B, h_x))), B = h_y sin u +
+    h_z cos u, E = h_y cos u - h_z sin u; w . n = w_x sin v + P cos v = 0 with P = w . n(u, 0) (sec. 5.2) gives
+    (sin v, cos v) = +-(-P, w_x) / sqrt(P^2 + w_x^2).  Eliminating v and squaring:
+    (h_x w_x + B P)^2 = cot^2 psi E^2 (P^2 + w_x^2), homogeneous of degree 4 in (cos u, sin u); divided by
+    cos^4 u it is Q(t) = 0.  Squaring adds roots on the other branch; callers keep the roots where w . n = 0."""
+    a0, a1, a2 = hx * wx + hz * wz, hz * wy + hy * wz, hx * wx + hy * wy  # h_x w_x (1 + t^2) + B P
+    p0, p1, p2, p3, p4 = quadratic_product(a0, a1, a2, a0, a1, a2)
+    k2 = cot_psi * cot_psi
+    r0, r1, r2, r3, r4 = quadratic_product(hy * hy, -2.0 * hy * hz, hz * hz,  # E^2
+                                           wz * wz + wx * wx, 2.0 * wy * wz, wy * wy + wx * wx)  # P^2 + w_x^2 (1 + t^2)
+    return p0 - k2 * r0, p1 - k2 * r1, p2 - k2 * r2, p3 - k2 * r3, p4 - k2 * r4
+
+
+@njit(cache=True, inline="always")
+def quartic_value(c0, c1, c2, c3, c4, t):
+    """c0 + c1 t + c2 t^2 + c3 t^3 + c4 t^4 (Horner)."""
+    return (((c4 * t + c3) * t + c2) * t + c1) * t + c0
+
+
+@njit(cache=True, inline="always")
+def bracketed_root(c0, c1, c2, c3, c4, a, b, fa):
+    """The root in [a, b] of the quartic (monotone there, opposite signs at a and b; fa its value at a):
+    Newton steps kept inside the shrinking bracket, bisection where a step leaves it."""
+    x = 0.5 * (a + b)
+    for _ in range(80):
+        fx = quartic_value(c0, c1, c2, c3, c4, x)
+        if fx == 0.0:
+            return x
+        if (fx < 0.0) == (fa < 0.0):
+            a, fa = x, fx
+        else:
+            b = x
+        slope = quartic_value(c1, 2.0 * c2, 3.0 * c3, 4.0 * c4, 0.0, x)
+        step = x - fx / slope if slope != 0.0 else 0.5 * (a + b)
+        if not a < step < b:
+            step = 0.5 * (a + b)
+        if abs(step - x) <= 1e-15 * (1.0 + abs(x)) or b - a <= 1e-15 * (1.0 + abs(x)):
+            return step
+        x = step
+    return x
+
+
+@njit(cache=True, inline="always")
+def roots_between(c0, c1, c2, c3, c4, knots, n_knots, out, m):
+    """Append to ``out[m:]`` the roots of the quartic between consecutive ``knots[:n_knots]`` (sorted; the
+    quartic monotone between them) where it changes sign; returns the new count."""
+    f_lo = quartic_value(c0, c1, c2, c3, c4, knots[0])
+    for i in range(n_knots - 1):
+        f_hi = quartic_value(c0, c1, c2, c3, c4, knots[i + 1])
+        if f_lo == 0.0:
+            out[m] = knots[i]
+            m += 1
+        elif f_lo * f_hi < 0.0:
+            out[m] = bracketed_root(c0, c1, c2, c3, c4, knots[i], knots[i + 1], f_lo)
+            m += 1
+        f_lo = f_hi
+    return m
+
+
+@njit(cache=True, inline="always")
+def quartic_roots(c0, c1, c2, c3, c4, lo, hi, knots, crit, out, m):
+    """Append the real roots in [lo, hi) of c0 + ... + c4 t^4, and its critical points there, to ``out[m:]``;
+    returns the new count.
+
+    Isolation by derivatives: the roots of Q'' (closed form) split [lo, hi] where Q' is monotone, Q's critical
+    points found there split it where Q is monotone, and each sign change is then bracketed (no root is missed,
+    however close two roots are).  The critical points are candidates too: a double root of Q has no sign
+    change, and the squaring of :func:`cosine_zero_quartic` turns a simple zero of the cosine into one where
+    w_x = 0 (the caller keeps only candidates where the cosine is 0).  ``knots``, ``crit``: scratch arrays of
+    >= 5 entries."""
+    qa, qb, qc = 12.0 * c4, 6.0 * c3, 2.0 * c2  # Q''
+    n_k = 0
+    knots[n_k] = lo
+    n_k += 1
+    if qa != 0.0:
+        disc = qb * qb - 4.0 * qa * qc
+        if disc > 0.0:
+            root = math.sqrt(disc)
+            q = -0.5 * (qb + math.copysign(root, qb))  # the stable quadratic formula
+            r1, r2 = q / qa, (qc / q if q != 0.0 else q / qa)
+            for r in (min(r1, r2), max(r1, r2)):
+                if lo < r < hi:
+                    knots[n_k] = r
+                    n_k += 1
+    elif qb != 0.0 and lo < -qc / qb < hi:
+        knots[n_k] = -qc / qb
+        n_k += 1
+    knots[n_k] = hi
+    n_k += 1
+    n_c = 1
+    crit[0] = lo
+    n_c = roots_between(c1, 2.0 * c2, 3.0 * c3, 4.0 * c4, 0.0, knots, n_k, crit, n_c)  # Q' = 0
+    for i in range(1, n_c):
+        t = crit[i]
+        size = abs(c0) + abs(t) * (abs(c1) + abs(t) * (abs(c2) + abs(t) * (abs(c3) + abs(t) * abs(c4))))
+        if abs(quartic_value(c0, c1, c2, c3, c4, t)) <= 1e-9 * size:  # Q touches 0 here: a double root
+            out[m] = t
+            m += 1
+    crit[n_c] = hi
+    n_c += 1
+    return roots_between(c0, c1, c2, c3, c4, crit, n_c, out, m)
+
+
+@njit(cache=True, inline="always")
+def staple_breakpoints(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, psi, cot_psi, abs_sin_psi, umax, breaks,
+                       knots, crit):
+    """Sorted breakpoints of the staple integrand over [-umax, umax] into ``breaks``; returns their count.
+
+    The ends, the closed-form jumps of :func:`staple_break_angles` (+ k pi) inside, and the zeros of c_i and
+    c_r of eq. 8 on the specular curve (roots of :func:`cosine_zero_quartic`, kept where the cosine is 0 on the
+    + root of eq. 3)."""
+    m = 0
+    breaks[m] = -umax
+    m += 1
+    for base in staple_break_angles(hy, hz, psi, abs_sin_psi):
+        for k in range(-2, 3):
+            b = base + k * math.pi
+            if -umax < b < umax:
+                breaks[m] = b
+                m += 1
+    t_lo, t_hi = math.tan(-umax), math.tan(umax)
+    for d in ((wix, wiy, wiz), (wox, woy, woz)):
+        c0, c1, c2, c3, c4 = cosine_zero_quartic(hx, hy, hz, d[0], d[1], d[2], cot_psi)  # eq. 8 on eq. 3
+        first = m
+        m = quartic_roots(c0, c1, c2, c3, c4, t_lo, t_hi, knots, crit, breaks, m)
+        kept = first
+        for i in range(first, m):
+            t = breaks[i]
+            cu = 1.0 / math.sqrt(1.0 + t * t)  # |u| < pi/2: cos u > 0
+            su = t * cu
+            found, cos_v, sin_v = specular_v(hx, hy, hz, su, cu, cot_psi)  # eq. 3
+            if found and t_lo < t < t_hi and \
+                    abs(normal_cosine(d[0], spine_normal_cosine(d[1], d[2], su, cu), sin_v, cos_v)) <= COSINE_ZERO_TOL:
+                breaks[kept] = math.atan(t)
+                kept += 1
+        m = kept
+    breaks[m] = umax
+    m += 1
+    for i in range(1, m):  # insertion sort of the few breakpoints
+        x = breaks[i]
+        j = i - 1
+        while j >= 0 and breaks[j] > x:
+            breaks[j + 1] = breaks[j]
+            j -= 1
+        breaks[j + 1] = x
+    return m
+
+
+@njit(cache=True, inline="always")
+def sincos(x):
+    """(sin x, cos x) for |x| <= pi/2 from their Taylor series to x^19 and x^20 (truncation error < 3e-16):
+    plain arithmetic, so loops over many angles vectorise (math.sin / math.cos do not, without SVML)."""
+    x2 = x * x
+    s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0 + x2 * (
+        -1.0 / 39916800.0 + x2 * (1.0 / 6227020800.0 + x2 * (-1.0 / 1307674368000.0 + x2 * (
+            1.0 / 355687428096000.0 + x2 * (-1.0 / 121645100408832000.0))))))))))
+    c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 + x2 * (
+        -1.0 / 3628800.0 + x2 * (1.0 / 479001600.0 + x2 * (-1.0 / 87178291200.0 + x2 * (
+            1.0 / 20922789888000.0 + x2 * (-1.0 / 6402373705728000.0 + x2 * (1.0 / 2432902008176640000.0))))))))))
+    return s, c
+
+
+PIECE_DOMAIN = 0.5 * math.pi - 1e-7  # the widest domain of the lit pieces (umax < 90 deg)
+
+
+@njit(cache=True)
+def staple_lit_pieces(wi, wo, psi, domain):
+    """The lit pieces of the staple integrand (eq. 1) per direction pair (yarn frame), as (lo, hi), each (P, N):
+    the intervals of u between consecutive :func:`staple_breakpoints` on [-domain, domain] (valid for every
+    umax <= domain) on which the integrand is not 0 (one test at the midpoint decides: between breakpoints it
+    is 0 everywhere or nowhere); P is the most any pair has, unused slots are empty (lo = hi = 0).  They depend
+    on the directions and psi only, so a fit computes them once per direction set (:class:`.integrals.YarnTerms`).
+    The cost grows with the domain (the quartic's roots are bracketed on [-tan domain, tan domain])."""
+    n_dir = wi.shape[0]
+    cot_psi = math.cos(psi) / math.sin(psi)
+    abs_sin_psi = abs(math.sin(psi))
+    breaks = np.empty(STAPLE_MAX_BREAKS)
+    knots = np.empty(5)
+    crit = np.empty(5)
+    lo_all = np.zeros((STAPLE_MAX_BREAKS, n_dir))
+    hi_all = np.zeros((STAPLE_MAX_BREAKS, n_dir))
+    most = 1
+    for n in range(n_dir):
+        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
+        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
+        hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+            continue
+        m = staple_breakpoints(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, psi, cot_psi, abs_sin_psi,
+                               min(domain, PIECE_DOMAIN), breaks, knots, crit)
+        count = 0
+        for p in range(m - 1):
+            a, b = breaks[p], breaks[p + 1]
+            mid = 0.5 * (a + b)
+            if b > a and staple_integrand(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, math.sin(mid), math.cos(mid),
+                                          0.0, cot_psi, abs_sin_psi, 1.0)[0] > 0.0:  # R >= 0 only scales
+                lo_all[count, n] = a
+                hi_all[count, n] = b
+                count += 1
+        most = max(most, count)
+    return lo_all[:most].copy(), hi_all[:most].copy()
+
+
+@njit(cache=True, error_model="numpy")
+def staple_support_sum(wi, wo, lo, hi, unit_nodes, unit_weights, psi, umax, kappa, w, l):
+    """The ``support`` rule of eq. 1 (without f_c) per direction pair (yarn frame): each lit piece of
+    :func:`staple_lit_pieces` (``lo``, ``hi``: (P, N)) clipped to [-umax, umax] and integrated with
+    ``unit_nodes`` / ``unit_weights`` on [0, 1] (the cosine-mapped Gauss-Legendre rule,
+    :func:`clothlab.models.irawan.quadrature.cosine_mapped_unit_rule`).
+
+    The non-empty clipped pieces of all pairs form one work list (most pairs have one or two), evaluated with
+    the list innermost and branch-free (the checks of eqs. 3 and 8 applied as a select, :func:`sincos` instead
+    of library trigonometry), as :func:`staple_quadrature_sets`, so the loop vectorises."""
+    n_dir = wi.shape[0]
+    out = np.zeros(n_dir)
+    cot_psi = math.cos(psi) / math.sin(psi)
+    abs_sin_psi = abs(math.sin(psi))
+    a = 0.5 * w
+    scale, q = spine_radius_factors(umax, kappa, w, l)  # sec. 5.4
+    n_items = 0
+    for n in range(n_dir):
+        for p in range(lo.shape[0]):
+            if min(hi[p, n], umax) > max(lo[p, n], -umax):
+                n_items += 1
+    owner = np.empty(n_items, dtype=np.int64)
+    start = np.empty(n_items)
+    span = np.empty(n_items)
+    hx = np.empty(n_items)
+    hy = np.empty(n_items)
+    hz = np.empty(n_items)
+    wix, wiy, wiz = np.empty(n_items), np.empty(n_items), np.empty(n_items)
+    wox, woy, woz = np.empty(n_items), np.empty(n_items), np.empty(n_items)
+    m = 0
+    for n in range(n_dir):
+        for p in range(lo.shape[0]):
+            first, last = max(lo[p, n], -umax), min(hi[p, n], umax)
+            if last > first:
+                owner[m], start[m], span[m] = n, first, last - first
+                hx[m], hy[m], hz[m], _ = half_vector(wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2])
+                wix[m], wiy[m], wiz[m] = wi[n, 0], wi[n, 1], wi[n, 2]
+                wox[m], woy[m], woz[m] = wo[n, 0], wo[n, 1], wo[n, 2]
+                m += 1
+    acc = np.zeros(n_items)
+    for k in range(unit_nodes.shape[0]):
+        t, wt = unit_nodes[k], unit_weights[k]
+        for m in range(n_items):
+            su, cu = sincos(start[m] + span[m] * t)
+            x = cu * cu + q * su * su
+            radius = scale / (x * math.sqrt(x))  # sec. 5.4: R(u)
+            rho, d, cos_v, sin_v = specular_v_terms(hx[m], hy[m], hz[m], su, cu, cot_psi)  # eq. 3
+            ci = normal_cosine(wix[m], spine_normal_cosine(wiy[m], wiz[m], su, cu), sin_v, cos_v)  # eq. 8
+            cr = normal_cosine(wox[m], spine_normal_cosine(woy[m], woz[m], su, cu), sin_v, cos_v)  # eq. 8
+            g = staple_geometry_attenuation(volume_element(radius, a, cos_v), ci, cr, abs_sin_psi)  # eqs. 5 x 8
+            lit = rho > 0.0 and abs(d) <= 1.0 and cos_v > 0.0 and ci > 0.0 and cr > 0.0
+            acc[m] += wt * (g if lit else 0.0)  # eq. 1
+    for m in range(n_items):
+        out[owner[m]] += span[m] * acc[m]
+    return out
+
+
+@njit(cache=True)
+def staple_break_table(wi, wo, psi, umax):
+    """(N, STAPLE_MAX_BREAKS) sorted breakpoints of :func:`staple_breakpoints` per direction pair, padded with
+    umax, and (N,) the number of lit pieces (for quad references and the benchmark's piece counts)."""
+    n_dir = wi.shape[0]
+    out = np.full((n_dir, STAPLE_MAX_BREAKS), umax)
+    lit_pieces = np.zeros(n_dir, dtype=np.int64)
+    cot_psi = math.cos(psi) / math.sin(psi)
+    abs_sin_psi = abs(math.sin(psi))
+    breaks = np.empty(STAPLE_MAX_BREAKS)
+    knots = np.empty(5)
+    crit = np.empty(5)
+    for n in range(n_dir):
+        wix, wiy, wiz = wi[n, 0], wi[n, 1], wi[n, 2]
+        wox, woy, woz = wo[n, 0], wo[n, 1], wo[n, 2]
+        hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
+        out[n, 0] = -umax
+        if wiz <= 0.0 or woz <= 0.0 or length <= 0.0:
+            continue
+        m = staple_breakpoints(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, psi, cot_psi, abs_sin_psi, umax, breaks,
+                               knots, crit)
+        for p in range(m):
+            out[n, p] = breaks[p]
+        for p in range(m - 1):
+            mid = 0.5 * (breaks[p] + breaks[p + 1])
+            if breaks[p + 1] > breaks[p] and staple_integrand(
+                    wix, wiy, wiz, wox, woy, woz, hx, hy, hz, math.sin(mid), math.cos(mid), 0.0, cot_psi,
+                    abs_sin_psi, 1.0)[0] > 0.0:
+                lit_pieces[n] += 1
+    return out, lit_pieces
 
 
 @njit(cache=True)
@@ -371,21 +696,6 @@ def half_vectors(wi, wo):
     for n in range(n_dir):
         h[n, 0], h[n, 1], h[n, 2], length[n] = half_vector(wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2])
     return h, length
-
-
-@njit(cache=True)
-def staple_break_candidates(h, psi):
-    """(N, 20) angles u where the staple integrand may jump: :func:`staple_break_angles` + k pi, |k| <= 2."""
-    out = np.empty((h.shape[0], 20))
-    abs_sin_psi = abs(math.sin(psi))
-    for n in range(h.shape[0]):
-        bases = staple_break_angles(h[n, 1], h[n, 2], psi, abs_sin_psi)
-        m = 0
-        for base in bases:
-            for k in range(-2, 3):
-                out[n, m] = base + k * math.pi
-                m += 1
-    return out
 
 
 @njit(cache=True)
@@ -443,12 +753,12 @@ def staple_points(wi, wo, u, umax, psi, kappa, w, l):
 
 
 @njit(cache=True)
-def filament_points(wi, wo, v, umax, kappa, w, l, delta):
+def filament_points(wi, wo, v, umax, kappa, w, l, delta, shortened):
     """G_u A_s at v[n] and the specular u of eq. 4 for each point n (Algorithm 4).
 
     wi, wo: (N, 3) or (1, 3) yarn-frame directions (one row: shared); v, umax: (N,) radians.
     Returns (value, u): value 0 where |v| > pi/2, |u| >= umax or a cosine is <= 0 (u is returned anyway).
-    Same integrand as :func:`filament_quadrature` (eqs. 4, 6, 8, 9, bounded form).
+    Same integrand as :func:`filament_quadrature` (eqs. 4, 6, 8, 9, bounded form; ``shortened`` as there).
     """
     n_pts = v.shape[0]
     value = np.zeros(n_pts)
@@ -463,7 +773,7 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta):
         upos[n] = uu
         if not ok or abs(v[n]) > 0.5 * math.pi:
             continue
-        radius = spine_radius(uu, umax[n], kappa, w, l)
+        radius = spine_radius(uu, spine_arc(umax[n], delta, shortened), kappa, w, l)
         value[n] = filament_integrand(wix, ci0, wox, cr0, math.sin(v[n]), math.cos(v[n]), a, radius) * scale
     return value, upos
 
@@ -583,10 +893,11 @@ def staple_quadrature_sets(wi, wo, unit_nodes, unit_weights, psi, umax, kappa, w
 
 
 @njit(cache=True, error_model="numpy")
-def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta):
+def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta, shortened):
     """(J, N) filament I_j (eq. 2) from the moments of :func:`filament_moments` for J parameter sets (umax in
     radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of eq. 9 is 0.  Branch-free
-    over the directions (the cuts applied as a select), so the loop vectorises."""
+    over the directions (the cuts applied as a select), so the loop vectorises.  ``shortened``: R on the arc
+    of :func:`spine_arc`, |u| clamped to it."""
     n_sets = umax.shape[0]
     n_dir = u.shape[0]
     out = np.zeros((n_sets, n_dir))
@@ -594,11 +905,14 @@ def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta):
     su = np.sin(u)
     for j in range(n_sets):
         a = 0.5 * w[j]
-        scale, q = spine_radius_factors(umax[j], kappa[j], w[j], l[j])  # sec. 5.4
+        arc = spine_arc(umax[j], delta[j], shortened)
+        scale, q = spine_radius_factors(arc, kappa[j], w[j], l[j])  # sec. 5.4
+        c_arc, s_arc = math.cos(arc), math.sin(arc)
         row = out[j]
         for n in range(n_dir):
             fade = filament_fade(u[n], umax[j], delta[j])  # eq. 9
-            radius = spine_radius_at(cu[n], su[n], scale, q)  # R(u), |u| < umax where lit
+            inside = abs(u[n]) <= arc  # R is even in u: |u| clamped to the arc
+            radius = spine_radius_at(cu[n] if inside else c_arc, su[n] if inside else s_arc, scale, q)  # R(u)
             value = inv[n] * fade * (a * radius * s0[n] + a * a * s1[n])  # eq. 2 (eq. 6 numerator x eq. 8)
             row[n] = value if ok[n] and abs(u[n]) < umax[j] and fade > 0.0 else 0.0
     return out

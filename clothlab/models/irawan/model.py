@@ -43,13 +43,20 @@ Decisions on what the paper leaves open:
   integral tends to the filament one as psi -> 0, and the test suite measures the jump at the threshold.
 - eq. 3: the +arccos(D) root only (the one with n.h >= 0), visible when |v| < pi/2.
 - phase lobe evaluated at -wi.wo; Seeliger's law without the 1/(4 pi) constant (absorbed by a_j).
-- filament smoothing (eq. 9): R(u) on the full arc; the cubic smoothstep fades the last delta*umax.
+- filament smoothing (eq. 9): R(u) on the full arc (option ``filament_arc: full``, the paper's text: sec. 5.4
+  defines R(u) on |u| <= umax and eq. 9 only fades A); the cubic smoothstep fades the last delta*umax.
+  ``filament_arc: shortened`` is the form of the Mitsuba 0.5/0.6 ``irawan`` plugin the exported ``.wv`` is
+  rendered in: r_hat, L and t_max of sec. 5.4 on (1 - delta) umax, |u| clamped to it
+  (:data:`.integrals.FILAMENT_ARCS`).  The option is recorded in fit.json (``model.options``) and in the
+  ``.wv`` export; a fit made with ``full`` on a smoothed filament yarn gets a note that the renderer shows the
+  other form, and a ``.wv`` recorded with one arc loaded into a model with the other gives a GeometryWarning.
 - a segment with w sin(umax) >= l (sec. 5.3) gets L = 0 (R = 0) and a GeometryWarning naming it.
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
@@ -59,12 +66,15 @@ from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the 
     ALBEDO_SAMPLES,
     ALBEDO_SEED,
     COMPONENTS,
+    FILAMENT_ARCS,
     GEOMETRY_KEYS,
     PSI_FILAMENT_THRESHOLD,
     Quadrature,
     YarnTerms,
     _albedo_directions,
     _specular_albedo_cached,
+    arc_matters,
+    check_filament_arc,
     geometry_warnings,
     specular_albedo,
     yarn_geometry_key,
@@ -90,43 +100,75 @@ class IrawanModel(Model):
 
     @classmethod
     def from_config(cls, weave: Weave, quadrature=None, **options) -> IrawanModel:
-        if options:
-            raise ConfigError(f"model kind 'irawan' takes no option {next(iter(options))!r}; options: none",
-                              field=f"model.options.{next(iter(options))}")
+        """Option ``filament_arc``: ``full`` (default, the paper's text) or ``shortened`` (the renderer's)."""
+        unknown = [name for name in options if name != "filament_arc"]
+        if unknown:
+            raise ConfigError(f"model kind 'irawan' takes no option {unknown[0]!r}; options: filament_arc",
+                              field=f"model.options.{unknown[0]}")
         q = quadrature if quadrature is None or isinstance(quadrature, Quadrature) else Quadrature(*quadrature)
-        return cls(weave, q)
+        return cls(weave, q, **options)
+
+    @classmethod
+    def check_option(cls, name: str, value) -> None:
+        """ConfigError for a ``model.options`` value the model cannot take (config validation names the line)."""
+        if name == "filament_arc":
+            check_filament_arc(value)
 
     def geometry_warnings(self, params: dict) -> list[str]:
-        return geometry_warnings(self.resolve(params), self.weave.name)
+        """The segment-fitting notes of sec. 5.3 and, for a fit with ``filament_arc: full`` on a smoothed
+        filament yarn, that the exported ``.wv`` is rendered with the other arc."""
+        p = self.resolve(params)
+        notes = geometry_warnings(p, self.weave.name, self.filament_arc)
+        kinds = [kind for kind in YARN_KINDS if arc_matters(p, kind)]
+        if self.filament_arc == "full" and kinds:
+            notes.append(f"{self.weave.name} {'/'.join(kinds)}: fitted with filament_arc: full (the paper's text, "
+                         f"R(u) on the whole arc); the exported weave.wv is rendered by the Mitsuba 0.5/0.6 irawan "
+                         f"plugin on the shortened arc (1 - delta) umax (delta = {p['delta']:g}), which changes the "
+                         "highlight's shape; fit with model.options.filament_arc: shortened for renderer parity")
+        return notes
 
     def fitted_weave(self, params: dict) -> Weave:
-        return apply_parameters(self.weave, self.resolve(params))
+        """The weave with ``params`` applied, recording this model's ``filament_arc`` for the ``.wv`` export."""
+        return replace(apply_parameters(self.weave, self.resolve(params)), filament_arc=self.filament_arc)
 
     def settings(self) -> dict:
-        return {"quadrature": {"rule": self.quadrature.rule, "nodes": self.quadrature.nodes}}
+        return {"quadrature": {"rule": self.quadrature.rule, "nodes": self.quadrature.nodes},
+                "options": {"filament_arc": self.filament_arc}}
 
     @classmethod
     def describe_settings(cls, settings: dict) -> str:
-        """The quadrature as ``rule nodes`` (e.g. ``trapezoid 11``)."""
+        """The quadrature as ``rule nodes`` (e.g. ``trapezoid 11``), then ``filament_arc=shortened`` if so."""
         quadrature = settings.get("quadrature") or {}
-        return " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or "defaults"
+        text = " ".join(str(quadrature[k]) for k in ("rule", "nodes") if k in quadrature) or "defaults"
+        arc = (settings.get("options") or {}).get("filament_arc", "full")
+        return text if arc == "full" else f"{text}, filament_arc={arc}"
 
     def with_quadrature(self, rule: str | None = None, nodes: int | None = None) -> IrawanModel:
         if rule is None and nodes is None:
             return self
         return IrawanModel(self.weave, Quadrature(rule or self.quadrature.rule,
-                                                  int(nodes) if nodes is not None else self.quadrature.nodes))
+                                                  int(nodes) if nodes is not None else self.quadrature.nodes),
+                           filament_arc=self.filament_arc)
 
     def texture(self, *, seed: int = 0):
         """The texture model of sec. 7.2 (:class:`clothlab.models.irawan.texture.IrawanTexture`) with this
-        model's quadrature (so its tile average is :meth:`components`)."""
+        model's quadrature and filament arc (so its tile average is :meth:`components`)."""
         from clothlab.models.irawan.texture import IrawanTexture
 
-        return IrawanTexture(self.weave, self.quadrature, seed=seed)
+        return IrawanTexture(self.weave, self.quadrature, seed=seed, filament_arc=self.filament_arc)
 
-    def __init__(self, weave: Weave, quadrature: Quadrature | None = None):
+    def __init__(self, weave: Weave, quadrature: Quadrature | None = None, *, filament_arc: str = "full"):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
+        self.filament_arc = check_filament_arc(filament_arc)
+        recorded = getattr(weave, "filament_arc", None)
+        if recorded not in (None, self.filament_arc):
+            kinds = [kind for kind in YARN_KINDS if arc_matters(weave_parameters(weave), kind)]
+            if kinds:
+                warnings.warn(f"{weave.source or weave.name}: the weave was fitted with filament_arc: {recorded} but "
+                              f"this model evaluates filament_arc: {self.filament_arc}; the {'/'.join(kinds)} "
+                              "highlight's shape differs (set model.options.filament_arc to match)",
+                              GeometryWarning, stacklevel=2)
         self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._at; see _integrals
         self._directions: dict | None = None  # the parameter-free quantities of the last directions; see _at
 
@@ -157,11 +199,12 @@ class IrawanModel(Model):
         these directions), so a fit varying only alpha / beta computes it once; batches are not memoised."""
         terms = self._yarn_terms(wi, wo, kind)
         if len(resolved) != 1:
-            return yarn_integrals(terms, np.array([yarn_geometry_key(p, kind) for p in resolved]), self.quadrature)
+            return yarn_integrals(terms, np.array([yarn_geometry_key(p, kind) for p in resolved]), self.quadrature,
+                                  self.filament_arc)
         key = (kind, yarn_geometry_key(resolved[0], kind))
         hit = self._memo.get(key)
         if hit is None:
-            hit = yarn_integrals(terms, np.array([key[1]]), self.quadrature)[0]
+            hit = yarn_integrals(terms, np.array([key[1]]), self.quadrature, self.filament_arc)[0]
             if len(self._memo) >= 8:
                 self._memo.pop(next(iter(self._memo)))
             self._memo[key] = hit
@@ -213,7 +256,7 @@ class IrawanModel(Model):
         need = COMPONENTS if need is None else tuple(need)
         if warn:
             for p in resolved:
-                for message in geometry_warnings(p, self.weave.name):
+                for message in geometry_warnings(p, self.weave.name, self.filament_arc):
                     warnings.warn(message, GeometryWarning, stacklevel=3)
         out = {}
         at = self._at(wi, wo)
@@ -231,7 +274,7 @@ class IrawanModel(Model):
             value = phase * self._integrals(wi, wo, resolved, kind)
             if normalised:
                 for j, p in enumerate(resolved):
-                    albedo = specular_albedo(p, kind, self.quadrature)
+                    albedo = specular_albedo(p, kind, self.quadrature, filament_arc=self.filament_arc)
                     if albedo > 0.0:
                         value[j] = value[j] / albedo
                     else:  # e.g. a filament with umax -> 0: the highlight has no extent; say so, never a silent 0

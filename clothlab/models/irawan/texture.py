@@ -67,6 +67,7 @@ from clothlab.models.irawan.integrals import (
     COMPONENTS,
     PSI_FILAMENT_THRESHOLD,
     Quadrature,
+    check_filament_arc,
     geometry_warnings,
     specular_albedo,
 )
@@ -103,7 +104,9 @@ class TexturePoints:
 
 class IrawanTexture:
     """Irawan-Marschner texture model of one weave; ``quadrature`` only sets the albedo a_j (use the same
-    one as the reflectance model it is combined with); ``seed`` selects the noise realisation."""
+    one as the reflectance model it is combined with); ``seed`` selects the noise realisation;
+    ``filament_arc`` the arc of a smoothed filament spine's R(u), as :class:`IrawanModel`'s option
+    (:data:`clothlab.models.irawan.integrals.FILAMENT_ARCS`)."""
 
     kind = "irawan-texture"
     params = IRAWAN_PARAMS
@@ -111,10 +114,12 @@ class IrawanTexture:
     #: components() takes (1, 3) directions shared by every point (faster than one row per point)
     shared_directions = True
 
-    def __init__(self, weave: Weave, quadrature: Quadrature | None = None, *, seed: int = 0):
+    def __init__(self, weave: Weave, quadrature: Quadrature | None = None, *, seed: int = 0,
+                 filament_arc: str = "full"):
         self.weave = weave
         self.quadrature = quadrature or Quadrature()
         self.seed = int(seed)
+        self.filament_arc = check_filament_arc(filament_arc)
         self.cell_shares = {kind: weave.cell_share(kind) for kind in YARN_KINDS}
         w, h = weave.tile_width, weave.tile_height
         self._centre_u = np.array([s.center_u for s in weave.segments]) * w  # cells
@@ -191,7 +196,7 @@ class IrawanTexture:
         p = self.resolve(params)
         need = COMPONENTS if need is None else tuple(need)
         if warn:
-            for message in geometry_warnings(p, self.weave.name):
+            for message in geometry_warnings(p, self.weave.name, self.filament_arc):
                 warnings.warn(message, GeometryWarning, stacklevel=2)
         wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
@@ -226,20 +231,22 @@ class IrawanTexture:
                     umax_deg = np.clip(umax_deg + offsets.reshape(-1)[rows], UMAX_MIN, UMAX_MAX)
                 sel = slice(None) if shared else rows
                 t = self._brightness(kind, p, flat["x"][rows], flat["y"][rows], np.deg2rad(umax_deg),
-                                     to_yarn_frame(wi[sel], kind), to_yarn_frame(wo[sel], kind))
+                                     to_yarn_frame(wi[sel], kind), to_yarn_frame(wo[sel], kind),
+                                     self.filament_arc == "shortened")
                 t *= phase[0] if shared else phase[rows]
                 if factor is not None:
                     t *= factor.reshape(-1)[rows]
                 scale = share
                 if normalised:
-                    scale *= specular_albedo(p, kind, self.quadrature)
+                    scale *= specular_albedo(p, kind, self.quadrature, filament_arc=self.filament_arc)
                 value[rows] = t / scale if scale > 0.0 else 0.0
             out[f"specular_{kind}"] = value.reshape(shape)
         return out
 
     @staticmethod
-    def _brightness(kind, p, x, y, umax, wi, wo) -> np.ndarray:
-        """T / f_c of eq. 13 at local (x, y) (cells) with per-point umax (radians); yarn-frame directions."""
+    def _brightness(kind, p, x, y, umax, wi, wo, shortened=False) -> np.ndarray:
+        """T / f_c of eq. 13 at local (x, y) (cells) with per-point umax (radians); yarn-frame directions;
+        ``shortened``: the filament R(u) on the arc (1 - delta) umax."""
         from clothlab.models.irawan import kernels
 
         psi = np.deg2rad(p[f"{kind}.psi"])
@@ -255,7 +262,7 @@ class IrawanTexture:
         dy = hwidth * l  # filament: Algorithm 4
         v_yarn = np.pi * x / w  # eq. 11
         g, u_spec = kernels.filament_points(wi, wo, v_yarn, umax, float(kappa), float(w), float(l),
-                                            float(p["delta"]))
+                                            float(p["delta"]), bool(shortened))
         y_spec = np.clip(l * u_spec / (2.0 * umax), -0.5 * (l - dy), 0.5 * (l - dy))
         chi = np.abs(y - y_spec) < 0.5 * dy
         return np.where(chi, g * np.pi / hwidth, 0.0)

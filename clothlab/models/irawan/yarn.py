@@ -8,9 +8,12 @@ Angles in radians; w and l in any common length unit (only w / l matters after n
 Staple yarns (psi != 0) integrate G_v A over u in [-umax, umax] (eq. 1), filament yarns G_u A_s over v in
 [-pi/2, pi/2] (eq. 2); the integrands, one helper per equation, are in :mod:`clothlab.models.irawan.kernels`.
 This module chooses the path (:func:`staple_path`) and the nodes (:mod:`clothlab.models.irawan.quadrature`).
-The ``support`` and ``adaptive`` rules split the staple integral where its integrand jumps, at closed-form
-points (the ends of eq. 3's support |D| <= 1 and the visibility cut |v| = pi/2), and integrate the filament
-one over the closed-form arc where both clamped cosines of eq. 8 are positive.
+The ``support`` and ``adaptive`` rules split the staple integral where its integrand jumps or kinks (the ends
+of eq. 3's support |D| <= 1 and the visibility cut |v| = pi/2 in closed form, the zeros of eq. 8's clamped
+cosines c_i, c_r on the specular curve as roots of a quartic), found per direction inside the compiled loop
+(:func:`clothlab.models.irawan.kernels.staple_lit_pieces`; parameter-free, so a model keeps them per direction
+set) and integrate only the lit pieces (:func:`clothlab.models.irawan.kernels.staple_support_sum`); they
+integrate the filament one over the closed-form arc where both clamped cosines of eq. 8 are positive.
 """
 
 from __future__ import annotations
@@ -21,8 +24,8 @@ from clothlab.models.irawan.quadrature import (
     ADAPTIVE_MAX_NODES,
     ADAPTIVE_RTOL,
     compact_breaks,
+    cosine_mapped_unit_rule,
     interval_rule,
-    piecewise_rule,
     unit_rule,
 )
 
@@ -34,12 +37,16 @@ def half_vectors(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return kernels.half_vectors(np.ascontiguousarray(wi, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64))
 
 
-def _staple_breaks(h, psi, umax):
-    """Breakpoints (N, P+1) of the staple integrand over [-umax, umax]: support ends and |v| = pi/2
-    (:func:`clothlab.models.irawan.kernels.staple_break_angles`)."""
+def staple_breaks(wi, wo, psi, umax) -> tuple[np.ndarray, np.ndarray]:
+    """Breakpoints (N, P+1) of the staple integrand over [-umax, umax] for yarn-frame pairs (N, 3), padded
+    with umax, and the number of lit pieces (N,) (:func:`clothlab.models.irawan.kernels.staple_breakpoints`:
+    support ends, |v| = pi/2, zeros of c_i and c_r); the ``support`` rule finds the same inside its loop."""
     from clothlab.models.irawan import kernels
 
-    return compact_breaks(-umax, umax, kernels.staple_break_candidates(np.ascontiguousarray(h), float(psi)))
+    table, lit = kernels.staple_break_table(np.ascontiguousarray(wi, dtype=np.float64),
+                                            np.ascontiguousarray(wo, dtype=np.float64), float(psi), float(umax))
+    used = int(np.max(np.sum(table < umax, axis=1), initial=1)) + 1
+    return table[:, :used], lit
 
 
 def _filament_breaks(wi, wo, h):
@@ -50,14 +57,24 @@ def _filament_breaks(wi, wo, h):
         np.ascontiguousarray(wi), np.ascontiguousarray(wo), np.ascontiguousarray(h)))
 
 
-def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
+def staple_pieces(wi, wo, psi, domain) -> tuple[np.ndarray, np.ndarray]:
+    """The lit pieces (lo, hi), each (P, N), of the staple integrand on [-domain, domain] (radians) for
+    yarn-frame pairs (N, 3) (:func:`clothlab.models.irawan.kernels.staple_lit_pieces`)."""
+    from clothlab.models.irawan import kernels
+
+    return kernels.staple_lit_pieces(np.ascontiguousarray(wi, dtype=np.float64),
+                                     np.ascontiguousarray(wo, dtype=np.float64), float(psi), float(domain))
+
+
+def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta, shortened, pieces=None):
     from clothlab.models.irawan import kernels
 
     def staple_sum(rows, nodes, weights):
         return kernels.staple_quadrature(wi[rows], wo[rows], nodes, weights, psi, umax, kappa, w, l)
 
     def filament_sum(rows, nodes, weights, on_arc=False):
-        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta, on_arc)
+        return kernels.filament_quadrature(wi[rows], wo[rows], nodes, weights, umax, kappa, w, l, delta, on_arc,
+                                           shortened)
 
     every = slice(None)
     if rule in ("trapezoid", "gauss"):
@@ -67,10 +84,12 @@ def _integrate(wi, wo, rule, n, staple, psi, umax, kappa, w, l, delta):
     if rule not in ("support", "adaptive"):
         raise ValueError(f"unknown quadrature rule {rule!r}")
     if staple:
-        breaks = _staple_breaks(half_vectors(wi, wo)[0], psi, umax)
+        lo, hi = pieces if pieces is not None else staple_pieces(wi, wo, psi, umax)
 
-        def evaluate(rows, m):
-            return staple_sum(rows, *piecewise_rule(breaks[rows], m))
+        def evaluate(rows, m):  # the lit pieces, clipped to [-umax, umax]
+            s, ws = cosine_mapped_unit_rule(m)
+            return kernels.staple_support_sum(wi[rows], wo[rows], np.ascontiguousarray(lo[:, rows]),
+                                              np.ascontiguousarray(hi[:, rows]), s, ws, psi, umax, kappa, w, l)
     else:
         def evaluate(rows, m):  # Gauss-Legendre on the arc where both cosines of eq. 8 are positive
             t, wt = unit_rule("gauss", m)
@@ -105,11 +124,14 @@ def staple_path(psi, umax, rule, n, psi_threshold) -> bool:
     return abs(psi) >= threshold
 
 
-def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid", n=11, psi_threshold=1e-3):
+def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid", n=11, psi_threshold=1e-3,
+                  shortened=False, pieces=None):
     """I(wi, wo) = integral of G A (eq. 10) for one segment type; (N,) for (N, 3) yarn-frame directions.
 
     Staple path when |psi| >= psi_threshold (radians), filament path otherwise (sec. 6.2); see
-    :func:`staple_path`.
+    :func:`staple_path`.  ``shortened``: the filament spine's R(u) on the arc (1 - delta) umax (the renderer's
+    form, :func:`clothlab.models.irawan.kernels.spine_arc`); staple yarns are not smoothed (eq. 9) and ignore it.
+    ``pieces``: :func:`staple_pieces` of these directions and psi, if already known (support / adaptive rules).
     """
     wi = np.ascontiguousarray(wi, dtype=np.float64)
     wo = np.ascontiguousarray(wo, dtype=np.float64)
@@ -117,6 +139,8 @@ def yarn_integral(wi, wo, *, psi, umax, kappa, w, l, delta=0.0, rule="trapezoid"
     front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
     if front.size:
         staple = staple_path(psi, umax, rule, n, psi_threshold)
+        if pieces is not None:
+            pieces = (pieces[0][:, front], pieces[1][:, front])
         out[front] = _integrate(wi[front], wo[front], rule, n, staple, float(psi), float(umax), float(kappa),
-                                float(w), float(l), float(delta))
+                                float(w), float(l), float(delta), bool(shortened), pieces)
     return out
