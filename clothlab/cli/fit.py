@@ -46,7 +46,7 @@ def _run(args, held) -> int:
     from dataclasses import replace
 
     from clothlab.atomic import prepare_result
-    from clothlab.cli.options import parallel_requested
+    from clothlab.cli.options import parallel_requested, runner_of
     from clothlab.config import PosteriorConfig, apply_overrides, load_config
     from clothlab.errors import ConfigError
     from clothlab.fit.batch import expand_config_paths
@@ -54,8 +54,9 @@ def _run(args, held) -> int:
 
     if args.cv is not None and args.cv < 2:
         raise ConfigError(f"--cv needs at least 2 folds, got {args.cv}", field="--cv")
+    parallel = parallel_requested(args)  # checked first: without the extra, one line and nothing done
     paths = expand_config_paths(args.configs)
-    batch = len(paths) > 1 or any(p.is_dir() for p in args.configs) or parallel_requested(args)
+    batch = len(paths) > 1 or any(p.is_dir() for p in args.configs)
     configs = []
     for path in paths:  # every yaml is checked (and no result overwritten) before the first fit starts
         cfg = apply_overrides(load_config(path), rule=args.rule, nodes=args.nodes, max_evals=args.max_evals,
@@ -76,8 +77,9 @@ def _run(args, held) -> int:
         configs.append(cfg)
     if batch:
         return _run_batch(args, configs)
+    runner = held.enter_context(runner_of(args)) if parallel else None  # the posterior's pool
     for cfg in configs:
-        result = run_fit(cfg, fits_dir=args.output)
+        result = run_fit(cfg, fits_dir=args.output, runner=runner)
         out = save_fit(result, force=args.force, fits_dir=args.output)
         print(present_fit(result, saved_to=out))
         if args.report:

@@ -112,9 +112,13 @@ def runner_of(args):
 
 
 def parallel_requested(args) -> bool:
-    """True when :func:`add_parallel`'s options (or ``$DASK_SCHEDULER_ADDRESS``) ask for a Dask runner."""
+    """True when :func:`add_parallel`'s options (or ``$DASK_SCHEDULER_ADDRESS``) ask for a Dask runner; then
+    Dask must be installed (else the one-line error naming the extra, before any work)."""
     import os
 
-    from clothlab.parallel import SCHEDULER_ENV
+    from clothlab.parallel import SCHEDULER_ENV, require_dask
 
-    return args.workers is not None or args.scheduler is not None or bool(os.environ.get(SCHEDULER_ENV))
+    requested = args.workers is not None or args.scheduler is not None or bool(os.environ.get(SCHEDULER_ENV))
+    if requested:
+        require_dask()
+    return requested

@@ -14,10 +14,12 @@ from clothlab.parallel.runner import (
     SCHEDULER_ENV,
     InProcessRunner,
     Runner,
+    Shared,
     TaskFailure,
     make_runner,
     raise_failures,
+    require_dask,
 )
 
-__all__ = ["Runner", "InProcessRunner", "TaskFailure", "make_runner", "raise_failures", "DASK_EXTRA",
-           "SCHEDULER_ENV"]
+__all__ = ["Runner", "InProcessRunner", "TaskFailure", "Shared", "make_runner", "raise_failures", "require_dask",
+           "DASK_EXTRA", "SCHEDULER_ENV"]

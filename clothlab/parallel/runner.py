@@ -47,6 +47,13 @@ class TaskFailure:
 
 
 @dataclass(frozen=True)
+class Shared:
+    """An object placed on every worker once (:meth:`Runner.share`), for many :meth:`Runner.map` calls."""
+
+    value: object
+
+
+@dataclass(frozen=True)
 class _Raised:
     """What a task returned instead of a value when it raised (picklable: text only)."""
 
@@ -75,10 +82,10 @@ def raise_failures(results: Sequence, what: str) -> list:
 class _Counts:
     """Progress of one :meth:`Runner.map`: done / running / failed counts in the stage's description."""
 
-    def __init__(self, total: int, desc: str, slots: int, dashboard: str | None):
+    def __init__(self, total: int, desc: str, slots: int, dashboard: str | None, enabled: bool | None = None):
         self.total, self.desc, self.slots, self.dashboard = total, desc, slots, dashboard
         self.done = self.failed = 0
-        self.bar = Progress(total, self._text(), unit="task")
+        self.bar = Progress(total, self._text(), unit="task", enabled=enabled)
 
     def _text(self) -> str:
         running = min(self.slots, self.total - self.done - self.failed)
@@ -105,9 +112,11 @@ class Runner:
     description: str = "in-process"
 
     def map(self, fn: Callable, items: Iterable, *, shared=_NO_SHARED, names: Sequence[str] | None = None,
-            desc: str = "tasks", retries: int = 1, on_result: Callable[[int, object], None] | None = None) -> list:
-        """``[fn(item) for item in items]`` (``fn(shared, item)`` with ``shared``) in submission order; a task
-        failing ``retries + 1`` times leaves a :class:`TaskFailure` in its slot (logged with its name)."""
+            desc: str = "tasks", retries: int = 1, on_result: Callable[[int, object], None] | None = None,
+            progress: bool = True) -> list:
+        """``[fn(item) for item in items]`` (``fn(shared, item)`` with ``shared``, an object or a :class:`Shared`
+        from :meth:`share`) in submission order; a task failing ``retries + 1`` times leaves a
+        :class:`TaskFailure` in its slot (logged with its name).  ``progress`` False: no progress display."""
         items = list(items)
         names = list(names) if names is not None else [f"{desc} #{i + 1}" for i in range(len(items))]
         if len(names) != len(items):
@@ -115,7 +124,7 @@ class Runner:
         results: list = [None] * len(items)
         if not items:
             return results
-        counts = _Counts(len(items), desc, self.workers, self.dashboard)
+        counts = _Counts(len(items), desc, self.workers, self.dashboard, enabled=None if progress else False)
         pending = {}
         try:
             handle = self._begin(fn, shared)
@@ -143,6 +152,10 @@ class Runner:
         finally:
             counts.close()
         return results
+
+    def share(self, value) -> Shared:
+        """``value`` placed on the workers once, to pass as ``shared`` to many :meth:`map` calls."""
+        return Shared(value)
 
     # backend hooks ------------------------------------------------------------------------------------
     def _begin(self, fn, shared):
@@ -173,6 +186,8 @@ class InProcessRunner(Runner):
     def _begin(self, fn, shared):
         self._queue: list = []
         self._count = 0
+        if isinstance(shared, Shared):
+            shared = shared.value
         return fn, () if shared is _NO_SHARED else (shared,)
 
     def _submit(self, handle, item):
@@ -188,8 +203,9 @@ class InProcessRunner(Runner):
         self._queue.clear()
 
 
-def _distributed():
-    """The ``distributed`` module, or a one-line ClothlabError naming the extra to install."""
+def require_dask():
+    """The ``distributed`` module, or a one-line ClothlabError naming the extra to install (call it before any
+    work when a Dask runner will be needed)."""
     try:
         import distributed
     except ImportError:
@@ -205,7 +221,7 @@ class DaskRunner(Runner):
     def __init__(self, *, workers: int | None = None, address: str | None = None):
         import logging
 
-        distributed = _distributed()
+        distributed = require_dask()
         self.cluster = None
         self.address = address
         if address is None:
@@ -235,9 +251,17 @@ class DaskRunner(Runner):
     def _begin(self, fn, shared):
         from distributed import as_completed
 
-        shared = () if shared is _NO_SHARED else (self.client.scatter(shared, broadcast=True, hash=False),)
+        if shared is _NO_SHARED:
+            shared = ()
+        elif isinstance(shared, Shared):
+            shared = (shared.value,)  # already on the workers
+        else:
+            shared = (self.client.scatter(shared, broadcast=True, hash=False),)
         self._done = as_completed([], with_results=False, loop=self.client.loop)
         return fn, shared
+
+    def share(self, value) -> Shared:
+        return Shared(self.client.scatter(value, broadcast=True, hash=False))
 
     def _submit(self, handle, item):
         fn, shared = handle
