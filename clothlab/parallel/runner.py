@@ -48,9 +48,12 @@ class TaskFailure:
 
 @dataclass(frozen=True)
 class Shared:
-    """An object placed on every worker once (:meth:`Runner.share`), for many :meth:`Runner.map` calls."""
+    """An object placed on every worker once (:meth:`Runner.share`), for many :meth:`Runner.map` calls:
+    ``value`` is what the tasks receive (the object, or Dask's handle to its copies), ``source`` the object
+    itself (placed again if every worker holding a copy died)."""
 
     value: object
+    source: object = None
 
 
 @dataclass(frozen=True)
@@ -251,21 +254,24 @@ class DaskRunner(Runner):
     def _begin(self, fn, shared):
         from distributed import as_completed
 
-        if shared is _NO_SHARED:
-            shared = ()
-        elif isinstance(shared, Shared):
-            shared = (shared.value,)  # already on the workers
-        else:
-            shared = (self.client.scatter(shared, broadcast=True, hash=False),)
         self._done = as_completed([], with_results=False, loop=self.client.loop)
-        return fn, shared
+        if shared is _NO_SHARED:
+            return [fn, None]
+        return [fn, shared if isinstance(shared, Shared) else self.share(shared)]
 
     def share(self, value) -> Shared:
-        return Shared(self.client.scatter(value, broadcast=True, hash=False))
+        [future] = self.client.scatter([value], broadcast=True, hash=False)  # a list: ``value`` as one object
+        return Shared(future, source=value)
 
     def _submit(self, handle, item):
         fn, shared = handle
-        future = self.client.submit(_attempt, fn, item, *shared, pure=False)
+        args = ()
+        if shared is not None:
+            if shared.value.status != "finished":  # every copy was on workers that died: place it again
+                log.info("shared data of the tasks lost with a worker; placing it on the workers again")
+                shared = handle[1] = self.share(shared.source)
+            args = (shared.value,)
+        future = self.client.submit(_attempt, fn, item, *args, pure=False)
         self._done.add(future)
         return future
 
