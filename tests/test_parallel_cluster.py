@@ -143,3 +143,19 @@ def test_batch_and_sweep_survive_a_killed_worker_and_match_the_sequential_run(tm
         del runner.map
     assert merged == {"s": {"random": whole}}
     assert not any(isinstance(r, TaskFailure) for r in parallel)
+
+
+@pytest.mark.slow
+def test_posterior_through_the_dask_pool_is_the_in_process_chain(cluster):
+    from test_posterior import FAST, _problem
+
+    from clothlab.fit.posterior import run_posterior
+
+    runner, _ = cluster
+    problem, truth = _problem()
+    reference = run_posterior(problem, truth, seed=5, **FAST)
+    pooled = run_posterior(problem, truth, seed=5, runner=runner, pool=True, **FAST)
+    np.testing.assert_array_equal(pooled.chain, reference.chain)
+    np.testing.assert_array_equal(pooled.log_prob, reference.log_prob)
+    auto = run_posterior(problem, truth, seed=5, runner=runner, pool="auto", **FAST)
+    np.testing.assert_array_equal(auto.chain, reference.chain)
