@@ -75,6 +75,20 @@ def test_option_mistakes_are_one_line_errors(monkeypatch):
     assert isinstance(make_runner(environ={}), InProcessRunner)
 
 
+def test_an_unreachable_scheduler_is_a_one_line_error_naming_it(monkeypatch):
+    pytest.importorskip("distributed")
+    import socket
+
+    import clothlab.parallel.runner as runner
+
+    with socket.socket() as s:  # a loopback port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 1.0)
+    with pytest.raises(ClothlabError, match=f"cannot reach the Dask scheduler at tcp://127.0.0.1:{port}"):
+        make_runner(scheduler=f"tcp://127.0.0.1:{port}")
+
+
 def _flaky(state_dir, x):
     """Fails the first time it sees ``x`` (a marker file remembers), then returns x * x; x = 3 always fails."""
     if x == 3:

@@ -18,7 +18,7 @@ pytest.importorskip("distributed")
 
 from test_parallel import make_project  # noqa: E402
 
-from clothlab.parallel import InProcessRunner, TaskFailure, make_runner  # noqa: E402
+from clothlab.parallel import SCHEDULER_ENV, InProcessRunner, TaskFailure, make_runner  # noqa: E402
 
 
 def _port_open(address: str) -> bool:
@@ -81,6 +81,13 @@ def test_a_killed_worker_s_task_is_retried_by_name_and_every_result_lands(cluste
     assert out == [x * x for x in range(8)]  # all present, in submission order
     assert "KilledWorker" in caplog.text and "retrying it (attempt 2 of 2)" in caplog.text
     assert time.monotonic() - started < 60
+    # the same cluster as an existing one: by --scheduler and by $DASK_SCHEDULER_ADDRESS
+    address = runner.client.scheduler.address
+    for other in (make_runner(scheduler=address), make_runner(environ={SCHEDULER_ENV: address})):
+        with other:
+            assert other.description == f"Dask cluster at {address}" and other.cluster is None
+            assert other.map(abs, [-1, -2, 3]) == [1, 2, 3]
+    assert runner.map(abs, [-4]) == [4]  # closing the other clients left the cluster running
 
 
 @pytest.mark.slow

@@ -77,7 +77,8 @@ def _run(args, held) -> int:
         configs.append(cfg)
     if batch:
         return _run_batch(args, configs)
-    runner = held.enter_context(runner_of(args)) if parallel else None  # the posterior's pool
+    posterior = any(cfg.fit.posterior is not None for cfg in configs)
+    runner = held.enter_context(runner_of(args)) if parallel and posterior else None  # the posterior's pool
     for cfg in configs:
         result = run_fit(cfg, fits_dir=args.output, runner=runner)
         out = save_fit(result, force=args.force, fits_dir=args.output)
