@@ -231,7 +231,8 @@ class DaskRunner(Runner):
             self.cluster = distributed.LocalCluster(
                 n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tcp",
                 dashboard_address=":0", silence_logs=logging.ERROR,
-                scheduler_kwargs={"allowed_failures": 0})  # a lost worker fails its task: retried by name here
+                scheduler_kwargs={"allowed_failures": 0},  # a lost worker fails its task: retried by name here
+                preload=["clothlab.parallel.worker"])  # workers ignore Ctrl-C: the command stops them
             try:
                 self.client = distributed.Client(self.cluster, set_as_default=False)
             except BaseException:
