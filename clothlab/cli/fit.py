@@ -33,7 +33,7 @@ def add_parser(sub):
     p.add_argument("--no-posterior", action="store_true", help="skip the posterior even if fabric.yaml asks for it")
     p.add_argument("--cv", type=int, metavar="K", help="k-fold cross-validated error percentiles (K >= 2)")
     add_quadrature_overrides(p)
-    add_parallel(p, "the fits (one task per fit)")
+    add_parallel(p, "the fits (one task per fit; one fabric.yaml: chunks of its posterior's walkers)")
     return p
 
 
