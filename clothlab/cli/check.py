@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothlab.cli.options import add_output
+from clothlab.cli.options import add_output, add_parallel
 
 
 def add_parser(sub):
@@ -20,11 +20,19 @@ def add_parser(sub):
     add_output(p, "report directory: an HTML page of the findings and the plots (PNG)", metavar="DIR",
                deprecated=("--report", "--figures"))
     p.add_argument("--json", type=Path, metavar="PATH", help="also write the findings as JSON")
+    add_parallel(p, "the sweep's chunks (the findings do not depend on it)")
     return p
 
 
 def run(args) -> int:
+    import contextlib
+
+    from clothlab.cli.options import parallel_requested, runner_of
     from clothlab.studies.stability import run_check_command
 
-    return run_check_command(full=args.full, seed=args.seed, data_dir=args.data, output=args.output,
-                             json_path=args.json, emit=print)
+    kwargs = dict(full=args.full, seed=args.seed, data_dir=args.data, output=args.output, json_path=args.json,
+                  emit=print)
+    if not parallel_requested(args):
+        return run_check_command(**kwargs)
+    with contextlib.closing(runner_of(args)) as runner:
+        return run_check_command(**kwargs, runner=runner)

@@ -90,3 +90,35 @@ def add_force(parser, what: str) -> None:
     """``--force``: replace an existing ``what`` (nothing is overwritten without it)."""
     parser.add_argument("--force", action="store_true", help=f"replace existing {what}")
 
+
+
+def add_parallel(parser, what: str) -> None:
+    """``--workers N`` (a Dask LocalCluster of N worker processes) and ``--scheduler ADDRESS`` (an existing
+    Dask cluster; default ``$DASK_SCHEDULER_ADDRESS``) for ``what``; without either, in-process.  Dask is the
+    optional extra ``clothlab[dask]`` (docs/parallel.md); :func:`runner_of` builds the runner."""
+    group = parser.add_argument_group("parallel execution (docs/parallel.md; needs pip install \"clothlab[dask]\")")
+    group.add_argument("--workers", type=int, metavar="N",
+                       help=f"run {what} on a local Dask cluster of N worker processes (1 thread each)")
+    group.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                       help=f"run {what} on the existing Dask cluster at this scheduler address (default: "
+                            "$DASK_SCHEDULER_ADDRESS when set, else in-process)")
+
+
+def runner_of(args):
+    """The :class:`clothlab.parallel.Runner` of :func:`add_parallel`'s options (close it when done)."""
+    from clothlab.parallel import make_runner
+
+    return make_runner(workers=args.workers, scheduler=args.scheduler)
+
+
+def parallel_requested(args) -> bool:
+    """True when :func:`add_parallel`'s options (or ``$DASK_SCHEDULER_ADDRESS``) ask for a Dask runner; then
+    Dask must be installed (else the one-line error naming the extra, before any work)."""
+    import os
+
+    from clothlab.parallel import SCHEDULER_ENV, require_dask
+
+    requested = args.workers is not None or args.scheduler is not None or bool(os.environ.get(SCHEDULER_ENV))
+    if requested:
+        require_dask()
+    return requested

@@ -114,7 +114,7 @@ def _cross_validate(result, problem, params, config) -> None:
 
 
 def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir=None,
-            posterior_progress: bool = True) -> FitResult:
+            posterior_progress: bool = True, runner=None) -> FitResult:
     """Fit the model of ``config`` to its measurement (or to ``measurement`` when given).
 
     ``progress(row)``, optional, is called with each evaluation's :class:`clothlab.fit.optimize.TraceRow`
@@ -122,7 +122,9 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     cross-validation (``fit.cv_folds`` >= 2) and the emcee posterior (``fit.posterior``, or ``posterior`` = a
     PosteriorConfig given here, e.g. by ``clothlab fit --posterior``), resumable from its checkpoint
     (:func:`clothlab.fit.store.checkpoint_path` under ``fits_dir``) if interrupted; ``posterior_progress``
-    False silences the sampler's progress.  With no free parameter only the coefficients are solved and the
+    False silences the sampler's progress; ``runner`` (a :class:`clothlab.parallel.Runner`) may evaluate the
+    posterior's walkers in chunks when that is faster (same chain; :func:`clothlab.fit.posterior.run_posterior`).
+    With no free parameter only the coefficients are solved and the
     posterior is skipped (noted).
     """
     started = time.perf_counter()
@@ -159,7 +161,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
         path.parent.mkdir(parents=True, exist_ok=True)
         result.posterior = posterior_sampling.run_posterior(
             problem, params, walkers=post.walkers, steps=post.steps, max_steps=post.max_steps, seed=opt.seed,
-            checkpoint_path=path, progress=posterior_progress)
+            checkpoint_path=path, progress=posterior_progress, runner=runner)
         result.warnings += [w for w in result.posterior.to_json()["warnings"] if w not in result.warnings]
         result.timings["posterior_s"] = result.posterior.wall_time
         log.debug("%s: posterior %d steps, %.1f s, %s", config.name, result.posterior.steps,

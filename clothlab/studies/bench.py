@@ -56,6 +56,8 @@ SECTIONS = (
     Section("render", "clothlab.studies.render_lod", "receding plane: LoD render cost and error by distance"),
     Section("footprint", "clothlab.studies.footprint", "footprint averages: SAT vs MC queries/s and error by size"),
     Section("neural", "clothlab.studies.neural", "neural surrogate decoder queries/s at three widths"),
+    Section("scaleout", "clothlab.studies.scaleout",
+            "sequential / 2 Dask workers: example fit batch, per-task overhead, check sweep, posterior pool"),
 )
 SECTION_NAMES: tuple[str, ...] = tuple(s.name for s in SECTIONS)
 

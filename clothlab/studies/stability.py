@@ -19,6 +19,13 @@ Three parts, returned as a dict (:func:`run_check`) with their human-readable li
 
 The full run evaluates more than 10^6 (parameter, direction) configurations per rule.
 
+Chunked (issue 13): the extremes sweep runs as tasks of :data:`CHUNK_SETS` parameter sets (one rule, one part
+each) and the continuity study as one task per (sweep, rule), on a :class:`clothlab.parallel.Runner`
+(in-process by default, ``clothlab check --workers N`` / ``--scheduler``).  The chunks are fixed by the seed and
+the run's sizes alone, never by the number of workers; each chunk's counts are written to a ``.npz`` file as it
+finishes (:func:`write_chunk`; a rerun with the same ``chunk_dir`` reuses them) and merged in chunk order
+(:func:`merge_sweeps`), so the findings equal the sequential sweep's exactly.
+
 Verdict (``result["verdict"]``, :func:`verdict`; :func:`run_check_command` returns :func:`exit_code`): the sweep
 fails when it finds any non-finite or negative value, any reciprocity violation above RECIPROCITY_RTOL relative,
 or any evaluation that raised (its value is unknown); exit code 1 then, 0 otherwise.  Continuity jumps, the
@@ -172,6 +179,97 @@ def sweep_extremes(parameter_sets, wi, wo, rule, max_examples: int = 5) -> dict:
     return {**counts, "worst_reciprocity_rel": worst_reciprocity, "examples": examples}
 
 
+CHUNK_SETS = 1024
+"""Parameter sets per extremes task (the fast check is one task per rule and part)."""
+_COUNT_KEYS = ("configurations", "non_finite", "negative", "back_facing_nonzero", "reciprocity", "exceptions")
+
+
+def merge_sweeps(parts, max_examples: int = 5) -> dict:
+    """One :func:`sweep_extremes` result from those of consecutive chunks of its parameter sets, in order:
+    counts summed, the worst reciprocity the largest, the first ``max_examples`` reproducers (exactly the
+    sequential sweep's result)."""
+    merged = {key: sum(int(p.get(key, 0)) for p in parts) for key in _COUNT_KEYS}
+    if not any("exceptions" in p for p in parts):
+        del merged["exceptions"]  # as sweep_extremes: the key only when an evaluation raised
+    examples = [ex for p in parts for ex in p["examples"]][:max_examples]
+    return {**merged, "worst_reciprocity_rel": max(float(p["worst_reciprocity_rel"]) for p in parts),
+            "examples": examples}
+
+
+def _sweep_task(directions, job):
+    """One extremes chunk (a Runner task): ``job`` = (rule, parameter sets)."""
+    rule, sets = job
+    return sweep_extremes(sets, *directions, rule)
+
+
+def chunk_key(rule, part: str, index: int, sets, wi, wo) -> str:
+    """File stem of one extremes chunk: rule, part, index and a digest of its inputs (a changed sweep never
+    reuses an old chunk file)."""
+    import hashlib
+    import json
+
+    from clothlab import __version__
+
+    digest = hashlib.sha256(json.dumps([__version__, list(rule), sets], sort_keys=True).encode()
+                            + np.ascontiguousarray(wi).tobytes() + np.ascontiguousarray(wo).tobytes())
+    return f"extremes-{rule[0]}-{rule[1]}-{part}-{index:04d}-{digest.hexdigest()[:16]}"
+
+
+def write_chunk(path: Path, counts: dict) -> None:
+    """One chunk's :func:`sweep_extremes` result as ``.npz`` (counts as integers, the reproducers as JSON),
+    written atomically."""
+    import io
+    import json
+
+    from clothlab.atomic import atomic_write_bytes
+
+    buffer = io.BytesIO()
+    np.savez(buffer, **{k: np.int64(counts[k]) for k in _COUNT_KEYS if k in counts},
+             worst_reciprocity_rel=np.float64(counts["worst_reciprocity_rel"]),
+             examples=np.array(json.dumps(counts["examples"], default=float)))
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def read_chunk(path: Path) -> dict:
+    """A chunk written by :func:`write_chunk`, as the :func:`sweep_extremes` result it holds."""
+    import json
+
+    with np.load(path) as data:
+        out = {k: int(data[k]) for k in _COUNT_KEYS if k in data.files}
+        out["worst_reciprocity_rel"] = float(data["worst_reciprocity_rel"])
+        out["examples"] = json.loads(str(data["examples"]))
+    return out
+
+
+def sweep_chunked(jobs, wi, wo, runner, chunk_dir: Path) -> dict:
+    """:func:`sweep_extremes` of every (label, rule, part, parameter sets) in ``jobs`` as chunks of
+    :data:`CHUNK_SETS` sets on ``runner``; each chunk lands in ``chunk_dir`` as it finishes and chunks found
+    there already are reused.  Returns {label: {part: merged result}}."""
+    from clothlab.parallel import raise_failures
+
+    chunk_dir = Path(chunk_dir)
+    chunk_dir.mkdir(parents=True, exist_ok=True)
+    chunks = []  # (label, part, path, rule, sets)
+    for label, rule, part, sets in jobs:
+        for index, start in enumerate(range(0, max(len(sets), 1), CHUNK_SETS)):
+            piece = sets[start:start + CHUNK_SETS]
+            chunks.append((label, part, chunk_dir / f"{chunk_key(rule, part, index, piece, wi, wo)}.npz", rule,
+                           piece))
+    todo = [c for c in chunks if not c[2].exists()]
+
+    def landed(i, counts):
+        if isinstance(counts, dict):
+            write_chunk(todo[i][2], counts)
+
+    raise_failures(runner.map(_sweep_task, [(c[3], c[4]) for c in todo], shared=(wi, wo),
+                              names=[c[2].stem for c in todo], desc="check: extremes", on_result=landed),
+                   "check chunks")
+    out: dict = {}
+    for label, part, path, _, _ in chunks:
+        out.setdefault(label, {}).setdefault(part, []).append(read_chunk(path))
+    return {label: {part: merge_sweeps(p) for part, p in parts.items()} for label, parts in out.items()}
+
+
 def _refine_jump(base, name, lo, hi, f_lo, f_hi, wi, wo, rule, width):
     """Bisect [lo, hi] on one direction pair, keeping the half with the larger change, until it is
     narrower than ``width``; returns (x, |f(x + width) - f(x)|)."""
@@ -203,47 +301,58 @@ def continuity_sweeps(fast: bool) -> list[tuple]:
     ]
 
 
-def continuity_study(fast: bool, wi, wo, rules=RULES_CHECKED, refine: int = 12) -> list[dict]:
-    """Discontinuities in the swept parameter, per sweep and rule.
+def continuity_study(fast: bool, wi, wo, rules=RULES_CHECKED, refine: int = 12, runner=None) -> list[dict]:
+    """Discontinuities in the swept parameter, per sweep and rule (one :func:`continuity_row` each, as tasks
+    on ``runner`` when given).
 
     The parameter is swept on a grid of K points; per direction the grid steps whose change is at least
     JUMP_TOLERANCE of max_x |f| and 3x the larger neighbouring step are candidates; the ``refine`` largest are
     bisected down to eps = 1e-9 of the range, and the jump |f(x + eps) - f(x)| / max_x |f| is measured there.
     A continuous function gives ~eps |f'| / max |f| (tiny); a discontinuity keeps its size."""
+    jobs = [(sweep, rule, 120 if fast else 1000, refine) for sweep in continuity_sweeps(fast) for rule in rules]
+    if runner is None:
+        return [continuity_row((wi, wo), job) for job in jobs]
+    from clothlab.parallel import raise_failures
+
+    return raise_failures(runner.map(continuity_row, jobs, shared=(wi, wo), desc="check: continuity",
+                                     names=[f"{job[0][0]}, {job[1][0]}-{job[1][1]}" for job in jobs]),
+                          "continuity sweeps")
+
+
+def continuity_row(directions, job) -> dict:
+    """One row of :func:`continuity_study`: ``job`` = (sweep of :func:`continuity_sweeps`, rule, grid points K,
+    refine), ``directions`` = (wi, wo)."""
     from clothlab.frames import vector_to_spherical
 
-    k = 120 if fast else 1000
-    rows = []
-    for label, base, name, lo, hi, expected in continuity_sweeps(fast):
-        xs = np.linspace(lo, hi, k)
-        eps = 1e-9 * (hi - lo)
-        for rule in rules:
-            f = np.array([_evaluate(wi, wo, {**base, name: x}, rule) for x in xs])  # (K, M)
-            scale = np.maximum(np.abs(f).max(axis=0), 1e-300)
-            step = np.abs(np.diff(f, axis=0)) / scale  # (K-1, M)
-            padded = np.pad(step, ((1, 1), (0, 0)))
-            neighbours = np.maximum(padded[:-2], padded[2:])
-            candidate = (step > JUMP_TOLERANCE) & (step > 3.0 * neighbours)
-            idx = np.argwhere(candidate)
-            order = np.argsort(-step[candidate])[:refine]
-            jumps = []
-            for kk, mm in idx[order]:
-                x, size = _refine_jump(base, name, xs[kk], xs[kk + 1], f[kk, mm], f[kk + 1, mm],
-                                       wi[mm:mm + 1], wo[mm:mm + 1], rule, eps)
-                jumps.append((size / scale[mm], x, mm))
-            real = [j for j in jumps if j[0] > JUMP_TOLERANCE]
-            row = {"sweep": label, "parameter": name, "rule": f"{rule[0]}-{rule[1]}", "expected": expected,
-                   "points": k, "eps": eps, "candidates": int(candidate.sum()), "refined": len(jumps),
-                   "jumps": len(real), "largest_jump": 0.0, "at": None, "direction_deg": None}
-            if jumps:
-                size, x, mm = max(jumps)
-                ti, pi_ = vector_to_spherical(wi[mm:mm + 1])
-                to, po = vector_to_spherical(wo[mm:mm + 1])
-                row.update({"largest_jump": float(size), "at": float(x),
-                            "direction_deg": [round(float(v), 4) for v in (ti[0], pi_[0], to[0], po[0])],
-                            "jump_locations": sorted({round(float(j[1]), 6) for j in real})[:10]})
-            rows.append(row)
-    return rows
+    wi, wo = directions
+    (label, base, name, lo, hi, expected), rule, k, refine = job
+    xs = np.linspace(lo, hi, k)
+    eps = 1e-9 * (hi - lo)
+    f = np.array([_evaluate(wi, wo, {**base, name: x}, rule) for x in xs])  # (K, M)
+    scale = np.maximum(np.abs(f).max(axis=0), 1e-300)
+    step = np.abs(np.diff(f, axis=0)) / scale  # (K-1, M)
+    padded = np.pad(step, ((1, 1), (0, 0)))
+    neighbours = np.maximum(padded[:-2], padded[2:])
+    candidate = (step > JUMP_TOLERANCE) & (step > 3.0 * neighbours)
+    idx = np.argwhere(candidate)
+    order = np.argsort(-step[candidate])[:refine]
+    jumps = []
+    for kk, mm in idx[order]:
+        x, size = _refine_jump(base, name, xs[kk], xs[kk + 1], f[kk, mm], f[kk + 1, mm],
+                               wi[mm:mm + 1], wo[mm:mm + 1], rule, eps)
+        jumps.append((size / scale[mm], x, mm))
+    real = [j for j in jumps if j[0] > JUMP_TOLERANCE]
+    row = {"sweep": label, "parameter": name, "rule": f"{rule[0]}-{rule[1]}", "expected": expected,
+           "points": k, "eps": eps, "candidates": int(candidate.sum()), "refined": len(jumps),
+           "jumps": len(real), "largest_jump": 0.0, "at": None, "direction_deg": None}
+    if jumps:
+        size, x, mm = max(jumps)
+        ti, pi_ = vector_to_spherical(wi[mm:mm + 1])
+        to, po = vector_to_spherical(wo[mm:mm + 1])
+        row.update({"largest_jump": float(size), "at": float(x),
+                    "direction_deg": [round(float(v), 4) for v in (ti[0], pi_[0], to[0], po[0])],
+                    "jump_locations": sorted({round(float(j[1]), 6) for j in real})[:10]})
+    return row
 
 
 def psi_threshold_jump(wi, wo, rules=RULES_CHECKED + (("support", 32),)) -> list[dict]:
@@ -276,10 +385,26 @@ PARTS = ("extremes", "continuity", "psi_threshold", "stiff", "verdict")
 """The parts of :func:`run_check`, in order (``stiff`` in the full run only)."""
 
 
-def run_check(full: bool = False, seed: int = 0, figures_dir=None, on_part=None) -> dict:
+def run_check(full: bool = False, seed: int = 0, figures_dir=None, on_part=None, runner=None,
+              chunk_dir=None) -> dict:
     """Run the stability study (fast subset by default, ``full`` for >= 10^6 configurations per rule and
     the stiff fits) and return its findings.  ``on_part(name, result)`` is called as each part of
-    :data:`PARTS` finishes (``"start"`` first, with the run's sizes)."""
+    :data:`PARTS` finishes (``"start"`` first, with the run's sizes).  ``runner``: where the extremes chunks and
+    continuity sweeps run (default in-process); ``chunk_dir``: where the chunk files go (default a temporary
+    directory, removed after the merge; a kept one is reused by a rerun)."""
+    import contextlib
+    import tempfile
+
+    from clothlab.parallel import InProcessRunner
+
+    with contextlib.ExitStack() as stack:
+        if chunk_dir is None:
+            chunk_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="clothlab-check-"))
+        return _run_check(full, seed, figures_dir, on_part, runner or InProcessRunner(), Path(chunk_dir),
+                          parallel=runner is not None)
+
+
+def _run_check(full, seed, figures_dir, on_part, runner, chunk_dir, parallel) -> dict:
     def done(name):
         if on_part is not None:
             on_part(name, result)
@@ -292,10 +417,9 @@ def run_check(full: bool = False, seed: int = 0, figures_dir=None, on_part=None)
     result = {"full": full, "seed": seed, "directions": len(wi), "grid_sets": len(grid),
               "random_sets": len(random_sets), "extremes": {}}
     done("start")
-    for rule in RULES_CHECKED:
-        label = f"{rule[0]}-{rule[1]}"
-        result["extremes"][label] = {"grid": sweep_extremes(grid, wi, wo, rule),
-                                     "random": sweep_extremes(random_sets, wi, wo, rule)}
+    jobs = [(f"{rule[0]}-{rule[1]}", rule, part, sets) for rule in RULES_CHECKED
+            for part, sets in (("grid", grid), ("random", random_sets))]
+    result["extremes"] = sweep_chunked(jobs, wi, wo, runner, chunk_dir)
     totals = {"configurations": 0, "non_finite": 0, "negative": 0, "back_facing_nonzero": 0, "reciprocity": 0,
               "exceptions": 0}
     for parts in result["extremes"].values():
@@ -307,7 +431,7 @@ def run_check(full: bool = False, seed: int = 0, figures_dir=None, on_part=None)
     cwi, cwo = check_directions(60 if full else 24, np.random.default_rng(seed + 1))
     front = (cwi[:, 2] > 0) & (cwo[:, 2] > 0)
     cwi, cwo = cwi[front], cwo[front]
-    result["continuity"] = continuity_study(not full, cwi, cwo)
+    result["continuity"] = continuity_study(not full, cwi, cwo, runner=runner if parallel else None)
     done("continuity")
     result["psi_threshold"] = psi_threshold_jump(*check_directions(400, np.random.default_rng(seed + 2)))
     done("psi_threshold")
@@ -381,18 +505,19 @@ def check_lines(result: dict) -> list[str]:
 
 
 def run_check_command(*, full: bool, seed: int, data_dir: Path | None, output: Path | None,
-                      json_path: Path | None, emit: Callable[[str], None]) -> int:
+                      json_path: Path | None, emit: Callable[[str], None], runner=None) -> int:
     """``clothlab check``: run :func:`run_check`, hand its lines to ``emit`` as each part finishes, write the
     findings as JSON to ``json_path`` and, with ``output``, an HTML page (and the JSON) into that directory.
     Returns :func:`exit_code` (1 when the sweep found a problem).  ``data_dir`` is accepted for symmetry with
-    ``clothlab bench`` and not needed: every data set of the check is simulated in the run."""
+    ``clothlab bench`` and not needed: every data set of the check is simulated in the run.  ``runner``: as in
+    :func:`run_check`."""
     del data_dir
 
     def on_part(name, partial):
         for line in part_lines(name, partial):
             emit(line)
 
-    result = run_check(full=full, seed=seed, figures_dir=output, on_part=on_part)
+    result = run_check(full=full, seed=seed, figures_dir=output, on_part=on_part, runner=runner)
     if json_path is not None:
         import json
 

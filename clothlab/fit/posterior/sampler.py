@@ -6,6 +6,13 @@ when ``tol_factor * max(tau) < steps`` and every tau changed by < :data:`TAU_CHA
 (and at least ``steps`` were run), or at ``max_steps``.  Burn-in 2 max(tau) is discarded and the rest thinned
 by max(1, min(tau) / 2).
 
+Through a pool (issue 13): with a :class:`clothlab.parallel.Runner` the log-probability of the walkers emcee
+hands over in one call is split into one chunk per worker slot, each chunk a task (the likelihood is placed on
+the workers once).  Every walker's value depends on its own coordinates only, so the chain is the in-process
+one bit for bit.  ``pool="auto"`` (the default) times both ways on the initial half-ensemble and keeps the
+pool only when it is faster (small problems: the transfer costs more than the work); in-process is the
+default without a runner.
+
 Reproducible and resumable: the walkers start in a ball of radius :data:`BALL_RADIUS` (unit coordinates,
 reflected into the box) drawn from ``numpy.random.RandomState(seed)``, whose following state seeds the sampler
 (emcee has no seed argument); :mod:`clothlab.fit.posterior.checkpoint` keeps the state between sessions.
@@ -33,6 +40,7 @@ from clothlab.fit.posterior.checkpoint import (
 )
 from clothlab.fit.posterior.likelihood import NOISE_RANGE, _Likelihood
 from clothlab.fit.posterior.result import PosteriorResult
+from clothlab.parallel import raise_failures
 from clothlab.progress import Progress, get_logger
 
 log = get_logger(__name__)
@@ -97,6 +105,55 @@ def _deferred_sigint():
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+def _chunk_log_prob(like, X):
+    """One pool task: the log-probabilities of a chunk of walkers."""
+    return like(X)
+
+
+class _PooledLogProb:
+    """``like(X)`` for a batch of walkers as one task per chunk on ``runner`` (one chunk per worker slot)."""
+
+    def __init__(self, like: _Likelihood, runner):
+        self.runner = runner
+        self.shared = runner.share(like)
+        self.chunks = max(1, int(runner.workers))
+
+    def __call__(self, X) -> np.ndarray:
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        parts = np.array_split(X, min(self.chunks, len(X)))
+        out = self.runner.map(_chunk_log_prob, parts, shared=self.shared, desc="posterior walkers", progress=False)
+        return np.concatenate(raise_failures(out, "posterior log-probability chunks"))
+
+
+def _best_time(fn, X, repeats: int = 2) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        tic = time.perf_counter()
+        fn(X)
+        best = min(best, time.perf_counter() - tic)
+    return best
+
+
+def choose_log_prob(like: _Likelihood, runner, pool, half: np.ndarray):
+    """The log-probability emcee calls: ``like`` itself, or through ``runner``'s pool (:class:`_PooledLogProb`)
+    when ``pool`` is True, or when ``pool == "auto"`` and the pool evaluated ``half`` (the walkers of one emcee
+    call) faster than in-process (after one warm-up call that places the model on the workers).
+    Returns (function, {"pool": bool, "in_process_s": .., "pool_s": ..})."""
+    if runner is None or pool is False:
+        return like, {"pool": False}
+    if pool not in (True, "auto"):
+        raise ValueError(f"pool must be True, False or 'auto', got {pool!r}")
+    pooled = _PooledLogProb(like, runner)
+    if pool is True:
+        return pooled, {"pool": True}
+    pooled(half)  # warm-up: the workers load the model and compile nothing twice
+    local_s, pool_s = _best_time(like, half), _best_time(pooled, half)
+    use = pool_s < local_s
+    log.info("posterior: %d walkers per call, in-process %.3g s, pool of %d %.3g s: %s", len(half), local_s,
+             pooled.chunks, pool_s, "using the pool" if use else "staying in-process")
+    return (pooled if use else like), {"pool": use, "in_process_s": local_s, "pool_s": pool_s}
+
+
 class _StepProgress:
     """The sampler's progress: one :class:`clothlab.progress.Progress` of steps, its description naming the
     minimum and the cap and, after each convergence check, the tau estimate."""
@@ -119,7 +176,7 @@ class _StepProgress:
 def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, max_steps: int, seed: int,
                   checkpoint_path=None, progress: bool = True, tol_factor: float = 50.0, check_every: int = 100,
                   max_seconds: float | None = None, moves=None,
-                  on_step: Callable[[int], None] | None = None) -> PosteriorResult:
+                  on_step: Callable[[int], None] | None = None, runner=None, pool="auto") -> PosteriorResult:
     """Sample the posterior of ``problem``'s free parameters with emcee (see the module docstring).
 
     Parameters
@@ -140,6 +197,8 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
     max_seconds : optional wall-time cap (the run then stops unconverged after the current step).
     moves : emcee moves (default: emcee's stretch move).
     on_step : called with the number of completed steps after each step (tests raise KeyboardInterrupt here).
+    runner, pool : a :class:`clothlab.parallel.Runner` to evaluate chunks of walkers on, and whether to use it
+        (True, False or "auto": measured, :func:`choose_log_prob`); the chain is the same either way.
     """
     import emcee
 
@@ -180,7 +239,8 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
         st = _initial_state(like, x_opt, walkers, seed)
     st.started = started
 
-    sampler = emcee.EnsembleSampler(walkers, like.ndim, like, vectorize=True, moves=moves)
+    log_prob, _ = choose_log_prob(like, runner, pool, st.coords[: walkers // 2])
+    sampler = emcee.EnsembleSampler(walkers, like.ndim, log_prob, vectorize=True, moves=moves)
     bar = _StepProgress(progress, steps, max_steps, resumed=st.steps)
     chain_chunks, lp_chunks = [st.chain], [st.log_prob]
     n = st.steps

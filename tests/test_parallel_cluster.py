@@ -1,0 +1,168 @@
+"""Tested the way a cluster runs: a Dask LocalCluster of 2 worker processes on loopback, started and torn down
+here; a worker killed (SIGKILL) mid-run; every result still present, in order, identical to the sequential
+run, and nothing half-written.  The fast test uses plain tasks; the fits and the sweep are marked slow
+(fresh worker processes load the compiled kernels, ~10 s each on a loaded 2-core machine)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+
+from test_parallel import make_project  # noqa: E402
+
+from clothlab.parallel import SCHEDULER_ENV, InProcessRunner, TaskFailure, make_runner  # noqa: E402
+
+
+def _port_open(address: str) -> bool:
+    host, port = address.removeprefix("tcp://").rsplit(":", 1)
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex((host, int(port))) == 0
+
+
+@pytest.fixture
+def cluster():
+    """A 2-process LocalCluster; afterwards its scheduler port is closed and its worker processes are gone."""
+    import psutil
+
+    runner = make_runner(workers=2)
+    address = runner.client.scheduler.address
+    pids = []
+    try:
+        yield runner, pids
+    finally:
+        pids += runner.client.run(os.getpid).values() if runner.client.status == "running" else []
+        runner.close()
+    deadline = time.monotonic() + 10
+    while (_port_open(address) or any(psutil.pid_exists(p) for p in pids)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _port_open(address), f"scheduler port {address} left open"
+    assert not [p for p in pids if psutil.pid_exists(p)], "worker processes left running"
+
+
+def _kill_a_busy_worker(client) -> int | None:
+    """SIGKILL one worker that is processing a task; its pid (None if no task is running)."""
+    for address, keys in client.processing().items():
+        if keys:
+            pid = client.run(os.getpid, workers=[address])[address]
+            os.kill(pid, signal.SIGKILL)
+            return pid
+    return None
+
+
+def _square_slowly(x):
+    time.sleep(0.3)
+    return x * x
+
+
+def test_a_killed_worker_s_task_is_retried_by_name_and_every_result_lands(cluster, caplog):
+    import logging
+
+    runner, pids = cluster
+    assert runner.workers == 2 and runner.client.scheduler.address.startswith("tcp://127.0.0.1:")
+    killed = []
+
+    def first(i, value):
+        if not killed:
+            killed.append(_kill_a_busy_worker(runner.client))
+
+    started = time.monotonic()
+    with caplog.at_level(logging.WARNING, logger="clothlab"):
+        out = runner.map(_square_slowly, range(8), names=[f"sq{i}" for i in range(8)], on_result=first)
+    assert killed and killed[0] is not None
+    assert out == [x * x for x in range(8)]  # all present, in submission order
+    assert "KilledWorker" in caplog.text and "retrying it (attempt 2 of 2)" in caplog.text
+    assert time.monotonic() - started < 60
+    # the same cluster as an existing one: by --scheduler and by $DASK_SCHEDULER_ADDRESS
+    address = runner.client.scheduler.address
+    for other in (make_runner(scheduler=address), make_runner(environ={SCHEDULER_ENV: address})):
+        with other:
+            assert other.description == f"Dask cluster at {address}" and other.cluster is None
+            assert other.map(abs, [-1, -2, 3]) == [1, 2, 3]
+    assert runner.map(abs, [-4]) == [4]  # closing the other clients left the cluster running
+
+
+@pytest.mark.slow
+def test_batch_and_sweep_survive_a_killed_worker_and_match_the_sequential_run(tmp_path, cluster, caplog):
+    import logging
+
+    from clothlab.config import load_config
+    from clothlab.fit.batch import plan_batch, run_batch
+    from clothlab.studies import stability as check
+
+    runner, pids = cluster
+    configs = make_project(tmp_path / "seq", ("cotton-twill", "polyester-lining", "silk-charmeuse"))
+    items, _ = plan_batch([load_config(c) for c in configs])
+    sequential = run_batch(items, InProcessRunner())
+    configs = make_project(tmp_path / "par", ("cotton-twill", "polyester-lining", "silk-charmeuse"))
+    items, _ = plan_batch([load_config(c) for c in configs])
+    killed = []
+
+    def first(row):
+        if not killed:
+            killed.append(_kill_a_busy_worker(runner.client))
+
+    with caplog.at_level(logging.WARNING, logger="clothlab"):
+        parallel = run_batch(items, runner, on_row=first)
+    assert killed and killed[0] is not None
+    assert "KilledWorker" in caplog.text
+    assert [r["status"] for r in parallel] == ["fitted"] * 3
+    for a, b in zip(sequential, parallel, strict=True):
+        assert a["name"] == b["name"] and a["params"] == b["params"]  # bit for bit
+        fa = json.loads((tmp_path / "seq" / "fits" / a["name"] / "fit.json").read_text())
+        fb = json.loads((tmp_path / "par" / "fits" / b["name"] / "fit.json").read_text())
+        assert fa["coefficients"] == fb["coefficients"] and fa["errors"] == fb["errors"]
+    assert not list((tmp_path / "par" / "fits").glob(".*"))  # no half-written temporary or lock left
+
+    # a small sweep in chunks on the cluster, a worker killed after the first chunk: the sequential counts
+    rng = np.random.default_rng(3)
+    wi, wo = check.check_directions(16, rng)
+    sets = check.random_parameter_sets(40, rng)
+    rule = ("support", 8)
+    whole = check.sweep_extremes(sets, wi, wo, rule)
+    check.CHUNK_SETS, saved = 5, check.CHUNK_SETS
+    try:
+        real_map = runner.map
+
+        def map_killing(fn, items, **kwargs):
+            done = kwargs.pop("on_result")
+            hit = []
+
+            def on_result(i, value):
+                if not hit:
+                    hit.append(_kill_a_busy_worker(runner.client))
+                done(i, value)
+
+            return real_map(fn, items, on_result=on_result, **kwargs)
+
+        runner.map = map_killing
+        merged = check.sweep_chunked([("s", rule, "random", sets)], wi, wo, runner, tmp_path / "chunks")
+    finally:
+        check.CHUNK_SETS = saved
+        del runner.map
+    assert merged == {"s": {"random": whole}}
+    assert not any(isinstance(r, TaskFailure) for r in parallel)
+
+
+@pytest.mark.slow
+def test_posterior_through_the_dask_pool_is_the_in_process_chain(cluster):
+    from test_posterior import FAST, _problem
+
+    from clothlab.fit.posterior import run_posterior
+
+    runner, _ = cluster
+    problem, truth = _problem()
+    reference = run_posterior(problem, truth, seed=5, **FAST)
+    pooled = run_posterior(problem, truth, seed=5, runner=runner, pool=True, **FAST)
+    np.testing.assert_array_equal(pooled.chain, reference.chain)
+    np.testing.assert_array_equal(pooled.log_prob, reference.log_prob)
+    auto = run_posterior(problem, truth, seed=5, runner=runner, pool="auto", **FAST)
+    np.testing.assert_array_equal(auto.chain, reference.chain)
