@@ -197,3 +197,27 @@ def test_random_parameters_finite_non_negative(psi, umax, kappa, beta, w, l, del
     if w * math.sin(math.radians(umax)) < l:  # the reference defines only segments that fit (sec. 5.3)
         expected = _reference_sum(WI[:30], WO[:30], params)
         np.testing.assert_allclose(value[:30], expected, rtol=1e-6, atol=1e-12 * max(expected.max(), 1e-300))
+
+
+@pytest.mark.parametrize("preset", ["silk-shantung", "polyester-lining"])
+def test_denormal_smoothing_is_the_unsmoothed_limit(preset):
+    """delta so small that delta * umax underflows (a denormal, found by hypothesis): eq. 9's fade takes its
+    delta -> 0 limit (no fade) instead of dividing by zero; reflectance and texture equal the delta = 0 values."""
+    from clothlab.models.irawan.model import IrawanModel
+    from clothlab.weave.presets import get_preset
+
+    model = IrawanModel(get_preset(preset))
+    rng = np.random.default_rng(3)
+    wi, wo = (np.abs(rng.normal(size=(40, 3))) for _ in range(2))
+    wi, wo = wi / np.linalg.norm(wi, axis=1)[:, None], wo / np.linalg.norm(wo, axis=1)[:, None]
+    limit = model.components(wi, wo, {"delta": 0.0})
+    texture = model.texture()
+    u, v = rng.random(40), rng.random(40)
+    for tiny in (5e-324, 1e-310):
+        got = model.components(wi, wo, {"delta": tiny})
+        for name in limit:
+            np.testing.assert_allclose(got[name], limit[name], rtol=1e-12, atol=0.0)
+        t0 = texture.components(u, v, wi, wo, {"delta": 0.0}, noise=False)
+        t1 = texture.components(u, v, wi, wo, {"delta": tiny}, noise=False)
+        for name in t0:
+            np.testing.assert_allclose(t1[name], t0[name], rtol=1e-12, atol=0.0)

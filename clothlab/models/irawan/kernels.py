@@ -212,9 +212,10 @@ def smoothstep(x):
 @njit(cache=True, inline="always")
 def filament_fade(u, umax, delta):
     """1 - s((|u| - (1 - delta) umax) / (delta umax)), the factor A_s / A of eq. 9; 1 when delta = 0."""
-    if delta <= 0.0:
+    width = delta * umax
+    if not width > 0.0:  # delta = 0, or so small that delta umax underflows: the unsmoothed limit (no fade)
         return 1.0
-    return 1.0 - smoothstep((abs(u) - (1.0 - delta) * umax) / (delta * umax))  # eq. 9
+    return 1.0 - smoothstep((abs(u) - (1.0 - delta) * umax) / width)  # eq. 9
 
 
 # ------------------------------------------------------------------ integrands (Algorithms 1-2)
