@@ -105,3 +105,21 @@ def test_linear_weights_are_the_first_order_metric(metric):
     residual = metric_residuals(measured, measured + delta, metric)
     linearised = linear_weights(measured, metric) * delta
     np.testing.assert_allclose(linearised, residual, rtol=1e-5)
+
+
+def test_a_single_zero_value_is_named_by_file_channel_and_row():
+    """A fit with the relative metric and one zero measured value: the message names the measurement file,
+    the channel and the row with its angles (issue 11: was a placeless "first at index (0, 0)")."""
+    from clothlab.errors import InputError
+    from clothlab.fit.metrics import check_measurement_for_metric
+    from clothlab.io.measurement import Measurement
+
+    values = np.full((3, 2), 0.2)
+    values[1, 1] = 0.0
+    m = Measurement(theta_i=np.array([10.0, 20.0, 30.0]), phi_i=np.zeros(3), theta_o=np.array([5.0, 15.0, 25.0]),
+                    phi_o=np.full(3, 180.0), values=values, channels=("grey", "nir"), source="/data/t.csv")
+    check_measurement_for_metric(m, "cube-root")  # zeros are fine there
+    with pytest.raises(InputError) as info:
+        check_measurement_for_metric(m, "relative")
+    text = str(info.value)
+    assert text.startswith("/data/t.csv, field 'nir':") and "data row 2" in text and "theta_i 20" in text

@@ -71,6 +71,25 @@ def _require_positive(measured: np.ndarray, metric: str) -> None:
             f"{tuple(int(i) for i in first)}: {float(measured[first])!r}); drop those rows or use 'cube-root'")
 
 
+def check_measurement_for_metric(measurement, metric: str) -> None:
+    """MetricDataError naming the measurement file, the channel and the row (its four angles, clothlab
+    convention, deg) of the first value that ``metric`` cannot use (``relative`` / ``log`` need > 0)."""
+    _check_metric(metric)
+    if metric == "cube-root":
+        return
+    values = np.asarray(measurement.values, dtype=np.float64)
+    bad = ~(values > 0)
+    if not bad.any():
+        return
+    row, col = np.unravel_index(int(np.argmax(bad)), values.shape)
+    angles = ", ".join(f"{name} {float(getattr(measurement, name)[row]):g}"
+                       for name in ("theta_i", "phi_i", "theta_o", "phi_o"))
+    raise MetricDataError(
+        f"the {metric!r} metric needs measured values > 0; {int(bad.sum())} are not, first {float(values[row, col])!r} "
+        f"in data row {int(row) + 1} ({angles} deg); drop those rows or use 'cube-root'",
+        path=measurement.source, field=str(measurement.channels[col]))
+
+
 def relative_errors(measured, model) -> np.ndarray:
     """|model - measured| / measured, same shape as the inputs (fractions, dimensionless).
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from clothlab.errors import ConfigError, GeometryWarning
-from clothlab.fit.metrics import linear_weights, metric_residuals, objective_value
+from clothlab.fit.metrics import check_measurement_for_metric, linear_weights, metric_residuals, objective_value
 from clothlab.fit.nnls import nnls_small
 from clothlab.io.loader import load_measurement
 from clothlab.models.components import coefficient_name
@@ -65,6 +65,7 @@ class FitProblem:
         self.wi = np.ascontiguousarray(measurement.wi)
         self.wo = np.ascontiguousarray(measurement.wo)
         self.y = measurement.values
+        check_measurement_for_metric(measurement, metric)  # the file, channel and row of a bad value
         self.weights = linear_weights(self.y, metric)
         self.component_names = tuple(model.component_names)
         self.evaluations = 0
