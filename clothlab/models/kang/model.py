@@ -55,6 +55,9 @@ from clothlab.weave.lookup import locate_segments
 from clothlab.weave.model import YARN_KINDS, Weave
 
 WEAVE_LEVELS = ("prefiltered", "flat")
+TILE_RULES = ("peak", "legendre")
+#: most nodes per perturbation axis of the ``peak`` rule when ``tile_nodes`` is None (docs/kang.md).
+PEAK_NODES = 10
 
 
 class KangModel(Model):
@@ -84,13 +87,15 @@ class KangModel(Model):
         "occluded eq. 1 lobe (Ashikhmin-Shirley, Schlick F with fresnel_f0) at its points - not an albedo: "
         "the yarn's specular albedo is ks_<kind> times the lobe's white-furnace albedo (<= 1)")
 
-    def __init__(self, weave: Weave, *, alternating: bool = True, tile_nodes: int | None = None,
-                 weave_level: str = "prefiltered", prefilter_min_samples: int = 5,
+    def __init__(self, weave: Weave, *, alternating: bool = True, tile_rule: str = "peak",
+                 tile_nodes: int | None = None, weave_level: str = "prefiltered", prefilter_min_samples: int = 5,
                  prefilter_max_samples: int = 64, seed: int = 0):
         if not isinstance(alternating, bool | np.bool_):
             raise ConfigError(f"alternating must be true or false, got {alternating!r}", field="alternating")
         if tile_nodes is not None and (not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1):
             raise ConfigError(f"tile_nodes must be a positive integer, got {tile_nodes!r}", field="tile_nodes")
+        if tile_rule not in TILE_RULES:
+            raise ConfigError(f"tile_rule must be one of {TILE_RULES}, got {tile_rule!r}", field="tile_rule")
         if weave_level not in WEAVE_LEVELS:
             raise ConfigError(f"weave_level must be one of {WEAVE_LEVELS}, got {weave_level!r}",
                               field="weave_level")
@@ -100,6 +105,7 @@ class KangModel(Model):
         self.weave = weave
         self.alternating = bool(alternating)
         self.params = KANG_ALTERNATING_PARAMS if self.alternating else KANG_PARAMS
+        self.tile_rule = tile_rule
         self.tile_nodes = None if tile_nodes is None else int(tile_nodes)
         self.weave_level = weave_level
         self.prefilter_min_samples = int(prefilter_min_samples)
@@ -123,7 +129,27 @@ class KangModel(Model):
         return microfacet.ashikhmin_shirley(wi_l, wo_l, pdf, f0)
 
     def _yarn_average(self, kind, wi_l, wo_l, p):
-        """E[ao rho] (N,) over the perturbation rectangle of eqs. 3-4 (Gauss-Legendre)."""
+        """E[ao rho] (N,) over the perturbation rectangle of eqs. 3-4 (rule ``tile_rule``)."""
+        if self.tile_rule == "peak":
+            return self._peak_average(kind, wi_l, wo_l, p)
+        return self._legendre_average(kind, wi_l, wo_l, p)
+
+    def _peak_average(self, kind, wi_l, wo_l, p):
+        """E[ao rho] = G(wi, wo) A(h): eq. 1's Fresnel and denominator (macro normal) times the compiled
+        peak-centred average of the eq. 2 lobe over the perturbed normals (:mod:`.kernels`)."""
+        from clothlab.models.kang import kernels
+
+        nx, ny = self._exponents(kind, p)
+        most = PEAK_NODES if self.tile_nodes is None else self.tile_nodes
+        x_gl, w_gl = _gauss_legendre_table(most)
+        h = np.ascontiguousarray(microfacet.half_vector(wi_l, wo_l).reshape(-1, 3))
+        g = microfacet.ashikhmin_shirley(wi_l, wo_l, 1.0, p["fresnel_f0"])  # eq. 1 with p(h) = 1
+        a = kernels.peak_tile_average(h, float(nx), float(ny), float(p["yarn_curvature"]),
+                                      float(p["fibre_curvature"]), x_gl, w_gl, most)
+        return g * a.reshape(g.shape)
+
+    def _legendre_average(self, kind, wi_l, wo_l, p):
+        """E[ao rho] (N,) with a tensor Gauss-Legendre rule over the whole rectangle (the previous rule)."""
         nx, ny = self._exponents(kind, p)
         if self.tile_nodes is not None:
             q_across = q_along = self.tile_nodes
@@ -266,6 +292,14 @@ def nodes_for_axis(curvature: float, exponent: float) -> int:
     if curvature == 0.0:
         return 1
     return int(np.clip(np.ceil(8.0 + 3.0 * curvature * np.sqrt(exponent)), 8, 256))
+
+
+@cache
+def _gauss_legendre_table(most: int) -> tuple[np.ndarray, np.ndarray]:
+    """The peak rule's Gauss-Legendre rows 1 ... ``most`` (:func:`clothlab.models.kang.kernels.gauss_legendre_table`)."""
+    from clothlab.models.kang import kernels
+
+    return kernels.gauss_legendre_table(most)
 
 
 @cache
