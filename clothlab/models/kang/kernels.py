@@ -38,8 +38,8 @@ LAM_WIDTHS = 2.0
 #: else 2 + ceil(NODES_PER_WIDTH r + NODES_PER_CURVATURE c) (the second term for the ambient occlusion
 #: n_p.z = sqrt(1 - da^2 - dl^2), which bends sharply near the rectangle's corners), at most ``most``.
 R_SINGLE = 1e-3
-NODES_PER_WIDTH = 2.0
-NODES_PER_CURVATURE = 8.0
+NODES_PER_WIDTH = 1.5
+NODES_PER_CURVATURE = 4.0
 
 
 @njit(cache=True, inline="always")
