@@ -104,7 +104,6 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
     scale = math.sqrt((nx + 1.0) * (ny + 1.0)) / (2.0 * math.pi)  # eq. 2 constant
     xa = np.zeros(most)
     wa = np.zeros(most)
-    inv_s = np.zeros(most)
     xl = np.zeros(most)
     wl = np.zeros(most)
     root_nx = math.sqrt(max(nx, 1e-12))

@@ -296,7 +296,7 @@ def nodes_for_axis(curvature: float, exponent: float) -> int:
 
 @cache
 def _gauss_legendre_table(most: int) -> tuple[np.ndarray, np.ndarray]:
-    """The peak rule's Gauss-Legendre rows 1 ... ``most`` (:func:`clothlab.models.kang.kernels.gauss_legendre_table`)."""
+    """The peak rule's Gauss-Legendre rows 1 ... ``most`` (:func:`.kernels.gauss_legendre_table`)."""
     from clothlab.models.kang import kernels
 
     return kernels.gauss_legendre_table(most)
