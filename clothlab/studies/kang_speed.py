@@ -139,8 +139,8 @@ def _pair(error: dict) -> str:
 
 def lines(result: dict) -> list[str]:
     out = ["== Kang tile average: legendre (previous, numpy) vs peak (compiled), 1,575 directions, same run ==",
-           f"  error: specular vs a {REFERENCE_NODES} x {REFERENCE_NODES} Gauss-Legendre rule, max / p99, floored at 1 % "
-           "of its mean; fit: the saved fit's optimisation time",
+           f"  error: specular vs a {REFERENCE_NODES} x {REFERENCE_NODES} Gauss-Legendre rule, max / p99, floored "
+           "at 1 % of its mean; fit: the saved fit's optimisation time",
            f"  {'fabric':18s} {'params':8s} {'old pairs/s':>12s} {'new pairs/s':>12s} {'ratio':>7s} "
            f"{'old error':>17s} {'new error':>17s} {'fit (s)':>8s}"]
     for r in result["tile_average"]:
