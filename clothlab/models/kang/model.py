@@ -35,8 +35,11 @@ position only through the perturbation (delta_across, delta_along) of eqs. 3-4; 
 uniform in [-1, 1] and the sawtooth phase uniform in [0, 1), so delta_across is uniform in [-c_y, c_y] and
 delta_along uniform in [-c_f, c_f] (exact when a yarn's visible part spans its width and a whole number of
 fibre ridges).  The specular average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the
-pattern's cell share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle
-(``tile_nodes`` per axis).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
+pattern's cell share of k and E a quadrature over the perturbation rectangle: ``tile_rule='peak'``
+(default) the compiled peak-centred rule of :mod:`clothlab.models.kang.kernels` (eq. 1's Fresnel and
+denominator times the average of the eq. 2 lobe, a function of the half vector alone; at most
+``tile_nodes`` per axis), ``'legendre'`` the previous tensor Gauss-Legendre rule (``tile_nodes`` per axis,
+None: :func:`nodes_for_axis`).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
 measured by the test suite against a fine grid over the tile.
 """
 
@@ -65,9 +68,11 @@ class KangModel(Model):
 
     Options: ``alternating`` (default True, the paper's model): the weft lobe is the warp lobe rotated by
     90 deg (sec. 3.3), so only ``warp.nx`` / ``warp.ny`` are parameters; False declares independent
-    ``weft.nx`` / ``weft.ny`` (a generalisation of Kang); ``tile_nodes`` (Gauss-Legendre nodes per
-    perturbation axis of the tile average and the prefiltered weave level; None (default) chooses per axis
-    from the lobe width, see :func:`nodes_for_axis`); ``weave_level``: the far (alpha = 1) level of eq. 5,
+    ``weft.nx`` / ``weft.ny`` (a generalisation of Kang); ``tile_rule`` (``'peak'``, default, or
+    ``'legendre'``: the rule of the tile average and the prefiltered weave level, module docstring);
+    ``tile_nodes`` (peak: the most nodes per axis, None = :data:`PEAK_NODES`; legendre: Gauss-Legendre
+    nodes per perturbation axis, None chooses per axis from the lobe width, see :func:`nodes_for_axis`);
+    ``weave_level``: the far (alpha = 1) level of eq. 5,
     ``'prefiltered'`` (default: the yarn level averaged over the yarn, so the far view equals the tile
     average) or ``'flat'`` (the paper's literal choice: the unperturbed normal, no ambient occlusion);
     ``prefilter_min_samples`` / ``prefilter_max_samples`` / ``seed`` for Algorithm 1.
