@@ -5,7 +5,8 @@ Per preset, each saved example fit (``fits/<fabric>``, ``fits/<fabric>-kang`` of
 fitted - IM trapezoid-11, Kang's tile average with its rule (the peak rule by default) - at its fitted
 parameters, beside IM support-8 and Kang's previous Gauss-Legendre rule with a fixed 8 nodes per axis at the
 same parameters (previous against current in detail: bench section ``kang``); plus each fit's errors and
-optimisation time.  Without saved fits (no data directory, or none under it) the models run at their default parameters and the rows say "defaults".
+optimisation time.  Without saved fits (no data directory, or none under it) the models run at their default
+parameters and the rows say "defaults".
 """
 
 from __future__ import annotations
