@@ -50,6 +50,8 @@ SECTIONS = (
     Section("tradeoff", "clothlab.studies.quadrature_tradeoff", "model error vs run time per rule, Pareto front"),
     Section("fit_algorithms", "clothlab.studies.nlopt_algorithms", "objective vs time for every nlopt algorithm"),
     Section("models", "clothlab.studies.im_vs_kang", "IM vs Kang speed and the saved fits' errors"),
+    Section("kang", "clothlab.studies.kang_speed",
+            "Kang tile average and LoD weave level: previous vs peak rule, pairs/s and error vs reference"),
     Section("posterior", "clothlab.studies.posterior", "one six-parameter posterior to the tau rule"),
     Section("coverage", "clothlab.studies.coverage", "95 % posterior interval coverage over six sets"),
     Section("btf", "clothlab.studies.btf_memory", "BTF stack streaming: images/s and peak memory"),

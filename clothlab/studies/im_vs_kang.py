@@ -2,10 +2,11 @@
 1,575 directions, timed in the same run.
 
 Per preset, each saved example fit (``fits/<fabric>``, ``fits/<fabric>-kang`` of the data directory) as
-fitted - IM trapezoid-11, Kang's tile average with the adaptive node count - at its fitted parameters (Kang's
-cost grows with its lobe exponents), beside IM support-8 and Kang with a fixed 8 nodes per axis at the same
-parameters; plus each fit's errors and optimisation time.  Without saved fits (no data directory, or none
-under it) the models run at their default parameters and the rows say "defaults".
+fitted - IM trapezoid-11, Kang's tile average with its rule (the peak rule by default) - at its fitted
+parameters, beside IM support-8 and Kang's previous Gauss-Legendre rule with a fixed 8 nodes per axis at the
+same parameters (previous against current in detail: bench section ``kang``); plus each fit's errors and
+optimisation time.  Without saved fits (no data directory, or none under it) the models run at their default
+parameters and the rows say "defaults".
 """
 
 from __future__ import annotations
@@ -44,10 +45,9 @@ def im_vs_kang(quick: bool, data: StudyData) -> list[dict]:
         candidates = [(f"irawan {im.quadrature.rule}-{im.quadrature.nodes}{' (fit)' if im_fit else ''}", im, im_params,
                        im_fit),
                       ("irawan support-8", IrawanModel(weave, Quadrature("support", 8)), im_params, None),
-                      (f"kang {'adaptive' if kang.tile_nodes is None else kang.tile_nodes} nodes"
-                       f"{' (fit)' if kang_fit else ''}", kang, kang_params, kang_fit),
-                      ("kang tile_nodes=8", KangModel(weave, tile_nodes=8, alternating=kang.alternating),
-                       kang_params, None)]
+                      (f"kang {kang.tile_rule}{' (fit)' if kang_fit else ''}", kang, kang_params, kang_fit),
+                      ("kang legendre-8", KangModel(weave, tile_rule="legendre", tile_nodes=8,
+                                                    alternating=kang.alternating), kang_params, None)]
         for label, model, p, fit in candidates:
             p = {k: v for k, v in p.items() if k in model.params}
 

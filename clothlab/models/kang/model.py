@@ -35,8 +35,11 @@ position only through the perturbation (delta_across, delta_along) of eqs. 3-4; 
 uniform in [-1, 1] and the sawtooth phase uniform in [0, 1), so delta_across is uniform in [-c_y, c_y] and
 delta_along uniform in [-c_f, c_f] (exact when a yarn's visible part spans its width and a whole number of
 fibre ridges).  The specular average is therefore share_k * E[ao * rho(n_p(delta))], with share_k the
-pattern's cell share of k and E a tensor Gauss-Legendre rule over the perturbation rectangle
-(``tile_nodes`` per axis).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
+pattern's cell share of k and E a quadrature over the perturbation rectangle: ``tile_rule='peak'``
+(default) the compiled peak-centred rule of :mod:`clothlab.models.kang.kernels` (eq. 1's Fresnel and
+denominator times the average of the eq. 2 lobe, a function of the half vector alone; at most
+``tile_nodes`` per axis), ``'legendre'`` the previous tensor Gauss-Legendre rule (``tile_nodes`` per axis,
+None: :func:`nodes_for_axis`).  The per-yarn noise has mean 1 over yarns and drops out.  Its accuracy is
 measured by the test suite against a fine grid over the tile.
 """
 
@@ -55,6 +58,9 @@ from clothlab.weave.lookup import locate_segments
 from clothlab.weave.model import YARN_KINDS, Weave
 
 WEAVE_LEVELS = ("prefiltered", "flat")
+TILE_RULES = ("peak", "legendre")
+#: most nodes per perturbation axis of the ``peak`` rule when ``tile_nodes`` is None (docs/kang.md).
+PEAK_NODES = 10
 
 
 class KangModel(Model):
@@ -62,9 +68,11 @@ class KangModel(Model):
 
     Options: ``alternating`` (default True, the paper's model): the weft lobe is the warp lobe rotated by
     90 deg (sec. 3.3), so only ``warp.nx`` / ``warp.ny`` are parameters; False declares independent
-    ``weft.nx`` / ``weft.ny`` (a generalisation of Kang); ``tile_nodes`` (Gauss-Legendre nodes per
-    perturbation axis of the tile average and the prefiltered weave level; None (default) chooses per axis
-    from the lobe width, see :func:`nodes_for_axis`); ``weave_level``: the far (alpha = 1) level of eq. 5,
+    ``weft.nx`` / ``weft.ny`` (a generalisation of Kang); ``tile_rule`` (``'peak'``, default, or
+    ``'legendre'``: the rule of the tile average and the prefiltered weave level, module docstring);
+    ``tile_nodes`` (peak: the most nodes per axis, None = :data:`PEAK_NODES`; legendre: Gauss-Legendre
+    nodes per perturbation axis, None chooses per axis from the lobe width, see :func:`nodes_for_axis`);
+    ``weave_level``: the far (alpha = 1) level of eq. 5,
     ``'prefiltered'`` (default: the yarn level averaged over the yarn, so the far view equals the tile
     average) or ``'flat'`` (the paper's literal choice: the unperturbed normal, no ambient occlusion);
     ``prefilter_min_samples`` / ``prefilter_max_samples`` / ``seed`` for Algorithm 1.
@@ -84,13 +92,15 @@ class KangModel(Model):
         "occluded eq. 1 lobe (Ashikhmin-Shirley, Schlick F with fresnel_f0) at its points - not an albedo: "
         "the yarn's specular albedo is ks_<kind> times the lobe's white-furnace albedo (<= 1)")
 
-    def __init__(self, weave: Weave, *, alternating: bool = True, tile_nodes: int | None = None,
-                 weave_level: str = "prefiltered", prefilter_min_samples: int = 5,
+    def __init__(self, weave: Weave, *, alternating: bool = True, tile_rule: str = "peak",
+                 tile_nodes: int | None = None, weave_level: str = "prefiltered", prefilter_min_samples: int = 5,
                  prefilter_max_samples: int = 64, seed: int = 0):
         if not isinstance(alternating, bool | np.bool_):
             raise ConfigError(f"alternating must be true or false, got {alternating!r}", field="alternating")
         if tile_nodes is not None and (not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1):
             raise ConfigError(f"tile_nodes must be a positive integer, got {tile_nodes!r}", field="tile_nodes")
+        if tile_rule not in TILE_RULES:
+            raise ConfigError(f"tile_rule must be one of {TILE_RULES}, got {tile_rule!r}", field="tile_rule")
         if weave_level not in WEAVE_LEVELS:
             raise ConfigError(f"weave_level must be one of {WEAVE_LEVELS}, got {weave_level!r}",
                               field="weave_level")
@@ -100,6 +110,7 @@ class KangModel(Model):
         self.weave = weave
         self.alternating = bool(alternating)
         self.params = KANG_ALTERNATING_PARAMS if self.alternating else KANG_PARAMS
+        self.tile_rule = tile_rule
         self.tile_nodes = None if tile_nodes is None else int(tile_nodes)
         self.weave_level = weave_level
         self.prefilter_min_samples = int(prefilter_min_samples)
@@ -123,7 +134,27 @@ class KangModel(Model):
         return microfacet.ashikhmin_shirley(wi_l, wo_l, pdf, f0)
 
     def _yarn_average(self, kind, wi_l, wo_l, p):
-        """E[ao rho] (N,) over the perturbation rectangle of eqs. 3-4 (Gauss-Legendre)."""
+        """E[ao rho] (N,) over the perturbation rectangle of eqs. 3-4 (rule ``tile_rule``)."""
+        if self.tile_rule == "peak":
+            return self._peak_average(kind, wi_l, wo_l, p)
+        return self._legendre_average(kind, wi_l, wo_l, p)
+
+    def _peak_average(self, kind, wi_l, wo_l, p):
+        """E[ao rho] = G(wi, wo) A(h): eq. 1's Fresnel and denominator (macro normal) times the compiled
+        peak-centred average of the eq. 2 lobe over the perturbed normals (:mod:`.kernels`)."""
+        from clothlab.models.kang import kernels
+
+        nx, ny = self._exponents(kind, p)
+        most = PEAK_NODES if self.tile_nodes is None else self.tile_nodes
+        x_gl, w_gl = _gauss_legendre_table(most)
+        h = np.ascontiguousarray(microfacet.half_vector(wi_l, wo_l).reshape(-1, 3))
+        g = microfacet.ashikhmin_shirley(wi_l, wo_l, 1.0, p["fresnel_f0"])  # eq. 1 with p(h) = 1
+        a = kernels.peak_tile_average(h, float(nx), float(ny), float(p["yarn_curvature"]),
+                                      float(p["fibre_curvature"]), x_gl, w_gl, most)
+        return g * a.reshape(g.shape)
+
+    def _legendre_average(self, kind, wi_l, wo_l, p):
+        """E[ao rho] (N,) with a tensor Gauss-Legendre rule over the whole rectangle (the previous rule)."""
         nx, ny = self._exponents(kind, p)
         if self.tile_nodes is not None:
             q_across = q_along = self.tile_nodes
@@ -266,6 +297,14 @@ def nodes_for_axis(curvature: float, exponent: float) -> int:
     if curvature == 0.0:
         return 1
     return int(np.clip(np.ceil(8.0 + 3.0 * curvature * np.sqrt(exponent)), 8, 256))
+
+
+@cache
+def _gauss_legendre_table(most: int) -> tuple[np.ndarray, np.ndarray]:
+    """The peak rule's Gauss-Legendre rows 1 ... ``most`` (:func:`.kernels.gauss_legendre_table`)."""
+    from clothlab.models.kang import kernels
+
+    return kernels.gauss_legendre_table(most)
 
 
 @cache

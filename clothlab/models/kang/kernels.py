@@ -1,0 +1,173 @@
+"""Compiled (numba) kernel of Kang's tile average: E[ao p(h; n_p)] over the perturbation rectangle of eqs. 3-4.
+
+Why the integrand is a function of the half vector alone.  In eq. 1 as evaluated here (rho = p(h) F(k.h) /
+(4 (k.h) max(k1.n, k2.n)), :mod:`.microfacet`) the Fresnel term and the denominator use the macro normal;
+only the eq. 2 density p(h; n_p) depends on the perturbed normal n_p.  So, per yarn type,
+
+    E[ao rho] = G(wi, wo) A(h),   G = F(k.h) / (4 (k.h) max(k1.n, k2.n)),
+    A(h) = 1 / (4 c_y c_f) * int_{-c_y}^{c_y} int_{-c_f}^{c_f} n_p.z p(h; n_p(da, dl)) d(dl) d(da),
+
+with n_p = (da, dl, sqrt(1 - da^2 - dl^2)) in the yarn frame (eqs. 3-4) and ao = n_p.z (sec. 4.2.2).  The lobe
+frame of eq. 2 about n_p has closed forms: t = (x - da n_p) / s and b = n_p x t = (0, n_z, -dl) / s with
+s = sqrt(1 - da^2), so h.t = (h_x - da h.n) / s and h.b = (h_y n_z - h_z dl) / s.
+
+Peak-centred rule.  p(h; n_p) peaks where n_p = h, i.e. at (da, dl) = (h_x, h_y), with widths (first order
+in the offset, from the derivatives of h.t and h.b there) sigma_a = sqrt(1 - h_x^2) / sqrt(nx) across and
+sigma_l = h_z / (sqrt(1 - h_x^2) sqrt(ny)) along, and (h.n)^e <= exp(-(nx (h.t)^2 + ny (h.b)^2) / 2) for all
+angles (log cos theta <= -sin^2 theta / 2).  Each axis is integrated with the substitution
+x = mu + lam tan u (mu the peak, lam its width), which maps the whole interval [-c, c] - no truncation - onto
+[atan((-c - mu) / lam), atan((c - mu) / lam)] and spreads Gauss-Legendre nodes evenly over the lobe whether
+its peak is inside, at the edge of or outside the rectangle; a lobe much wider than the rectangle gives
+lam tan u ~ linear, i.e. the plain rule.  The node count per axis is fixed (``nodes``), so the cost is
+the same at every parameter set: nodes^2 lobe evaluations per direction and yarn type.
+
+Serial on purpose, as :mod:`clothlab.models.irawan.kernels` (numba's thread pool is slower on a loaded
+2-core machine).  Imported lazily; compiled code cached on disk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: scale of the tan map in units of the lobe's first-order width: lam = LAM_WIDTHS * sigma.
+LAM_WIDTHS = 2.0
+#: node count of an axis [-c, c] spanning r = c / sigma lobe widths: 1 when both r and c are below R_SINGLE,
+#: else 2 + ceil(NODES_PER_WIDTH r + NODES_PER_CURVATURE c) (the second term for the ambient occlusion
+#: n_p.z = sqrt(1 - da^2 - dl^2), which bends sharply near the rectangle's corners), at most ``most``.
+R_SINGLE = 1e-3
+NODES_PER_WIDTH = 1.5
+NODES_PER_CURVATURE = 4.0
+
+
+@njit(cache=True, inline="always")
+def _axis_count(c, sigma, most):
+    """Nodes for an axis [-c, c] holding a lobe of width sigma (module constants; 1 when c = 0)."""
+    if c <= 0.0:
+        return 1
+    r = c / sigma
+    if r < R_SINGLE and c < R_SINGLE:
+        return 1
+    return min(most, 2 + int(math.ceil(NODES_PER_WIDTH * r + NODES_PER_CURVATURE * c)))
+
+
+@njit(cache=True, inline="always")
+def _axis_nodes(mu, sigma, c, count, gl_x, gl_w, out_x, out_w):
+    """``count`` nodes / weights (summing to the mean over [-c, c]) of the tan-mapped Gauss-Legendre rule
+    centred on mu with width sigma; ``gl_x[count]``, ``gl_w[count]``: the count-node rule on [-1, 1]."""
+    if count == 1:
+        out_x[0] = 0.0
+        out_w[0] = 1.0
+        return
+    lam = LAM_WIDTHS * sigma
+    if lam >= 64.0 * c:  # lobe far wider than the interval: the map is linear there; plain Gauss-Legendre
+        for k in range(count):
+            out_x[k] = c * gl_x[count, k]
+            out_w[k] = gl_w[count, k]
+        return
+    ua = math.atan((-c - mu) / lam)
+    ub = math.atan((c - mu) / lam)
+    half = 0.5 * (ub - ua)
+    mid = 0.5 * (ub + ua)
+    for k in range(count):
+        t = math.tan(mid + half * gl_x[count, k])
+        out_x[k] = min(max(mu + lam * t, -c), c)
+        # dx = lam sec^2 u du; mean over [-c, c]: / (2 c); gl_w sums to 1 over [-1, 1], i.e. du = 2 half gl_w
+        out_w[k] = gl_w[count, k] * half * lam * (1.0 + t * t) / c
+
+
+@njit(cache=True, inline="always")
+def _lobe(hx, hy, hz, da, dl, inv_s, nx, ny):
+    """n_p.z (h.n_p)^(nx cos^2 phi + ny sin^2 phi) (eq. 2 without its constant, times ao, sec. 4.2.2)."""
+    nz2 = 1.0 - da * da - dl * dl
+    nz = math.sqrt(nz2) if nz2 > 0.0 else 0.0
+    cz = hx * da + hy * dl + hz * nz  # h.n_p
+    if cz <= 0.0:
+        return 0.0
+    tx = (hx - da * cz) * inv_s  # h.t
+    ty = (hy * nz - hz * dl) * inv_s  # h.b
+    sin2 = tx * tx + ty * ty
+    if sin2 <= 1e-300:
+        return nz
+    return nz * math.exp((nx * tx * tx + ny * ty * ty) * math.log(cz) / sin2)  # eq. 2: (h.n)^e
+
+
+@njit(cache=True)
+def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
+    """A(h) (N,) of the module docstring for unit half vectors h (N, 3) in the yarn frame (1/sr, with the eq. 2
+    constant sqrt((nx+1)(ny+1)) / (2 pi)); 0 where h_z <= 0.  ``gl_x``, ``gl_w`` (M + 1, M): row k the
+    k-node Gauss-Legendre rule on [-1, 1], weights summing to 1; ``most`` <= M nodes per axis."""
+    n = h.shape[0]
+    out = np.zeros(n)
+    scale = math.sqrt((nx + 1.0) * (ny + 1.0)) / (2.0 * math.pi)  # eq. 2 constant
+    xa = np.zeros(most)
+    wa = np.zeros(most)
+    xl = np.zeros(most)
+    wl = np.zeros(most)
+    root_nx = math.sqrt(max(nx, 1e-12))
+    root_ny = math.sqrt(max(ny, 1e-12))
+    for i in range(n):
+        hx, hy, hz = h[i, 0], h[i, 1], h[i, 2]
+        if hz <= 0.0:
+            continue
+        hyz = math.sqrt(hy * hy + hz * hz)  # = sqrt(1 - hx^2)
+        # across axis: centred on the highest h.n_p reachable (the peak hx if |hy| <= c_f, else the peak
+        # along the edge dl = +-c_f), width cos(asin hx) / sqrt(nx) (the lobe cos^nx along the ridge)
+        mu_a = hx
+        if abs(hy) > c_f:
+            dl_edge = math.copysign(c_f, hy)
+            mu_a = hx * math.sqrt(1.0 - dl_edge * dl_edge) / math.sqrt(hx * hx + hz * hz)
+        sigma_a = hyz / root_nx
+        count_a = _axis_count(c_y, sigma_a, most)
+        _axis_nodes(mu_a, sigma_a, c_y, count_a, gl_x, gl_w, xa, wa)
+        acc = 0.0
+        for a in range(count_a):
+            da = xa[a]
+            s = math.sqrt(1.0 - da * da)
+            inv = 1.0 / s
+            # along axis, given da: the conditional peak dl* = hy s / hyz (max of h.n_p over dl, h.b = 0
+            # there), width h_z s / (hyz^2 sqrt(ny)) (from d(h.b)/d(dl) at dl*)
+            sigma_l = max(hz, 1e-6) * s / (hyz * hyz * root_ny)
+            count_l = _axis_count(c_f, sigma_l, most)
+            _axis_nodes(hy * s / hyz, sigma_l, c_f, count_l, gl_x, gl_w, xl, wl)
+            inner = 0.0
+            for b in range(count_l):
+                inner += wl[b] * _lobe(hx, hy, hz, da, xl[b], inv, nx, ny)
+            acc += wa[a] * inner
+        out[i] = scale * acc
+    return out
+
+
+def gauss_legendre_table(most: int) -> tuple[np.ndarray, np.ndarray]:
+    """(x, w) (most + 1, most): row k the k-node Gauss-Legendre rule on [-1, 1], weights summing to 1."""
+    x = np.zeros((most + 1, most))
+    w = np.zeros((most + 1, most))
+    for k in range(1, most + 1):
+        nodes, weights = np.polynomial.legendre.leggauss(k)
+        x[k, :k], w[k, :k] = nodes, weights / 2.0
+    return x, w
+
+
+@njit(cache=True)
+def legendre_tile_average(h, nx, ny, c_y, c_f, x_a, w_a, x_l, w_l):
+    """A(h) (N,) with a fixed tensor Gauss-Legendre rule over the rectangle (nodes ``x_a`` x ``x_l`` on
+    [-1, 1], weights summing to 1): the previous rule, compiled (the converged reference with many nodes)."""
+    n = h.shape[0]
+    out = np.zeros(n)
+    scale = math.sqrt((nx + 1.0) * (ny + 1.0)) / (2.0 * math.pi)  # eq. 2 constant
+    for i in range(n):
+        hx, hy, hz = h[i, 0], h[i, 1], h[i, 2]
+        if hz <= 0.0:
+            continue
+        acc = 0.0
+        for a in range(x_a.size):
+            da = c_y * x_a[a]
+            inv_s = 1.0 / math.sqrt(1.0 - da * da)
+            inner = 0.0
+            for b in range(x_l.size):
+                inner += w_l[b] * _lobe(hx, hy, hz, da, c_f * x_l[b], inv_s, nx, ny)
+            acc += w_a[a] * inner
+        out[i] = scale * acc
+    return out
