@@ -100,7 +100,8 @@ def _cross_validate(result, problem, params, config) -> None:
     k = config.fit.cv_folds
     try:
         cv = crossval.cross_validate(problem, params, k=k, seed=config.fit.optimizer.seed,
-                                     percentiles=config.report.percentiles, scheme=config.fit.cv_scheme)
+                                     percentiles=config.report.percentiles, scheme=config.fit.cv_scheme,
+                                     refit=config.fit.cv_refit, optimizer=config.fit.optimizer)
     except crossval.CrossValidationError as exc:
         note = f"cross-validation ({k}-fold) not run: {exc}"
         result.cross_validation = {"k": k, "failed": str(exc), "notes": [note]}
