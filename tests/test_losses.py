@@ -28,7 +28,7 @@ def test_rho_forms_and_weights_are_the_derivative_in_r_squared():
     inner = np.abs(r) <= s
     np.testing.assert_allclose(rho(r, "huber", s)[inner], r[inner] ** 2)
     np.testing.assert_allclose(rho(np.array([s - 1e-12, s + 1e-12]), "huber", s), s * s, rtol=1e-9)  # continuous
-    np.testing.assert_allclose(rho(1e-4 * r, "cauchy", s), (1e-4 * r) ** 2, rtol=1e-6)  # r^2 (1 - r^2 / (2 s^2) + ...) near 0
+    np.testing.assert_allclose(rho(1e-4 * r, "cauchy", s), (1e-4 * r) ** 2, rtol=1e-6)  # r^2 (1 - r^2/2s^2)
     for loss in ROBUST + ("squared",):  # u = g'(t), t = r^2, up to one constant factor per loss
         t = r[np.abs(r) > 0.05] ** 2
         h = 1e-6 * t

@@ -39,10 +39,9 @@ pooled training-row errors of the fold fits.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
-
-from dataclasses import replace
 
 from clothlab.config.choices import CV_REFITS, CV_SCHEMES
 from clothlab.config.schema import OptimizerConfig

@@ -3,7 +3,8 @@
 At the optimum x* (unit-box coordinates of :class:`clothlab.fit.problem.FitProblem`) the residual vector r(x)
 of the fit metric (all values and channels, the linear coefficients re-solved at every x, i.e. the profiled
 or "variable projection" residual; under a robust loss each residual is sign(r) sqrt(rho(r)),
-:meth:`clothlab.fit.problem.FitProblem.residuals`, so that sum r^2 is the summed loss) is linearised, r(x) ~ r(x*) + J (x - x*), J by central differences.  The
+:meth:`clothlab.fit.problem.FitProblem.residuals`, so that sum r^2 is the summed loss) is linearised,
+r(x) ~ r(x*) + J (x - x*), J by central differences.  The
 covariance of the free parameters is then
 
     C = s^2 (J^T J)^-1,   s^2 = sum r^2 / (n - p),
