@@ -99,3 +99,25 @@ def test_free_empty_fits_only_the_coefficients():
         w = 1.0 / y[:, c]
         coef, _ = nnls(design * w[:, None], y[:, c] * w)
         np.testing.assert_allclose(result.solution.prediction[:, c], design @ coef, rtol=1e-8)
+
+
+def test_valid_geometry_caps_the_default_bounds_at_the_segment_constraint():
+    """cotton-twill weft (w = 2, l = 1): w sin(umax) < l (Irawan & Marschner 2012, sec. 5.3) holds for umax <
+    asin(1/2) = 30 deg; with fit.valid_geometry the default upper bound 85 becomes 30 deg."""
+    from clothlab.models.irawan.model import IrawanModel
+    from clothlab.simulate.gonio import simulate
+    from clothlab.weave.presets import get_preset
+
+    model = IrawanModel(get_preset("cotton-twill"))
+    start = {**model.resolve({}), "weft.umax": 20.0}
+    m = simulate(model, start, {"kd": np.ones(3), "ks_warp": np.ones(3), "ks_weft": np.ones(3)},
+                 sampling=(np.array([30.0]), np.array([0.0]), np.array([30.0]), np.array([180.0])))
+    capped = FitProblem(model, m, ("weft.umax", "warp.umax"), start, None, "relative", valid_geometry=True)
+    plain = FitProblem(model, m, ("weft.umax", "warp.umax"), start, None, "relative")
+    assert plain.upper.tolist() == [85.0, 85.0]
+    assert capped.upper[0] == pytest.approx(30.0, abs=1e-9) and capped.upper[1] == 85.0  # warp: w 1, l 6
+    assert not model.geometry_warnings({**start, "weft.umax": capped.upper[0]})
+    assert model.geometry_warnings({**start, "weft.umax": capped.upper[0] + 1e-6})
+    assert set(capped.geometry_caps) == {"weft.umax"}
+    given = FitProblem(model, m, ("weft.umax",), start, {"weft.umax": (1.0, 60.0)}, "relative", valid_geometry=True)
+    assert given.upper.tolist() == [60.0]  # bounds given explicitly are kept

@@ -117,6 +117,7 @@ class FitConfig:
     cv_refit: str = "neutral"  # CV folds refit from the neutral start ("neutral") or the full optimum ("local")
     loss: str = "squared"  # rho applied to the metric residuals (clothlab.fit.loss)
     loss_scale: float = DEFAULT_LOSS_SCALE
+    valid_geometry: bool = False  # default bounds shrunk to the geometry the model accepts (clothlab.fit.problem)
 
 
 @dataclass(frozen=True)
@@ -202,6 +203,7 @@ class Config:
                 **({} if fit.cv_scheme == "auto" else {"cv_scheme": fit.cv_scheme}),  # hashes of older configs kept
                 **({} if fit.cv_refit == "neutral" else {"cv_refit": fit.cv_refit}),
                 **({} if fit.loss == "squared" else {"loss": fit.loss, "loss_scale": fit.loss_scale}),
+                **({"valid_geometry": True} if fit.valid_geometry else {}),
             },
             "report": {"percentiles": list(self.report.percentiles)},
         }

@@ -289,7 +289,7 @@ class _Validator:
     def fit(self, value: Any, model: ModelConfig) -> FitConfig:
         p = ("fit",)
         f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds",
-                                    "cv_scheme", "cv_refit", "loss", "loss_scale"))
+                                    "cv_scheme", "cv_refit", "loss", "loss_scale", "valid_geometry"))
         table = _param_table(model.kind)
         free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
@@ -317,8 +317,12 @@ class _Validator:
         loss_scale = as_number(f.get("loss_scale", FitConfig.loss_scale), scale_at)
         if not loss_scale > 0:
             raise scale_at.error(f"expected a positive scale (the metric's units, e.g. 0.1 = 10 %), got {loss_scale:g}")
+        valid_geometry = f.get("valid_geometry", FitConfig.valid_geometry)
+        if not isinstance(valid_geometry, bool):
+            raise self.at(p + ("valid_geometry",)).error(f"expected true or false, got {shown(valid_geometry)}")
         return FitConfig(free=free, bounds=bounds, metric=metric, optimizer=optimizer, posterior=posterior,
-                         cv_folds=cv_folds, cv_scheme=cv_scheme, cv_refit=cv_refit, loss=loss, loss_scale=loss_scale)
+                         cv_folds=cv_folds, cv_scheme=cv_scheme, cv_refit=cv_refit, loss=loss, loss_scale=loss_scale,
+                         valid_geometry=valid_geometry)
 
     def free(self, value: Any, table) -> tuple:
         p = ("fit", "free")

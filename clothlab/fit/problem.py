@@ -49,7 +49,8 @@ class FitProblem:
     """Measurement + model + free parameter set + bounds + metric -> a scalar objective on [0, 1]^k."""
 
     def __init__(self, model, measurement, free, start: dict | None = None, bounds: dict | None = None,
-                 metric: str = "relative", *, loss: str = "squared", loss_scale: float = DEFAULT_SCALE):
+                 metric: str = "relative", *, loss: str = "squared", loss_scale: float = DEFAULT_SCALE,
+                 valid_geometry: bool = False):
         check_loss(loss)
         if not (np.isfinite(loss_scale) and loss_scale > 0):
             raise ConfigError(f"loss scale must be a positive number, got {loss_scale!r}", field="fit.loss_scale")
@@ -69,12 +70,41 @@ class FitProblem:
             if not lo < hi or (spec.transform == "log" and lo <= 0):
                 raise ConfigError(f"bounds [{lo:g}, {hi:g}] of {spec.name} are empty or not positive for a "
                                   "log-scaled parameter", field=f"fit.bounds.{spec.name}")
+        self.valid_geometry = bool(valid_geometry)
+        self.geometry_caps: dict = {}
+        if valid_geometry:
+            self._cap_invalid_geometry(bounds)
         self.wi = np.ascontiguousarray(measurement.wi)
         self.wo = np.ascontiguousarray(measurement.wo)
         self.y = measurement.values
         self.weights = linear_weights(self.y, metric)
         self.component_names = tuple(model.component_names)
         self.evaluations = 0
+
+    def _cap_invalid_geometry(self, given: dict, steps: int = 60) -> None:
+        """Shrink the default bounds (not those given in ``given``) of each free parameter to the geometry the
+        model accepts without a warning (``Model.geometry_warnings``; for the IM model the segment constraint
+        w sin(umax) < l of sec. 5.3), the other parameters at their start values: the valid end is found by
+        bisection between the start and the bound (``steps`` halvings).  Recorded in ``geometry_caps``."""
+        if self.model.geometry_warnings(self.start):
+            return  # the start itself is outside: the user works in the model's limit (nothing to cap towards)
+        for i, spec in enumerate(self.specs):
+            if spec.name in given:
+                continue
+            for side, array in ((1, self.upper), (0, self.lower)):
+                bound = float(array[i])
+                if not self.model.geometry_warnings({**self.start, spec.name: bound}):
+                    continue
+                good, bad = float(self.start[spec.name]), bound
+                for _ in range(steps):
+                    mid = 0.5 * (good + bad)
+                    if self.model.geometry_warnings({**self.start, spec.name: mid}):
+                        bad = mid
+                    else:
+                        good = mid
+                array[i] = good
+                self.geometry_caps[spec.name] = {"bound": "upper" if side else "lower", "declared": bound,
+                                                 "capped": good}
 
     # ------------------------------------------------------------------ coordinates
     def _t(self, values):
@@ -120,7 +150,7 @@ class FitProblem:
             b = min(b, v_hi - (eps if spec.open_upper else 0.0))
             bounds[spec.name] = (float(min(a, old_a)), float(max(b, old_b)))
         return FitProblem(self.model, self.measurement, self.free, self.start, bounds, self.metric,
-                          loss=self.loss, loss_scale=self.loss_scale)
+                          loss=self.loss, loss_scale=self.loss_scale)  # the enlarged box: no geometry cap
 
     # ------------------------------------------------------------------ evaluation
     def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
@@ -198,7 +228,7 @@ def build_problem(config, measurement=None) -> FitProblem:
     model = build_model(config.model.kind, weave, (q.rule, q.nodes), **config.model.options)
     fit = config.fit
     return FitProblem(model, measurement, fit.free, config.model.params, fit.bounds, fit.metric,
-                      loss=fit.loss, loss_scale=fit.loss_scale)
+                      loss=fit.loss, loss_scale=fit.loss_scale, valid_geometry=fit.valid_geometry)
 
 
 def collinearity_notes(design: np.ndarray, names, threshold: float = 0.999) -> list[str]:

@@ -84,6 +84,9 @@ class FitResult(Reportable):
 
 def _notes_at_optimum(problem, params, optimum, coefficients) -> list[str]:
     notes = list(problem.model.geometry_warnings(params))
+    for name, cap in getattr(problem, "geometry_caps", {}).items():
+        notes.append(f"fit.valid_geometry: the {cap['bound']} bound of {name} was moved from {cap['declared']:g} to "
+                     f"{cap['capped']:.6g}, the limit of the geometry the model accepts at the start values")
     for name, lo, hi in zip(problem.free, optimum.at_lower, optimum.at_upper, strict=True):
         if lo or hi:
             notes.append(f"{name} ended at its {'lower' if lo else 'upper'} bound "
