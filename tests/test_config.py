@@ -629,7 +629,7 @@ def test_cv_scheme_defaults_to_auto_and_keeps_the_config_hash(tmp_path):
     chosen = load_config(project(tmp_path, edit(FULL, "cv_folds: 4", "cv_folds: 4\n  cv_scheme: random")))
     assert chosen.fit.cv_scheme == "random" and chosen.canonical()["fit"]["cv_scheme"] == "random"
     assert chosen.hash != default.hash
-    assert crossval.SCHEMES == ("auto", "grouped", "random")
+    assert crossval.SCHEMES == ("auto", "grouped", "grouped-incident", "leave-one-direction-out", "random")
     text = edit(FULL, "cv_folds: 4", "cv_folds: 4\n  cv_scheme: leave-one-out")
     err = fails(tmp_path, text)
     assert err.field == "fit.cv_scheme" and err.line == line_of(text, "cv_scheme:")

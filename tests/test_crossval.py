@@ -163,3 +163,47 @@ output: {fits: fits, reports: reports}
     warned = [line for line in err.splitlines() if "not run" in line]
     assert len(warned) == 1 and "Traceback" not in err  # one line on stderr
     assert "cross-validation (5-fold) not run" in out  # the fit report printed after the fit
+
+
+def test_incident_grouping_and_leave_one_direction_out():
+    """Scattered exitant directions but repeated incident ones: auto picks grouped-incident; leave-one-direction-
+    out holds out every row of one exitant direction per fold."""
+    full, truth = _problem(every=1)
+    rng = np.random.default_rng(2)
+    ti, pi_ = np.repeat(rng.uniform(0, 70, 6), 8), np.repeat(rng.uniform(0, 360, 6), 8)  # 6 incident x 8 rows
+    to, po = rng.uniform(0, 70, 48), rng.uniform(0, 360, 48)
+    m = simulate(full.model, truth, full.measurement.provenance["coefficients"], sampling=(ti, pi_, to, po))
+    scheme, reason = choose_scheme(m, 5)
+    assert scheme == "grouped-incident" and "all 6 incident directions" in reason
+    labels = fold_labels(m, 5, seed=1, scheme=scheme)
+    for g in np.unique(ti):
+        counts = np.bincount(labels[ti == g], minlength=5)
+        assert counts.max() - counts.min() <= 1
+    grid, _ = _problem(every=5)
+    lodo = fold_labels(grid.measurement, 5, seed=0, scheme="leave-one-direction-out")
+    gm = grid.measurement
+    assert lodo.max() + 1 == 7
+    for fold in range(7):
+        held = lodo == fold
+        assert len(set(zip(gm.theta_o[held].tolist(), gm.phi_o[held].tolist(), strict=True))) == 1
+        assert not ((gm.theta_o[~held] == gm.theta_o[held][0]) & (gm.phi_o[~held] == gm.phi_o[held][0])).any()
+
+
+def test_neutral_refit_starts_from_the_start_values_not_the_optimum():
+    """Refit from the start (umax 12 deg, truth 22): the neutral refit's search finds the truth on every fold
+    although it is handed a wrong "optimum" (60 deg); a 1-evaluation local refit stays at that point."""
+    from clothlab.config.schema import OptimizerConfig
+
+    problem, truth = _problem(free=("warp.umax",), every=9)
+    problem = FitProblem(problem.model, problem.measurement, problem.free, {**truth, "warp.umax": 12.0}, None,
+                         "relative")
+    wrong = {**truth, "warp.umax": 60.0}
+    opt = OptimizerConfig(global_algorithm=None, max_evals=150, starts=1, polish=30)
+    out = cross_validate(problem, wrong, k=3, seed=0, refit="neutral", optimizer=opt, max_evals=150)
+    assert out["refit_mode"] == "neutral" and "from the start values" in out["refit"]
+    assert all(abs(f["params"]["warp.umax"] - 22.0) < 0.2 for f in out["folds"])  # measured 22.00-22.11
+    local = cross_validate(problem, wrong, k=3, seed=0, refit="local", max_evals=1)
+    assert all(f["params"]["warp.umax"] == pytest.approx(60.0) for f in local["folds"])
+    assert out["held_out"]["p50"] < local["held_out"]["p50"]
+    with pytest.raises(ValueError, match="unknown cross-validation refit"):
+        cross_validate(problem, wrong, k=3, refit="warm")

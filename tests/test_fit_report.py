@@ -219,7 +219,10 @@ def progress_stream():
 def test_progress_shows_stage_start_and_the_yaml_budget(progress_stream):
     """Not on a terminal: one plain line per stage when it ends, naming the start k/K, the stage, and the
     evaluations against the yaml's budget (max_evals split over the starts; the polish its own budget)."""
-    result = run_fit(_config(max_evals=240, starts=2, polish=50, cv=2))
+    cfg = _config(max_evals=240, starts=2, polish=50, cv=2)  # the design-free scheme: max_evals split evenly
+    cfg = replace(cfg, fit=replace(cfg.fit, cv_refit="local",
+                                   optimizer=replace(cfg.fit.optimizer, design="none", box_check=False)))
+    result = run_fit(cfg)
     assert "\r" not in progress_stream.getvalue()
     lines = progress_stream.getvalue().splitlines()
     assert all("/120 eval" in line for line in lines if line.startswith("start "))

@@ -17,8 +17,20 @@ from __future__ import annotations
 METRICS = ("relative", "log", "cube-root")
 """What a fit minimises (``fit.metric``); defined in :mod:`clothlab.fit.metrics`."""
 
-CV_SCHEMES = ("auto", "grouped", "random")
+CV_SCHEMES = ("auto", "grouped", "grouped-incident", "leave-one-direction-out", "random")
 """``fit.cv_scheme``: cross-validation fold schemes; defined in :mod:`clothlab.fit.crossval`."""
+
+CV_REFITS = ("neutral", "local")
+"""``fit.cv_refit``: how a cross-validation fold refits its parameters; defined in :mod:`clothlab.fit.crossval`."""
+
+LOSSES = ("squared", "l1", "huber", "cauchy")
+"""``fit.loss``: the loss applied to the metric residuals; defined in :mod:`clothlab.fit.loss`."""
+
+DEFAULT_LOSS_SCALE = 0.1
+"""Default ``fit.loss_scale`` (the metric's units; 0.1 = 10 % under ``relative``); see :mod:`clothlab.fit.loss`."""
+
+START_DESIGNS = ("sobol", "lhs", "none")
+"""``fit.optimizer.design``: how the starts after the first are spread over the box (:mod:`clothlab.fit.optimize`)."""
 
 GLOBAL_ALGORITHMS = ("GN_CRS2_LM", "GN_DIRECT_L", "GN_ISRES", "GN_ESCH", "G_MLSL_LDS")
 """``fit.optimizer.global``: the global stages the optimiser driver supports."""

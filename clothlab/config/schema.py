@@ -15,7 +15,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from clothlab.config.choices import DEFAULT_GLOBAL, DEFAULT_LOCAL
+from clothlab.config.choices import DEFAULT_GLOBAL, DEFAULT_LOCAL, DEFAULT_LOSS_SCALE
 from clothlab.models.registry import DEFAULT_KIND
 
 PRESET_PREFIX = "preset:"
@@ -80,6 +80,8 @@ class OptimizerConfig:
     max_time: float | None = None
     starts: int = 1
     polish: int | None = None  # evaluations of the final restarted polish; None = max_evals // 3, 0 = none
+    design: str = "sobol"  # starts 2.. at the points of a scrambled Sobol ("sobol") / Latin hypercube ("lhs") design
+    box_check: bool = True  # after the polish: does the optimum move when the box is enlarged?
 
     @property
     def polish_evals(self) -> int:
@@ -112,6 +114,10 @@ class FitConfig:
     posterior: PosteriorConfig | None = None
     cv_folds: int = 0
     cv_scheme: str = "auto"
+    cv_refit: str = "neutral"  # CV folds refit from the neutral start ("neutral") or the full optimum ("local")
+    loss: str = "squared"  # rho applied to the metric residuals (clothlab.fit.loss)
+    loss_scale: float = DEFAULT_LOSS_SCALE
+    valid_geometry: bool = False  # default bounds shrunk to the geometry the model accepts (clothlab.fit.problem)
 
 
 @dataclass(frozen=True)
@@ -186,12 +192,18 @@ class Config:
                     "max_time": opt.max_time,
                     "starts": opt.starts,
                     "polish": opt.polish_evals,
+                    # new settings only when not the default: hashes of older configs kept
+                    **({} if opt.design == "sobol" else {"design": opt.design}),
+                    **({} if opt.box_check else {"box_check": False}),
                 },
                 "posterior": None if post is None else {
                     "walkers": post.walkers, "steps": post.steps, "max_steps": post.max_steps,
                 },
                 "cv_folds": fit.cv_folds,
                 **({} if fit.cv_scheme == "auto" else {"cv_scheme": fit.cv_scheme}),  # hashes of older configs kept
+                **({} if fit.cv_refit == "neutral" else {"cv_refit": fit.cv_refit}),
+                **({} if fit.loss == "squared" else {"loss": fit.loss, "loss_scale": fit.loss_scale}),
+                **({"valid_geometry": True} if fit.valid_geometry else {}),
             },
             "report": {"percentiles": list(self.report.percentiles)},
         }

@@ -44,7 +44,17 @@ from clothlab.config.checks import (
     shown,
     suggest,
 )
-from clothlab.config.choices import CV_SCHEMES, GLOBAL_ALGORITHMS, LOCAL_ALGORITHMS, METRICS, MLSL_LOCAL, NEEDS_LOCAL
+from clothlab.config.choices import (
+    CV_REFITS,
+    CV_SCHEMES,
+    GLOBAL_ALGORITHMS,
+    LOCAL_ALGORITHMS,
+    LOSSES,
+    METRICS,
+    MLSL_LOCAL,
+    NEEDS_LOCAL,
+    START_DESIGNS,
+)
 from clothlab.config.linemap import LineMap, dotted, load_yaml_with_lines
 from clothlab.config.schema import (
     DEFAULT_MAX_STEPS,
@@ -285,7 +295,7 @@ class _Validator:
     def fit(self, value: Any, model: ModelConfig) -> FitConfig:
         p = ("fit",)
         f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds",
-                                             "cv_scheme"))
+                                    "cv_scheme", "cv_refit", "loss", "loss_scale", "valid_geometry"))
         table = _param_table(model.kind)
         free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
@@ -307,8 +317,18 @@ class _Validator:
         if cv_folds == 1:
             raise at.error("expected 0 (no cross-validation) or at least 2 folds, got 1")
         cv_scheme = as_choice(f.get("cv_scheme", FitConfig.cv_scheme), self.at(p + ("cv_scheme",)), CV_SCHEMES)
+        cv_refit = as_choice(f.get("cv_refit", FitConfig.cv_refit), self.at(p + ("cv_refit",)), CV_REFITS)
+        loss = as_choice(f.get("loss", FitConfig.loss), self.at(p + ("loss",)), LOSSES)
+        scale_at = self.at(p + ("loss_scale",))
+        loss_scale = as_number(f.get("loss_scale", FitConfig.loss_scale), scale_at)
+        if not loss_scale > 0:
+            raise scale_at.error(f"expected a positive scale (the metric's units, e.g. 0.1 = 10 %), got {loss_scale:g}")
+        valid_geometry = f.get("valid_geometry", FitConfig.valid_geometry)
+        if not isinstance(valid_geometry, bool):
+            raise self.at(p + ("valid_geometry",)).error(f"expected true or false, got {shown(valid_geometry)}")
         return FitConfig(free=free, bounds=bounds, metric=metric, optimizer=optimizer, posterior=posterior,
-                         cv_folds=cv_folds, cv_scheme=cv_scheme)
+                         cv_folds=cv_folds, cv_scheme=cv_scheme, cv_refit=cv_refit, loss=loss, loss_scale=loss_scale,
+                         valid_geometry=valid_geometry)
 
     def free(self, value: Any, table) -> tuple:
         p = ("fit", "free")
@@ -352,7 +372,8 @@ class _Validator:
 
     def optimizer(self, value: Any) -> OptimizerConfig:
         p = ("fit", "optimizer")
-        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time", "starts", "polish"))
+        o = self.section(value, p, ("global", "local", "max_evals", "seed", "max_time", "starts", "polish", "design",
+                                    "box_check"))
         d = OptimizerConfig()
         g = as_choice(o.get("global", d.global_algorithm), self.at(p + ("global",)), GLOBAL_ALGORITHMS,
                       allow_null=True)
@@ -378,7 +399,11 @@ class _Validator:
         polish = o.get("polish")
         if polish is not None:
             polish = as_int(polish, self.at(p + ("polish",)), 0, MAX_EVALS)
-        return OptimizerConfig(g, loc, max_evals, seed, max_time, starts, polish)
+        design = as_choice(o.get("design", d.design), self.at(p + ("design",)), START_DESIGNS)
+        box_check = o.get("box_check", d.box_check)
+        if not isinstance(box_check, bool):
+            raise self.at(p + ("box_check",)).error(f"expected true or false, got {shown(box_check)}")
+        return OptimizerConfig(g, loc, max_evals, seed, max_time, starts, polish, design, box_check)
 
     def posterior(self, value: Any, free: tuple) -> PosteriorConfig | None:
         p = ("fit", "posterior")

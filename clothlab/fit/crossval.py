@@ -1,21 +1,33 @@
 """k-fold cross-validated error of a fit: held-out relative-error percentiles next to in-sample ones.
 
-Two fold schemes:
+Fold schemes (``SCHEMES``):
 
 * ``grouped``: the rows of **each exitant direction** are shuffled (seeded) and dealt to the k folds in turn,
   so every fold holds out about 1/k of the incident directions of every exitant direction (the paper's
   sampling is 225 incident x 7 exitant directions, sec. 4.1).  No fold loses a whole exitant direction.
   Needs at least k rows in every exitant direction.
-* ``random``: all rows shuffled (seeded) and dealt to the k folds in turn, for scattered data where exitant
+* ``grouped-incident``: the same with the roles swapped: the rows of each **incident** direction are dealt to
+  the folds (every fold holds out ~1/k of the exitant directions of every illumination).  Needs at least k
+  rows in every incident direction.
+* ``leave-one-direction-out``: one fold per exitant direction, holding out **all** its rows: how well the
+  model predicts a view it has never seen (k is then the number of exitant directions, >= 2).
+* ``random``: all rows shuffled (seeded) and dealt to the k folds in turn, for scattered data where
   directions have few rows.  Needs at least k rows.
 
-``auto`` (the default) picks ``grouped`` when every exitant direction has at least k rows, else ``random``;
-the result names the scheme and the reason.  No held-out row is used to fit anything: for each fold
+``auto`` (the default) picks ``grouped`` when every exitant direction has at least k rows, else
+``grouped-incident`` when every incident direction has, else ``random``; the result names the scheme and the
+reason.  No held-out row is used to fit anything: for each fold
 
-* the non-linear parameters are refitted on the training rows by the **local optimiser only**
-  (LN_BOBYQA, ``max_evals`` evaluations, default 300) started from the full fit's optimum - a short budget
-  that measures how far the optimum moves when 1/k of the data is withheld, without re-running the global
-  search (which would mostly measure the global search's own scatter and cost k times the full fit);
+* the non-linear parameters are refitted on the training rows, by ``refit``:
+
+  - ``neutral`` (``fit.cv_refit`` default): the fit's own global + local search
+    (:func:`clothlab.fit.optimize.multistart_minimize`) from the problem's **start values**, not from the
+    full fit's optimum, with a stated budget (``max_evals`` per fold, default :data:`NEUTRAL_EVALS`, the
+    enlarged-box check off).  A refit started at the full-data optimum sits in the basin the held-out rows
+    helped choose, which makes held-out errors optimistic; the neutral refit repeats the whole fit.
+  - ``local``: the local optimiser only (LN_BOBYQA, ``max_evals`` evaluations, default 300) from the full
+    fit's optimum - cheap, and it measures how far the optimum moves when 1/k of the data is withheld.
+
 * the linear coefficients (kd, ks) are re-solved on the training rows (weighted NNLS, as in the fit);
 * the model of that fold is evaluated on its held-out rows.
 
@@ -27,20 +39,32 @@ pooled training-row errors of the fold fits.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from clothlab.config.choices import CV_SCHEMES
+from clothlab.config.choices import CV_REFITS, CV_SCHEMES
+from clothlab.config.schema import OptimizerConfig
 from clothlab.fit.metrics import error_percentiles
-from clothlab.fit.optimize import minimize
+from clothlab.fit.optimize import minimize, multistart_minimize
 from clothlab.fit.problem import FitProblem, build_problem
 from clothlab.progress import Progress
 
 DEFAULT_LOCAL = "LN_BOBYQA"
+LOCAL_EVALS = 300
+"""Default evaluations of a ``local`` fold refit."""
+NEUTRAL_EVALS = 2000
+"""Default evaluations of a ``neutral`` fold refit (design screen, starts and polish; measured in
+docs/fitting.md: on the polyester-lining example a 5-fold neutral CV costs about 1.3 full fits)."""
 SCHEMES = CV_SCHEMES
+REFITS = CV_REFITS
 SPLITS = {
     "grouped": ("by incident direction within each exitant direction: each exitant direction's rows are "
                 "shuffled and dealt to the folds in turn; every row is held out once"),
+    "grouped-incident": ("by exitant direction within each incident direction: each incident direction's rows "
+                         "are shuffled and dealt to the folds in turn; every row is held out once"),
+    "leave-one-direction-out": ("leave one exitant direction out: each fold holds out all rows of one exitant "
+                                "direction; every row is held out once"),
     "random": "random by row: all rows shuffled and dealt to the folds in turn; every row is held out once",
 }
 
@@ -49,48 +73,73 @@ class CrossValidationError(ValueError):
     """Cross-validation cannot run on these data (e.g. fewer rows than folds)."""
 
 
+def _groups(theta, phi) -> np.ndarray:
+    return np.unique(np.stack([theta, phi], axis=1), axis=0, return_inverse=True)[1].reshape(-1)
+
+
 def _exitant_groups(measurement) -> np.ndarray:
-    exitant = np.stack([measurement.theta_o, measurement.phi_o], axis=1)
-    return np.unique(exitant, axis=0, return_inverse=True)[1].reshape(-1)
+    return _groups(measurement.theta_o, measurement.phi_o)
+
+
+def _incident_groups(measurement) -> np.ndarray:
+    return _groups(measurement.theta_i, measurement.phi_i)
+
+
+def _smallest(groups) -> tuple[np.ndarray, int]:
+    counts = np.bincount(groups) if groups.size else np.zeros(0, dtype=int)
+    return counts, int(counts.min()) if counts.size else 0
 
 
 def choose_scheme(measurement, k: int, scheme: str = "auto") -> tuple[str, str]:
-    """(scheme, reason): ``auto`` resolves to ``grouped`` if every exitant direction has >= k rows, else
-    ``random``."""
+    """(scheme, reason): ``auto`` resolves to ``grouped`` if every exitant direction has >= k rows, else to
+    ``grouped-incident`` if every incident direction has, else ``random``."""
     if scheme not in SCHEMES:
         raise ValueError(f"unknown cross-validation scheme {scheme!r}; expected one of {', '.join(SCHEMES)}")
-    counts = np.bincount(_exitant_groups(measurement)) if measurement.n else np.zeros(0, dtype=int)
-    smallest = int(counts.min()) if counts.size else 0
     if scheme != "auto":
         return scheme, f"{scheme} (requested)"
+    counts, smallest = _smallest(_exitant_groups(measurement))
     if smallest >= k:
         return "grouped", (f"grouped by exitant direction: all {counts.size} exitant directions have at least "
                            f"k = {k} rows")
     short = int((counts < k).sum())
-    return "random", (f"random by row: {short} of {counts.size} exitant directions have fewer than k = {k} rows "
-                      f"(smallest {smallest})")
+    exitant = (f"{short} of {counts.size} exitant directions have fewer than k = {k} rows (smallest {smallest})")
+    incident, smallest_i = _smallest(_incident_groups(measurement))
+    if smallest_i >= k:
+        return "grouped-incident", (f"grouped by incident direction: {exitant}, but all {incident.size} incident "
+                                    f"directions have at least k = {k} rows")
+    short_i = int((incident < k).sum())
+    return "random", (f"random by row: {exitant}; {short_i} of {incident.size} incident directions too "
+                      f"(smallest {smallest_i})")
 
 
 def fold_labels(measurement, k: int, seed: int, scheme: str = "grouped") -> np.ndarray:
-    """(N,) fold index 0..k-1 of every row, by ``scheme`` (``grouped``, ``random`` or ``auto``).
+    """(N,) fold index of every row, by ``scheme`` (module docstring; ``auto`` resolved by
+    :func:`choose_scheme`): 0..k-1, or 0..D-1 over the D exitant directions for ``leave-one-direction-out``.
 
-    Raises :class:`CrossValidationError` when the data are too few for k folds under that scheme."""
+    Raises :class:`CrossValidationError` when the data are too few for the folds under that scheme."""
     if k < 2:
         raise ValueError(f"k-fold cross-validation needs k >= 2, got {k}")
     scheme, _ = choose_scheme(measurement, k, scheme)
-    if measurement.n < k:
+    if measurement.n < k and scheme != "leave-one-direction-out":
         raise CrossValidationError(f"{measurement.n} rows, fewer than k = {k} folds: cross-validation not run")
     rng = np.random.default_rng(seed)
     labels = np.empty(measurement.n, dtype=np.int64)
     if scheme == "random":
         labels[rng.permutation(measurement.n)] = np.arange(measurement.n) % k
         return labels
-    group = _exitant_groups(measurement)
+    if scheme == "leave-one-direction-out":
+        group = _exitant_groups(measurement)
+        if group.size == 0 or group.max() < 1:
+            raise CrossValidationError("leave-one-direction-out needs at least 2 exitant directions; these data "
+                                       "have 1: use the random scheme")
+        return group.astype(np.int64)
+    what = "exitant" if scheme == "grouped" else "incident"
+    group = _exitant_groups(measurement) if scheme == "grouped" else _incident_groups(measurement)
     offset = 0
     for g in range(int(group.max()) + 1):
         rows = np.flatnonzero(group == g)
         if rows.size < k:
-            raise CrossValidationError(f"exitant direction group {g} has {rows.size} rows, fewer than k = {k} "
+            raise CrossValidationError(f"{what} direction group {g} has {rows.size} rows, fewer than k = {k} "
                                        "folds: use the random scheme")
         labels[rng.permutation(rows)] = (offset + np.arange(rows.size)) % k
         offset += rows.size  # continue dealing where the previous group stopped: fold sizes stay balanced
@@ -106,54 +155,79 @@ def _problem_of(source):
 
 
 def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, seed: int = 0,
-                   max_evals: int = 300, percentiles=(50, 80), scheme: str = "auto") -> dict:
+                   max_evals: int | None = None, percentiles=(50, 80), scheme: str = "auto",
+                   refit: str = "local", optimizer: OptimizerConfig | None = None) -> dict:
     """k-fold cross-validated relative-error percentiles (fractions) of a fit.
 
     Parameters
     ----------
     source : a FitProblem, a zero-argument factory returning one, or a Config (built with build_problem).
     optimum_params : the full fit's optimum (``FitResult.params``); None = the problem's start values, which
-        are first polished on all rows with the same local optimiser and budget (noted in the result).
+        are first polished on all rows with the local optimiser (noted in the result).
     k, seed : number of folds and the seed of the split.
-    scheme : ``auto`` (default), ``grouped`` or ``random`` (module docstring).
-    max_evals : local-optimiser evaluations per fold refit.
+    scheme : ``auto`` (default), ``grouped``, ``grouped-incident``, ``leave-one-direction-out`` or ``random``.
+    refit : ``local`` (this function's default, from the optimum) or ``neutral`` (the fit's search from the
+        start values; ``clothlab fit`` uses ``fit.cv_refit``, default neutral), module docstring.
+    max_evals : evaluations per fold refit (default 300 for local, :data:`NEUTRAL_EVALS` for neutral).
+    optimizer : the fit's optimizer settings for a neutral refit (algorithms, starts, design, seed; its budget
+        replaced by ``max_evals``); default :class:`clothlab.config.schema.OptimizerConfig`.
 
-    Returns ``{"k", "seed", "scheme", "scheme_reason", "split", "refit", "held_out": {"p50", "p80", "mean",
-    "n"}, "in_sample": {...}, "train_folds": {...}, "folds": [...], "wall_time_s", "notes"}``.
+    Returns ``{"k", "seed", "scheme", "scheme_reason", "split", "refit", "refit_mode", "budget", "held_out":
+    {"p50", "p80", "mean", "n"}, "in_sample": {...}, "train_folds": {...}, "folds": [...], "wall_time_s",
+    "notes"}``.
 
     With no free parameter only the coefficients are re-solved per fold.  Progress: "cross-validation fold
     3/5" (:class:`clothlab.progress.Progress`).  Raises :class:`CrossValidationError` when the data are too
-    few for k folds (checked before any refit).
+    few for the folds (checked before any refit).
     """
+    if refit not in REFITS:
+        raise ValueError(f"unknown cross-validation refit {refit!r}; expected one of {', '.join(REFITS)}")
     started = time.perf_counter()
     problem = _problem_of(source)
     m = problem.measurement
     scheme, reason = choose_scheme(m, k, scheme)
     labels = fold_labels(m, k, seed, scheme)
+    n_folds = int(labels.max()) + 1
+    budget = int(max_evals if max_evals is not None else NEUTRAL_EVALS if refit == "neutral" else LOCAL_EVALS)
     bounds = {name: (float(lo), float(hi)) for name, lo, hi in zip(problem.free, problem.lower, problem.upper,
                                                                    strict=True)}
     k_free = len(problem.free)
     notes = []
+    settings = replace(optimizer or OptimizerConfig(), max_evals=max(budget, 2), polish=budget // 3,
+                       box_check=False)
+    settings = replace(settings, starts=min(settings.starts, settings.max_evals))
 
-    def refit(prob, start, desc):
-        with Progress(max_evals if k_free else 1, desc, unit="eval") as bar:
+    def local(prob, start, desc):
+        with Progress(budget if k_free else 1, desc, unit="eval") as bar:
             result = minimize(prob, prob.to_unit(start), np.zeros(k_free), np.ones(k_free), global_algorithm=None,
-                              local_algorithm=DEFAULT_LOCAL, max_evals=max_evals, seed=seed,
+                              local_algorithm=DEFAULT_LOCAL, max_evals=budget, seed=seed,
                               callback=lambda row: bar.update(1))
         return prob.from_unit(result.x), result
 
+    def neutral(prob, desc):
+        with Progress(settings.max_evals + settings.polish_evals, desc, unit="eval") as bar:
+            result = multistart_minimize(prob, prob.to_unit(prob.start), settings, lambda row: bar.update(1))
+        return prob.from_unit(result.x), result
+
     if optimum_params is None:
-        optimum_params, _ = refit(problem, problem.start, "cross-validation, polish of the start")
+        optimum_params, _ = local(problem, problem.start, "cross-validation, polish of the start")
         notes.append(f"no optimum given: the start values were polished on all rows ({DEFAULT_LOCAL}, "
-                     f"{max_evals} evaluations) first")
+                     f"{budget} evaluations) first")
     optimum_params = {name: optimum_params[name] for name in problem.start}
     full = problem.solve(optimum_params)
     held_out = np.full_like(problem.y, np.nan)
     train_measured, train_model, folds = [], [], []
-    for fold in range(k):
+    for fold in range(n_folds):
         test = labels == fold
-        sub = FitProblem(problem.model, m.subset(~test), problem.free, optimum_params, bounds, problem.metric)
-        params, result = refit(sub, optimum_params, f"cross-validation fold {fold + 1}/{k}")
+        desc = f"cross-validation fold {fold + 1}/{n_folds}"
+        if refit == "neutral" and k_free:
+            sub = FitProblem(problem.model, m.subset(~test), problem.free, problem.start, bounds, problem.metric,
+                             loss=problem.loss, loss_scale=problem.loss_scale)
+            params, result = neutral(sub, desc)
+        else:
+            sub = FitProblem(problem.model, m.subset(~test), problem.free, optimum_params, bounds, problem.metric,
+                             loss=problem.loss, loss_scale=problem.loss_scale)
+            params, result = local(sub, optimum_params, desc)
         sol = sub.solve(params)
         design = problem.design(params)[test]
         held_out[test] = design @ sol.coefficients
@@ -165,12 +239,19 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
                       "held_out": fold_errors, "train": train_errors, "evaluations": int(result.nevals),
                       "objective": float(result.fun),
                       "params": {name: float(params[name]) for name in problem.free}})
+    if not k_free:
+        how = "each fold: linear coefficients re-solved on the training rows (no free parameter)"
+    elif refit == "neutral":
+        how = (f"each fold: the fit's search from the start values, not from the full fit's optimum ({settings.design} "
+               f"design, {settings.starts} start(s), {budget} evaluations + polish {settings.polish_evals}) on the "
+               "training rows; linear coefficients re-solved on the training rows")
+    else:
+        how = (f"each fold: local optimiser only ({DEFAULT_LOCAL}, {budget} evaluations) from the full fit's "
+               "optimum on the training rows (held-out errors may be optimistic); linear coefficients re-solved "
+               "on the training rows")
     return {
-        "k": k, "seed": seed, "scheme": scheme, "scheme_reason": reason,
-        "split": SPLITS[scheme],
-        "refit": (f"each fold: local optimiser only ({DEFAULT_LOCAL}, {max_evals} evaluations) from the full "
-                  "fit's optimum on the training rows; linear coefficients re-solved on the training rows"
-                  if k_free else "each fold: linear coefficients re-solved on the training rows (no free parameter)"),
+        "k": n_folds, "seed": seed, "scheme": scheme, "scheme_reason": reason,
+        "split": SPLITS[scheme], "refit": how, "refit_mode": refit, "budget": budget,
         "held_out": error_percentiles(problem.y, held_out, percentiles)["overall"],
         "in_sample": error_percentiles(problem.y, full.prediction, percentiles)["overall"],
         "train_folds": error_percentiles(np.concatenate(train_measured), np.concatenate(train_model),

@@ -94,6 +94,12 @@ def _evaluations(fit: dict, any_free: bool) -> str:
             + (f" + polish {polish}" if polish else "") + ")")
 
 
+def _loss(cfg: dict) -> str:
+    """fit.loss as the objective uses it (fit.json records it in config.fit when not the default squared)."""
+    loss = cfg.get("loss", "squared")
+    return loss if loss in ("squared", "l1") else f"{loss} (scale {cfg.get('loss_scale')})"
+
+
 def _fit_section(fit: dict) -> Section:
     model, m = fit.get("model") or {}, fit.get("measurement") or {}
     q = model.get("quadrature")
@@ -110,6 +116,7 @@ def _fit_section(fit: dict) -> Section:
                         f"({', '.join(channels)})"],
         ["free parameters", _values(fit, len(free))],
         ["metric", str(fit.get("metric"))],
+        ["loss", _loss(((fit.get("config") or {}).get("fit")) or {})],
         ["evaluations", _evaluations(fit, bool(free))],
         ["objective", f"{_num(objective.get('start'))} at the start -> {_num(objective.get('final'))}"],
         ["optimiser status", str(opt.get("status", ""))],

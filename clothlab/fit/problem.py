@@ -2,11 +2,13 @@
 
 For free parameters theta (declared units) the objective is
 
-    F(theta) = mean_{n,c} r(measured[n,c], sum_k c_k[c] component_k(theta)[n])^2
+    F(theta) = mean_{n,c} rho( r(measured[n,c], sum_k c_k[c] component_k(theta)[n]) )
 
-with r the chosen metric (:mod:`clothlab.fit.metrics`) and the coefficients c_k >= 0 solved per channel at
-every evaluation by non-negative least squares with the metric's linearised row weights
-(:func:`clothlab.fit.metrics.linear_weights`; the paper fits kd and ks linearly too, sec. 8).  Parameters are
+with r the chosen metric (:mod:`clothlab.fit.metrics`), rho the loss (:mod:`clothlab.fit.loss`; ``squared``
+rho = r^2 by default) and the coefficients c_k >= 0 solved per channel at every evaluation by non-negative
+least squares with the metric's linearised row weights (:func:`clothlab.fit.metrics.linear_weights`; the
+paper fits kd and ks linearly too, sec. 8) - for a robust loss by IRLS from that solution
+(:func:`clothlab.fit.loss.irls_coefficients`).  Parameters are
 seen by the optimiser in [0, 1]: x = (T(theta) - T(lo)) / (T(hi) - T(lo)) with T = log for parameters
 declared with a log transform, identity otherwise (the parameters' scales differ by orders of magnitude).
 With no free parameter (k = 0) the box is empty and the objective is a single NNLS solve of the coefficients.
@@ -24,8 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from clothlab.errors import ConfigError, GeometryWarning
-from clothlab.fit.metrics import check_measurement_for_metric, linear_weights, metric_residuals, objective_value
-from clothlab.fit.nnls import nnls_small
+from clothlab.fit.loss import DEFAULT_SCALE, check_loss, effective_residuals, irls_coefficients, loss_value
+from clothlab.fit.metrics import check_measurement_for_metric, linear_weights, metric_residuals
+from clothlab.fit.nnls import nnls_sets, nnls_small
 from clothlab.io.loader import load_measurement
 from clothlab.models.components import coefficient_name
 from clothlab.models.registry import build_model
@@ -46,10 +49,15 @@ class FitProblem:
     """Measurement + model + free parameter set + bounds + metric -> a scalar objective on [0, 1]^k."""
 
     def __init__(self, model, measurement, free, start: dict | None = None, bounds: dict | None = None,
-                 metric: str = "relative"):
+                 metric: str = "relative", *, loss: str = "squared", loss_scale: float = DEFAULT_SCALE,
+                 valid_geometry: bool = False):
+        check_loss(loss)
+        if not (np.isfinite(loss_scale) and loss_scale > 0):
+            raise ConfigError(f"loss scale must be a positive number, got {loss_scale!r}", field="fit.loss_scale")
         self.model = model
         self.measurement = measurement
         self.metric = metric
+        self.loss, self.loss_scale = loss, float(loss_scale)
         self.free = tuple(free)
         self.start = model.resolve(start or {})
         self.specs = [model.params[name] for name in self.free]
@@ -62,6 +70,10 @@ class FitProblem:
             if not lo < hi or (spec.transform == "log" and lo <= 0):
                 raise ConfigError(f"bounds [{lo:g}, {hi:g}] of {spec.name} are empty or not positive for a "
                                   "log-scaled parameter", field=f"fit.bounds.{spec.name}")
+        self.valid_geometry = bool(valid_geometry)
+        self.geometry_caps: dict = {}
+        if valid_geometry:
+            self._cap_invalid_geometry(bounds)
         self.wi = np.ascontiguousarray(measurement.wi)
         self.wo = np.ascontiguousarray(measurement.wo)
         self.y = measurement.values
@@ -69,6 +81,31 @@ class FitProblem:
         self.weights = linear_weights(self.y, metric)
         self.component_names = tuple(model.component_names)
         self.evaluations = 0
+
+    def _cap_invalid_geometry(self, given: dict, steps: int = 60) -> None:
+        """Shrink the default bounds (not those given in ``given``) of each free parameter to the geometry the
+        model accepts without a warning (``Model.geometry_warnings``; for the IM model the segment constraint
+        w sin(umax) < l of sec. 5.3), the other parameters at their start values: the valid end is found by
+        bisection between the start and the bound (``steps`` halvings).  Recorded in ``geometry_caps``."""
+        if self.model.geometry_warnings(self.start):
+            return  # the start itself is outside: the user works in the model's limit (nothing to cap towards)
+        for i, spec in enumerate(self.specs):
+            if spec.name in given:
+                continue
+            for side, array in ((1, self.upper), (0, self.lower)):
+                bound = float(array[i])
+                if not self.model.geometry_warnings({**self.start, spec.name: bound}):
+                    continue
+                good, bad = float(self.start[spec.name]), bound
+                for _ in range(steps):
+                    mid = 0.5 * (good + bad)
+                    if self.model.geometry_warnings({**self.start, spec.name: mid}):
+                        bad = mid
+                    else:
+                        good = mid
+                array[i] = good
+                self.geometry_caps[spec.name] = {"bound": "upper" if side else "lower", "declared": bound,
+                                                 "capped": good}
 
     # ------------------------------------------------------------------ coordinates
     def _t(self, values):
@@ -99,6 +136,23 @@ class FitProblem:
         t[:, log] = np.exp(t[:, log])
         return [{**self.start, **dict(zip(self.free, row, strict=True))} for row in t.tolist()]
 
+    def enlarged(self, fraction: float) -> FitProblem:
+        """The same problem on a larger box: every bound moved out by ``fraction`` of the range in the
+        optimiser's coordinates (log for log-scaled parameters), clipped to the physical range (an open end
+        kept 1e-9 of the range away)."""
+        lo, hi = self._t(self.lower), self._t(self.upper)
+        lo, hi = lo - fraction * (hi - lo), hi + fraction * (hi - lo)
+        bounds = {}
+        for spec, a, b, old_a, old_b in zip(self.specs, lo, hi, self.lower, self.upper, strict=True):
+            a, b = (np.exp(a), np.exp(b)) if spec.transform == "log" else (a, b)
+            v_lo, v_hi = spec.valid
+            eps = 1e-9 * (v_hi - v_lo)
+            a = max(a, v_lo + (eps if spec.open_lower else 0.0))
+            b = min(b, v_hi - (eps if spec.open_upper else 0.0))
+            bounds[spec.name] = (float(min(a, old_a)), float(max(b, old_b)))
+        return FitProblem(self.model, self.measurement, self.free, self.start, bounds, self.metric,
+                          loss=self.loss, loss_scale=self.loss_scale)  # the enlarged box: no geometry cap
+
     # ------------------------------------------------------------------ evaluation
     def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
         """(N, k) matrix of the model components at ``params``."""
@@ -115,23 +169,53 @@ class FitProblem:
         return np.stack([comps[name] for name in self.component_names], axis=2)
 
     def solve(self, params: dict, *, normalised: bool = False) -> Solution:
-        """Coefficients by weighted NNLS, prediction and objective at ``params``."""
+        """Coefficients by weighted NNLS (IRLS for a robust loss), prediction and objective at ``params``."""
         design = self.design(params, normalised=normalised)
-        coef, _ = nnls_small(design, self.y, self.weights)
+        coef, _, _ = irls_coefficients(design, self.y, self.weights, self.loss, self.loss_scale)
         prediction = design @ coef
-        value = objective_value(metric_residuals(self.y, prediction, self.metric))
+        value = loss_value(metric_residuals(self.y, prediction, self.metric), self.loss, self.loss_scale)
         return Solution(params, coef, prediction, float(value))
 
+    def residuals(self, params: dict) -> np.ndarray:
+        """The residual vector (N C,) at ``params`` whose sum of squares is N C times the objective:
+        the metric's residuals, each mapped to sign(r) sqrt(rho(r)) under a robust loss."""
+        prediction = self.solve(params).prediction
+        return effective_residuals(metric_residuals(self.y, prediction, self.metric).ravel(), self.loss,
+                                   self.loss_scale)
+
+    def _fast(self) -> bool:
+        return self.metric == "relative" and self.loss == "squared"
+
     def __call__(self, x) -> float:
-        """The objective F at unit coordinates ``x``.  For the ``relative`` metric the NNLS weights are
-        1 / measured, so its residual norms already give F = sum ||w (A c - y)||^2 / (N C) (no prediction is
-        formed); the other metrics go through :meth:`solve`."""
+        """The objective F at unit coordinates ``x``.  For the ``relative`` metric and the squared loss the
+        NNLS weights are 1 / measured, so its residual norms already give F = sum ||w (A c - y)||^2 / (N C) (no
+        prediction is formed); the other metrics and losses go through :meth:`solve`."""
         self.evaluations += 1
         params = self.from_unit(x)
-        if self.metric != "relative":
+        if not self._fast():
             return self.solve(params).objective
         _, residual_norm = nnls_small(self.design(params), self.y, self.weights)
         return float(np.sum(residual_norm**2) / self.y.size)
+
+    def many(self, X, chunk: int = 32) -> np.ndarray:
+        """The objective at each row of ``X`` (J, k) unit coordinates, (J,): the model evaluated for
+        ``chunk`` points per call (``Model.components_many``) and, for the relative metric and squared loss,
+        the coefficients of all of them in one NNLS call (:func:`clothlab.fit.nnls.nnls_sets`)."""
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        out = np.empty(len(X))
+        for lo in range(0, len(X), chunk):
+            params = self.from_unit_many(X[lo:lo + chunk])
+            designs = self.designs(params)
+            self.evaluations += len(params)
+            if self._fast():
+                _, norms = nnls_sets(designs, self.y, self.weights)
+                out[lo:lo + len(params)] = np.sum(norms**2, axis=1) / self.y.size
+                continue
+            for j, design in enumerate(designs):
+                coef, _, _ = irls_coefficients(design, self.y, self.weights, self.loss, self.loss_scale)
+                out[lo + j] = loss_value(metric_residuals(self.y, design @ coef, self.metric), self.loss,
+                                         self.loss_scale)
+        return out
 
 
 def build_problem(config, measurement=None) -> FitProblem:
@@ -143,7 +227,9 @@ def build_problem(config, measurement=None) -> FitProblem:
     weave = resolve_weave(config.model.weave, config.base_dir)
     q = config.model.quadrature
     model = build_model(config.model.kind, weave, (q.rule, q.nodes), **config.model.options)
-    return FitProblem(model, measurement, config.fit.free, config.model.params, config.fit.bounds, config.fit.metric)
+    fit = config.fit
+    return FitProblem(model, measurement, fit.free, config.model.params, fit.bounds, fit.metric,
+                      loss=fit.loss, loss_scale=fit.loss_scale, valid_geometry=fit.valid_geometry)
 
 
 def collinearity_notes(design: np.ndarray, names, threshold: float = 0.999) -> list[str]:

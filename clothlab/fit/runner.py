@@ -84,10 +84,19 @@ class FitResult(Reportable):
 
 def _notes_at_optimum(problem, params, optimum, coefficients) -> list[str]:
     notes = list(problem.model.geometry_warnings(params))
+    for name, cap in getattr(problem, "geometry_caps", {}).items():
+        notes.append(f"fit.valid_geometry: the {cap['bound']} bound of {name} was moved from {cap['declared']:g} to "
+                     f"{cap['capped']:.6g}, the limit of the geometry the model accepts at the start values")
     for name, lo, hi in zip(problem.free, optimum.at_lower, optimum.at_upper, strict=True):
         if lo or hi:
             notes.append(f"{name} ended at its {'lower' if lo else 'upper'} bound "
                          f"({params[name]:.6g}): not determined by these data within the bounds")
+    check = getattr(optimum, "box_check", None)
+    if check and check.get("moved"):
+        moved = ", ".join(f"{name} {value:.6g}" for name, value in check["params"].items())
+        notes.append(f"the optimum moves when every bound is moved out by {100 * check['enlarged_by']:g} % of its "
+                     f"range: objective {check['objective']:.6g} < {check['objective_in_box']:.6g} at {moved}; "
+                     "the bounds (fit.bounds) may exclude the best fit")
     notes += collinearity_notes(problem.design(params, normalised=True), problem.component_names)
     for name, coef in coefficients.items():
         if np.all(coef == 0.0):
@@ -96,14 +105,17 @@ def _notes_at_optimum(problem, params, optimum, coefficients) -> list[str]:
 
 
 def _cross_validate(result, problem, params, config) -> None:
-    """Cross-validation into ``result``; a data problem becomes a note and a warning, never an exception."""
+    """Cross-validation into ``result``; a problem (data too few for the folds, or any error inside a fold refit)
+    becomes a note and a warning, never an exception: a CV problem never costs the fit."""
     k = config.fit.cv_folds
     try:
         cv = crossval.cross_validate(problem, params, k=k, seed=config.fit.optimizer.seed,
-                                     percentiles=config.report.percentiles, scheme=config.fit.cv_scheme)
-    except crossval.CrossValidationError as exc:
-        note = f"cross-validation ({k}-fold) not run: {exc}"
-        result.cross_validation = {"k": k, "failed": str(exc), "notes": [note]}
+                                     percentiles=config.report.percentiles, scheme=config.fit.cv_scheme,
+                                     refit=config.fit.cv_refit, optimizer=config.fit.optimizer)
+    except Exception as exc:  # noqa: BLE001 - the fit is kept; the failure is reported as a note
+        detail = str(exc) if isinstance(exc, crossval.CrossValidationError) else f"{type(exc).__name__}: {exc}"
+        note = f"cross-validation ({k}-fold) not run: {detail}"
+        result.cross_validation = {"k": k, "failed": detail, "notes": [note]}
         result.warnings.append(note)
         log.warning("%s: %s", config.name, note)
         return

@@ -2,7 +2,9 @@
 
 At the optimum x* (unit-box coordinates of :class:`clothlab.fit.problem.FitProblem`) the residual vector r(x)
 of the fit metric (all values and channels, the linear coefficients re-solved at every x, i.e. the profiled
-or "variable projection" residual) is linearised, r(x) ~ r(x*) + J (x - x*), J by central differences.  The
+or "variable projection" residual; under a robust loss each residual is sign(r) sqrt(rho(r)),
+:meth:`clothlab.fit.problem.FitProblem.residuals`, so that sum r^2 is the summed loss) is linearised,
+r(x) ~ r(x*) + J (x - x*), J by central differences.  The
 covariance of the free parameters is then
 
     C = s^2 (J^T J)^-1,   s^2 = sum r^2 / (n - p),
@@ -18,8 +20,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.fit.metrics import metric_residuals
-
 METHOD = "gauss-newton"
 STEP = 1e-3
 """Central-difference step in unit-box coordinates (one-sided at a bound).  Not smaller: under a fixed-node
@@ -33,8 +33,7 @@ MAX_CONDITION = 1e12
 def _residuals(problem, x, fixed: dict | None = None) -> np.ndarray:
     at = problem.from_unit(x)
     params = at if fixed is None else {**fixed, **{name: at[name] for name in problem.free}}
-    solution = problem.solve(params)
-    return metric_residuals(problem.y, solution.prediction, problem.metric).ravel()
+    return problem.residuals(params)
 
 
 def jacobian(problem, x, step=STEP, fixed: dict | None = None) -> np.ndarray:
