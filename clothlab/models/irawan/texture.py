@@ -70,6 +70,7 @@ from clothlab.models.irawan.integrals import (
     geometry_warnings,
     specular_albedo,
 )
+from clothlab.models.base import texture_parameters
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
 from clothlab.models.irawan.phase import phase_function
 from clothlab.models.irawan.texture_noise import exponential_noise, perlin_1d
@@ -131,6 +132,7 @@ class IrawanTexture:
     def resolve(self, params: dict | None) -> dict[str, float]:
         """The weave's parameters overridden by ``params``, validated (as :meth:`IrawanModel.resolve`)."""
         full = self.default_parameters()
+        params = texture_parameters(params, "irawan")  # the weave's own frame: orientation 0 only
         if params:
             full.update(IRAWAN_PARAMS.validate(params))
         return full
