@@ -64,6 +64,7 @@ from clothlab.config.schema import (
 )
 from clothlab.errors import ConfigError, InputError, ParameterError
 from clothlab.io.loader import check_reader_options
+from clothlab.models.base import ORIENTATION
 from clothlab.models.registry import MODEL_KINDS, model_class
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
@@ -145,6 +146,8 @@ class _Validator:
         measurement = self.measurement(top["measurement"])
         model = self.model(top.get("model", {}))
         fit = self.fit(top.get("fit", {}), model)
+        if ORIENTATION in fit.free and ORIENTATION not in model.params:  # listed only when given: start at 0
+            model = replace(model, params={**model.params, ORIENTATION: 0.0})
         report = self.report(top.get("report", {}))
         output = self.output(top.get("output", {}))
         return Config(name=name, path=self.path, base_dir=self.base_dir, measurement=measurement,
