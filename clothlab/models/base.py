@@ -52,8 +52,8 @@ direction pair is the unrotated model's at the directions turned back into the w
 orientations is evaluated orientation by orientation).  Absent or 0, nothing is rotated: results are
 bitwise those of the model alone.  :meth:`resolve` lists ``orientation`` only when it is given, and
 :meth:`default_parameters` never (so existing fits and simulated tables are unchanged); a configuration
-that frees it gets the start value 0 (:mod:`clothlab.config.validate`).  Texture models (u, v) do not rotate the tile: they refuse an orientation other than 0
-(:func:`texture_parameters`).
+that frees it gets the start value 0 (:mod:`clothlab.config.validate`).  Texture models (u, v) do not rotate
+the tile: they refuse an orientation other than 0 (:func:`texture_parameters`).
 
 Symmetry (:attr:`orientation_period`).  The tile-averaged models of woven cloth are invariant under a turn by
 180 deg (the yarn integrals of a segment are even in the segment's arc parameter u and a helix keeps its

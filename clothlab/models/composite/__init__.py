@@ -4,7 +4,7 @@ instead of the IM model's Lambertian, issue 14 item 3).
 
 A composite of a *specular* model S and a *diffuse* model D is the sum
 
-    f_r = sum_{k in specular components of S} c_k S_k(wi, wo; theta_S) + sum_{k in components of D} c_k D_k(wi, wo; theta_D)
+    f_r = sum_{k: specular parts of S} c_k S_k(wi, wo; theta_S) + sum_{k: parts of D} c_k D_k(wi, wo; theta_D)
 
 Its components are S's components except the diffuse ones (names starting ``diffuse``) followed by all of
 D's; its parameters are the union of both tables (names must not clash; ``orientation`` is the composite's

@@ -62,6 +62,7 @@ import numpy as np
 
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
+from clothlab.models.base import texture_parameters
 from clothlab.models.components import combine
 from clothlab.models.irawan.integrals import (
     COMPONENTS,
@@ -70,7 +71,6 @@ from clothlab.models.irawan.integrals import (
     geometry_warnings,
     specular_albedo,
 )
-from clothlab.models.base import texture_parameters
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
 from clothlab.models.irawan.phase import phase_function
 from clothlab.models.irawan.texture_noise import exponential_noise, perlin_1d
