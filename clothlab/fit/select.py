@@ -123,6 +123,18 @@ class CandidateResult:
     period: float = 0.0
 
 
+def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=None, max_evals=None,
+                         cv_folds=None) -> SelectSettings:
+    """The :class:`SelectSettings` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
+    with the given values (command-line options) replacing it."""
+    sel = config.select
+    chosen = tuple(weaves if weaves is not None else sel.weaves) or SelectSettings.weaves
+    return SelectSettings(weaves=chosen, kinds=tuple(kinds if kinds is not None else sel.kinds),
+                          orientation_starts=int(orientation_starts or sel.orientation_starts),
+                          max_evals=int(max_evals or sel.max_evals),
+                          cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds))
+
+
 def candidates(settings: SelectSettings) -> list[Candidate]:
     """The candidate list (module docstring), in weave, kind, orientation-start order."""
     out = []
@@ -393,4 +405,4 @@ def save_selection(selection: Selection, *, force: bool = False, fits_dir=None):
 
 __all__ = ["Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection", "candidate_config",
            "candidates", "fit_candidate", "information_criteria", "rank", "save_selection",
-           "select", "selection_summary", "table_columns", "table_markdown"]
+           "select", "selection_summary", "settings_from_config", "table_columns", "table_markdown"]
