@@ -12,7 +12,7 @@ from clothlab.cli.options import add_force, add_output
 
 
 def add_parser(sub):
-    p = sub.add_parser("select", help="model selection: candidate weaves x kinds x orientations, ranked -> fits/<name>/",
+    p = sub.add_parser("select", help="model selection: weaves x kinds x orientations, ranked -> fits/<name>/",
                        description="Fit every candidate (weave presets or select.weaves, model kinds with their "
                                    "diffuse term, orientation starts) with a reduced budget, rank them by "
                                    "cross-validated error (and list AIC / BIC), refit the winner with the "
