@@ -81,3 +81,25 @@ def to_yarn_frame(w: np.ndarray, kind: str) -> np.ndarray:
     if kind == "weft":
         return np.stack([-w[..., 1], w[..., 0], w[..., 2]], axis=-1)
     raise ValueError(f"yarn kind must be 'warp' or 'weft', got {kind!r}")
+
+
+def rotate_about_normal(w, angle, *, degrees: bool = True) -> np.ndarray:
+    """Directions (..., 3) rotated counter-clockwise (seen from above, +z towards the viewer) by ``angle``
+    about the normal z: (x, y, z) -> (x cos a - y sin a, x sin a + y cos a, z).  An angle of exactly 0
+    returns the input values unchanged (a float64 copy)."""
+    w = np.array(w, dtype=np.float64)
+    a = np.deg2rad(angle) if degrees else float(angle)
+    if a == 0.0:
+        return w
+    c, s = np.cos(a), np.sin(a)
+    x, y = w[..., 0].copy(), w[..., 1].copy()
+    w[..., 0] = c * x - s * y
+    w[..., 1] = s * x + c * y
+    return w
+
+
+def to_weave_frame(w, orientation: float) -> np.ndarray:
+    """Fabric-frame directions (..., 3) of a table expressed in the frame of a weave rotated by
+    ``orientation`` degrees counter-clockwise about the normal (its warp at azimuth 90 + orientation deg of
+    the table): the directions rotated by -orientation (:func:`rotate_about_normal`)."""
+    return rotate_about_normal(w, -float(orientation))

@@ -29,6 +29,9 @@ class ParamSpec:
     doc: str = ""
     open_lower: bool = False
     open_upper: bool = False
+    #: the period (declared unit) of a periodic parameter (e.g. an angle about the normal), else None: a fit
+    #: whose bounds span one period treats the bounds as the same point, not as limits (clothlab.fit.periodic)
+    period: float | None = None
 
     def check(self, value: float, where: str = "") -> float:
         """Return ``value`` as float or raise :class:`ParameterError` naming the parameter and its range."""

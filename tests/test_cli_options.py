@@ -67,7 +67,7 @@ def test_every_option_and_positional_has_help(bench_api):
     parser = build_parser()
     parsers = _parsers(parser)
     assert {name.split()[-1] for name, _ in parsers[1:]} == {
-        "fit", "report", "eval", "simulate", "import", "fit-btf", "render", "calibrate", "check", "bench",
+        "fit", "select", "report", "eval", "simulate", "import", "fit-btf", "render", "calibrate", "check", "bench",
         "train-surrogate"}
     hidden = []
     for name, p in parsers:

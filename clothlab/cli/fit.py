@@ -32,12 +32,21 @@ def add_parser(sub):
                         "interrupted run continues from its checkpoint when the same command is run again")
     p.add_argument("--no-posterior", action="store_true", help="skip the posterior even if fabric.yaml asks for it")
     p.add_argument("--cv", type=int, metavar="K", help="k-fold cross-validated error percentiles (K >= 2)")
+    p.add_argument("--select", action="store_true",
+                   help="model selection instead of one fit: the same as `clothlab select` (docs/select.md)")
+    from clothlab.cli.select import add_selection_options
+
+    add_selection_options(p)
     add_quadrature_overrides(p)
     add_parallel(p, "the fits (one task per fit; one fabric.yaml: chunks of its posterior's walkers)")
     return p
 
 
 def run(args) -> int:
+    if args.select:
+        from clothlab.cli import select
+
+        return select.run(args)
     with contextlib.ExitStack() as held:  # each result's lock, held from the checks to the save
         return _run(args, held)
 

@@ -22,12 +22,14 @@ import sys
 
 from clothlab import __version__
 from clothlab.atomic import interrupts_recorded, was_interrupted
-from clothlab.cli import bench, calibrate, check, fit, fit_btf, import_table, render, report, simulate, train_surrogate
+from clothlab.cli import (bench, calibrate, check, fit, fit_btf, import_table, render, report, select, simulate,
+                          train_surrogate)
 from clothlab.cli import eval as eval_
 from clothlab.cli.options import DEPRECATED
 from clothlab.errors import ClothlabError
 
-SUBCOMMANDS = (fit, report, eval_, simulate, import_table, fit_btf, render, calibrate, check, bench, train_surrogate)
+SUBCOMMANDS = (fit, select, report, eval_, simulate, import_table, fit_btf, render, calibrate, check, bench,
+               train_surrogate)
 """The subcommand modules, in the order ``clothlab --help`` lists them; each has ``add_parser(sub)``
 (returning its parser) and ``run(args) -> int``."""
 

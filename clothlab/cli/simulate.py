@@ -32,6 +32,15 @@ def add_parser(sub):
     p.add_argument("--noise-mult", type=float, default=0.0, help="multiplicative log-normal sigma (0.05 = 5 %%)")
     p.add_argument("--noise-add", type=float, default=0.0, help="additive Gaussian sigma in 1/sr")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--sampling", metavar="SPEC", default=None,
+                   help="direction pairs of the table: paper (default: the paper's 225 x 7 grid), random:N "
+                        "(N pairs, each direction uniform over the hemisphere in solid angle), random:N:cosine "
+                        "(cosine-weighted), or a CSV file with columns theta_i,phi_i,theta_o,phi_o in degrees "
+                        "(clothlab's azimuths)")
+    p.add_argument("--sampling-seed", type=int, default=0, help="seed of random:N (default 0)")
+    p.add_argument("--orientation", type=float, metavar="DEG", default=None,
+                   help="rotate the generating weave by DEG about the normal (counter-clockwise from above; the "
+                        "model parameter orientation)")
     add_force(p, "output (table, example sets or BTF stack)")
     add_quadrature_overrides(p)
     return p
@@ -93,9 +102,14 @@ def run(args) -> int:
     for name in model.component_names:  # per-yarn diffuse components (kind surface) take --kd
         if name.startswith("diffuse_"):
             coefficients.setdefault("kd_" + name.split("_", 1)[1], coefficients["kd"])
+    from clothlab.simulate.sampling import parse_sampling
+
+    if args.orientation is not None:
+        params["orientation"] = model.params["orientation"].check(args.orientation, "--orientation")
+    sampling, described = parse_sampling(args.sampling, args.sampling_seed)
     noise = NoiseModel(args.noise_mult, args.noise_add, args.seed)
-    m = simulate(model, params, coefficients, channels=channels, noise=noise,
-                 provenance={"sample_name": f"{weave.name} (SIMULATED)"})
+    m = simulate(model, params, coefficients, channels=channels, noise=noise, sampling=sampling,
+                 provenance={"sample_name": f"{weave.name} (SIMULATED)", "sampling": described})
     print(write_table(m, args.output, overwrite=args.force))
     return 0
 

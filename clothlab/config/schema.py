@@ -128,6 +128,19 @@ class ReportConfig:
 
 
 @dataclass(frozen=True)
+class SelectConfig:
+    """``select``: what ``clothlab select`` / ``fit --select`` tries (clothlab.fit.select, docs/select.md):
+    weaves (``preset:<name>`` or resolved .wv paths; empty = every shipped preset), model kinds, orientation
+    starts, the per-candidate evaluation budget and CV folds."""
+
+    weaves: tuple = ()
+    kinds: tuple = ("irawan", "irawan+oren-nayar")
+    orientation_starts: int = 2
+    max_evals: int = 600
+    cv_folds: int = 5
+
+
+@dataclass(frozen=True)
 class OutputConfig:
     """``output``: directories under which fits/<name>/ and reports/<name>/ are written (resolved)."""
 
@@ -154,6 +167,7 @@ class Config:
     output: OutputConfig
     raw: dict
     source: str = "<dict>"
+    select: SelectConfig = field(default_factory=SelectConfig)  # not in canonical(): it changes no fit
 
     def canonical(self) -> dict:
         """The validated settings as plain JSON data with defaults filled in.

@@ -71,9 +71,11 @@ from clothlab.config.schema import (
     PosteriorConfig,
     QuadratureConfig,
     ReportConfig,
+    SelectConfig,
 )
 from clothlab.errors import ConfigError, InputError, ParameterError
 from clothlab.io.loader import check_reader_options
+from clothlab.models.base import ORIENTATION
 from clothlab.models.registry import MODEL_KINDS, model_class
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
@@ -140,7 +142,7 @@ class _Validator:
             found = "an empty document" if top is None else shown(top)
             raise ConfigError(f"expected a mapping of settings (name:, measurement:, ...), got {found}",
                               path=self.source, line=self.lines.line(()))
-        self.section(top, (), ("name", "measurement", "model", "fit", "report", "output"),
+        self.section(top, (), ("name", "measurement", "model", "fit", "report", "output", "select"),
                      required=("name", "measurement"))
         name = as_str(top["name"], self.at(("name",)))
         if len(name) > MAX_NAME_CHARS:
@@ -155,11 +157,32 @@ class _Validator:
         measurement = self.measurement(top["measurement"])
         model = self.model(top.get("model", {}))
         fit = self.fit(top.get("fit", {}), model)
+        if ORIENTATION in fit.free and ORIENTATION not in model.params:  # listed only when given: start at 0
+            model = replace(model, params={**model.params, ORIENTATION: 0.0})
         report = self.report(top.get("report", {}))
         output = self.output(top.get("output", {}))
+        select = self.select(top.get("select", {}) or {})
         return Config(name=name, path=self.path, base_dir=self.base_dir, measurement=measurement,
                       model=model, fit=fit, report=report, output=output, raw=copy.deepcopy(top),
-                      source=self.source)
+                      source=self.source, select=select)
+
+    def select(self, value: Any) -> SelectConfig:
+        """``select``: weaves (preset:<name> or .wv files), kinds, orientation_starts, max_evals, cv_folds."""
+        p = ("select",)
+        s = self.section(value, p, ("weaves", "kinds", "orientation_starts", "max_evals", "cv_folds"))
+        d = SelectConfig()
+        weaves = tuple(self.weave(w, self.at(p + ("weaves", i)))
+                       for i, w in enumerate(as_list(s.get("weaves", []), self.at(p + ("weaves",)))))
+        kinds = tuple(as_choice(k, self.at(p + ("kinds", i)), MODEL_KINDS)
+                      for i, k in enumerate(as_list(s.get("kinds", list(d.kinds)), self.at(p + ("kinds",)))))
+        if not kinds:
+            raise self.at(p + ("kinds",)).error("expected at least one model kind, got []")
+        starts = as_int(s.get("orientation_starts", d.orientation_starts), self.at(p + ("orientation_starts",)), 1, 8)
+        max_evals = as_int(s.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1, MAX_EVALS)
+        cv_folds = as_int(s.get("cv_folds", d.cv_folds), self.at(p + ("cv_folds",)), 0)
+        if cv_folds == 1:
+            raise self.at(p + ("cv_folds",)).error("expected 0 (no cross-validation) or at least 2 folds, got 1")
+        return SelectConfig(weaves, kinds, starts, max_evals, cv_folds)
 
     def measurement(self, value: Any) -> MeasurementConfig:
         p = ("measurement",)

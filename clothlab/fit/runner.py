@@ -28,6 +28,7 @@ from clothlab.fit import posterior as posterior_sampling
 from clothlab.fit.fitreport import Reportable
 from clothlab.fit.metrics import error_percentiles
 from clothlab.fit.optimize import multistart_minimize, polish
+from clothlab.fit.periodic import release_periodic_bounds
 from clothlab.fit.problem import FitProblem, Solution, build_problem, collinearity_notes, evaluation_speed
 from clothlab.fit.store import (
     checkpoint_path,
@@ -146,7 +147,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     start_objective = problem(x0)
     log.debug("%s: %d free parameters, %d values, start objective %.6g", config.name, len(problem.free),
               problem.y.size, start_objective)
-    optimum = multistart_minimize(problem, x0, opt, progress)
+    optimum = release_periodic_bounds(problem, multistart_minimize(problem, x0, opt, progress))
     params = problem.from_unit(optimum.x)
     solution = problem.solve(params, normalised=True)
     coefficients = {coefficient_name(n): solution.coefficients[i] for i, n in enumerate(problem.component_names)}

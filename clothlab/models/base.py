@@ -33,7 +33,37 @@ member                   meaning
 ``texture``              the texture model: components at texture points (u, v) whose tile average is
                          :meth:`components`; ConfigError for models without one
 ``texture_filters``      True when the texture model takes a pixel footprint and filters itself (capability)
+``orientation_period``   the period (deg) of the model under a rotation of the weave about the normal
+                         (:data:`ISOTROPIC` = 0: any rotation); the bounds of ``orientation`` span one period
+``quarter_turn_swaps``   True when a quarter turn maps the warp components onto the weft ones (capability)
+``fit_period``           the period of ``orientation`` at given parameters, up to relabelling warp <-> weft
 =======================  =====================================================================================
+
+Orientation (one implementation for every model, here).  Every model accepts the parameter ``orientation``
+(deg): the weave rotated counter-clockwise about the surface normal, seen from above, so that its warp lies at
+azimuth 90 + orientation deg of the table's fabric frame (docs/design.md principle 1).  The value at a
+direction pair is the unrotated model's at the directions turned back into the weave's frame,
+
+    f_r(wi, wo; orientation) = f_r(R(-orientation) wi, R(-orientation) wo; 0)     (R: rotation about z)
+
+(:func:`clothlab.frames.to_weave_frame`).  A subclass writes its model in the weave's frame and never sees
+``orientation``: :meth:`Model.__init_subclass__` adds the declaration to its parameter table(s) and wraps its
+``components`` / ``components_many`` to take the parameter out and rotate the directions (a batch of several
+orientations is evaluated orientation by orientation).  Absent or 0, nothing is rotated: results are
+bitwise those of the model alone.  :meth:`resolve` lists ``orientation`` only when it is given, and
+:meth:`default_parameters` never (so existing fits and simulated tables are unchanged); a configuration
+that frees it gets the start value 0 (:mod:`clothlab.config.validate`).  Texture models (u, v) do not rotate
+the tile: they refuse an orientation other than 0 (:func:`texture_parameters`).
+
+Symmetry (:attr:`orientation_period`).  The tile-averaged models of woven cloth are invariant under a turn by
+180 deg (the yarn integrals of a segment are even in the segment's arc parameter u and a helix keeps its
+handedness under a half turn: Irawan & Marschner 2012, eqs. 4-10; Kang's perturbation rectangle is symmetric),
+so their period is 180 deg and ``orientation`` is bounded to [-90, 90] by default.  A quarter turn maps the
+warp components onto the weft ones (the weft frame is the warp frame turned by 90 deg, sec. 5.2): when warp and
+weft carry the same parameters (or tied ones, as Kang's alternating lobes), a quarter turn changes only which
+linear coefficient is called ks_warp and which ks_weft, so a fit determines the orientation modulo 90 deg only
+(:meth:`fit_period`).  Isotropic models (Lambert, Oren-Nayar) do not depend on it at all (:data:`ISOTROPIC`).
+The test suite checks these symmetries numerically for every registered kind.
 
 A texture model (what :meth:`Model.texture` returns) has ``weave``, ``component_names``, ``resolve(params)``
 and ``components(u, v, wi, wo, params, *, need=None, noise=True, normalised=True, warn=True, footprint=None,
@@ -50,13 +80,186 @@ Helpers for implementations: :func:`as_directions` (the (N, 3) float64 arrays ev
 from __future__ import annotations
 
 import abc
+import copy
+import functools
+import math
 from typing import ClassVar
 
 import numpy as np
 
 from clothlab.errors import ConfigError
+from clothlab.frames import to_weave_frame
 from clothlab.models.components import combine
-from clothlab.params import ParamTable
+from clothlab.params import ParamSpec, ParamTable
+
+#: The name of the rotation of the weave about the normal, a parameter of every model (module docstring).
+ORIENTATION = "orientation"
+#: Methods of a model about its weave whose ``params`` lose ``orientation`` before the model sees them.
+WEAVE_FRAME_METHODS = ("fitted_weave", "geometry_warnings", "with_parameters")
+#: :attr:`Model.orientation_period` of a model that does not depend on the orientation at all.
+ISOTROPIC = 0.0
+#: The period of the tile-averaged woven-cloth models (a half turn maps a weave onto itself).
+HALF_TURN = 180.0
+
+
+def orientation_spec(period: float) -> ParamSpec:
+    """The declaration of ``orientation`` for a model of period ``period`` deg (:data:`ISOTROPIC`: a full
+    turn): default 0, fit bounds one period centred on 0, any value in [-360, 360] accepted."""
+    span = float(period) if period and period > 0 else 360.0
+    return ParamSpec(ORIENTATION, "deg", (-360.0, 360.0), (-0.5 * span, 0.5 * span), 0.0, "linear",
+                     "rotation of the weave about the surface normal, counter-clockwise from above: the warp at "
+                     f"azimuth 90 + orientation deg of the table (periodic, {span:g} deg)", period=span)
+
+
+def with_orientation(table, period: float):
+    """``table`` (a ParamTable or subclass, kept) with the ``orientation`` declaration added (once)."""
+    if table is None or not isinstance(table, ParamTable) or ORIENTATION in table.specs:
+        return table
+    out = copy.copy(table)
+    out.specs = {**table.specs, ORIENTATION: orientation_spec(period)}
+    return out
+
+
+def common_period(periods) -> float:
+    """The period of a sum of models of these periods: the least common multiple of the non-isotropic ones
+    (in units of 1e-6 deg), :data:`ISOTROPIC` if all are."""
+    ticks = [round(p * 1e6) for p in periods if p and p > 0]
+    if not ticks:
+        return ISOTROPIC
+    return functools.reduce(lambda a, b: a * b // math.gcd(a, b), ticks) / 1e6
+
+
+def split_orientation(params):
+    """(``params`` without ``orientation``, the orientation in deg; 0 when absent)."""
+    if not params or ORIENTATION not in params:
+        return params, 0.0
+    return {k: v for k, v in params.items() if k != ORIENTATION}, float(params[ORIENTATION])
+
+
+class _WeaveFrame:
+    """While a model's own code runs inside a wrapped method (``with _WeaveFrame(model):``), its
+    :meth:`Model.resolve` answers without ``orientation``: the model works in the weave's frame and never sees
+    it (a per-instance depth count; a model instance is not shared between threads)."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def __enter__(self):
+        self.model.__dict__["_weave_frame_depth"] = self.model.__dict__.get("_weave_frame_depth", 0) + 1
+
+    def __exit__(self, *exc):
+        self.model.__dict__["_weave_frame_depth"] -= 1
+
+
+def _in_weave_frame(model) -> bool:
+    return model.__dict__.get("_weave_frame_depth", 0) > 0
+
+
+def _oriented_components(method):
+    """Wrap a ``components(wi, wo, params, **kw)``: take ``orientation`` out, rotate the directions."""
+    @functools.wraps(method)
+    def components(self, wi, wo, params=None, **kw):
+        rest, angle = split_orientation(params)
+        if angle != 0.0:
+            self.params[ORIENTATION].check(angle)
+            wi, wo = as_directions(wi, wo)
+            wi, wo = to_weave_frame(wi, angle), to_weave_frame(wo, angle)
+        with _WeaveFrame(self):
+            return method(self, wi, wo, rest, **kw)
+    components.oriented = True
+    return components
+
+
+def _oriented_components_many(method):
+    """Wrap a ``components_many(wi, wo, params_list, **kw)``: sets of one orientation are evaluated together
+    at the directions rotated into that orientation's weave frame; the rows come back in the given order."""
+    @functools.wraps(method)
+    def components_many(self, wi, wo, params_list, **kw):
+        split = [split_orientation(p) for p in params_list]
+        angles = [a for _, a in split]
+        with _WeaveFrame(self):
+            if all(a == 0.0 for a in angles):
+                return method(self, wi, wo, [p for p, _ in split], **kw)
+            wi, wo = as_directions(wi, wo)
+            out: dict = {}
+            for angle in dict.fromkeys(angles):
+                rows = [j for j, a in enumerate(angles) if a == angle]
+                if angle != 0.0:
+                    self.params[ORIENTATION].check(angle)
+                part = method(self, to_weave_frame(wi, angle), to_weave_frame(wo, angle),
+                              [split[j][0] for j in rows], **kw)
+                for name, value in part.items():
+                    if name not in out:
+                        out[name] = np.zeros((len(angles),) + value.shape[1:], dtype=value.dtype)
+                    out[name][rows] = value
+            return out
+    components_many.oriented = True
+    return components_many
+
+
+def _weave_frame_method(method):
+    """Wrap a method ``f(params, ...)`` about the weave itself (``fitted_weave``, ``geometry_warnings``):
+    ``orientation`` taken out; it does not change the weave (the .wv format has no orientation)."""
+    @functools.wraps(method)
+    def wrapped(self, params=None, *args, **kw):
+        with _WeaveFrame(self):
+            return method(self, split_orientation(params)[0], *args, **kw)
+    wrapped.oriented = True
+    return wrapped
+
+
+def _oriented_resolve(method):
+    """Wrap ``resolve(params)`` / ``default_parameters()`` of a subclass: the subclass resolves its own
+    parameters; ``orientation`` is added when it was given, checked against its declaration - except while
+    the model's own code runs (:class:`_WeaveFrame`), which gets its own parameters only."""
+    @functools.wraps(method)
+    def resolve(self, *args):
+        given = args[0] if args else None
+        rest, angle = split_orientation(given)
+        out = method(self, *((rest,) if args else ()))
+        out.pop(ORIENTATION, None)  # tables listing every declaration put its default in
+        if rest is not given and not _in_weave_frame(self):
+            out[ORIENTATION] = self.params[ORIENTATION].check(angle, ORIENTATION)
+        return out
+    resolve.oriented = True
+    return resolve
+
+
+def texture_parameters(params, kind: str):
+    """``params`` for a texture model, which evaluates the weave in its own tile frame: ``orientation`` taken
+    out, and refused (ConfigError) unless 0 - rotate the scene's (u, v) frame instead."""
+    rest, angle = split_orientation(params)
+    if angle != 0.0:
+        raise ConfigError(f"the texture model of kind {kind!r} takes no orientation (got {angle:g} deg): it "
+                          "evaluates the weave in its tile frame; rotate the scene's (u, v) frame instead",
+                          field=ORIENTATION)
+    return rest
+
+
+def _oriented_components_many(method):
+    """Wrap a ``components_many(wi, wo, params_list, **kw)``: sets of one orientation are evaluated together
+    at the directions rotated into that orientation's weave frame; the rows come back in the given order."""
+    @functools.wraps(method)
+    def components_many(self, wi, wo, params_list, **kw):
+        split = [split_orientation(p) for p in params_list]
+        angles = [a for _, a in split]
+        if all(a == 0.0 for a in angles):
+            return method(self, wi, wo, [p for p, _ in split], **kw)
+        wi, wo = as_directions(wi, wo)
+        out: dict = {}
+        for angle in dict.fromkeys(angles):
+            rows = [j for j, a in enumerate(angles) if a == angle]
+            if angle != 0.0:
+                self.params[ORIENTATION].check(angle)
+            part = method(self, to_weave_frame(wi, angle), to_weave_frame(wo, angle),
+                          [split[j][0] for j in rows], **kw)
+            for name, value in part.items():
+                if name not in out:
+                    out[name] = np.zeros((len(angles),) + value.shape[1:], dtype=value.dtype)
+                out[name][rows] = value
+        return out
+    components_many.oriented = True
+    return components_many
 
 
 def as_directions(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +287,65 @@ class Model(abc.ABC):
     has_texture: ClassVar[bool] = False
     #: True when the texture model takes a pixel footprint and filters itself (a renderer need not blend)
     texture_filters: ClassVar[bool] = False
+    #: period (deg) under a rotation of the weave about the normal; ISOTROPIC (0) for no dependence at all
+    orientation_period: ClassVar[float] = HALF_TURN
+    #: True when the weft components are the warp components turned by 90 deg up to a constant factor (the
+    #: same yarn model for both types, the weave entering only through cell shares): :meth:`fit_period`
+    quarter_turn_swaps: ClassVar[bool] = True
     params: ParamTable
+
+    def __init_subclass__(cls, **kwargs):
+        """Give the subclass the ``orientation`` parameter (module docstring): its declarations gain the
+        entry, its components are wrapped to rotate the directions."""
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__
+        if "params" in own:
+            cls.params = with_orientation(own["params"], cls.orientation_period)
+        if "components" in own and not getattr(own["components"], "oriented", False):
+            cls.components = _oriented_components(own["components"])
+        if "components_many" in own and not getattr(own["components_many"], "oriented", False):
+            cls.components_many = _oriented_components_many(own["components_many"])
+        for name in ("resolve", "default_parameters"):
+            if name in own and not getattr(own[name], "oriented", False):
+                setattr(cls, name, _oriented_resolve(own[name]))
+        for name in WEAVE_FRAME_METHODS:
+            if name in own and not getattr(own[name], "oriented", False):
+                setattr(cls, name, _weave_frame_method(own[name]))
+        if "declared_parameters" in own:
+            declared = own["declared_parameters"].__func__
+
+            @classmethod
+            @functools.wraps(declared)
+            def declared_parameters(klass, options=None):
+                return with_orientation(declared(klass, options), klass.orientation_period)
+            cls.declared_parameters = declared_parameters
+        if "__init__" in own and not getattr(own["__init__"], "oriented", False):
+            init = own["__init__"]
+
+            @functools.wraps(init)
+            def __init__(self, *args, **kw):
+                init(self, *args, **kw)
+                if "params" in self.__dict__:  # an instance narrowing its declarations (e.g. Kang's options)
+                    self.params = with_orientation(self.__dict__["params"], type(self).orientation_period)
+            __init__.oriented = True
+            cls.__init__ = __init__
+
+    def fit_period(self, params: dict | None = None) -> float:
+        """The period (deg) of ``orientation`` as a fit sees it at ``params``: :attr:`orientation_period`,
+        halved when every warp parameter equals its weft counterpart (or has none: tied), because a quarter turn
+        then only exchanges ks_warp and ks_weft (module docstring); :data:`ISOTROPIC` stays 0."""
+        period = self.orientation_period
+        if not period:
+            return ISOTROPIC
+        p = self.resolve(params)
+        warp = {k[len("warp."):]: v for k, v in p.items() if k.startswith("warp.")}
+        weft = {k[len("weft."):]: v for k, v in p.items() if k.startswith("weft.")}
+        if "specular_warp" in self.component_names and "specular_weft" in self.component_names and \
+                all(name not in weft or weft[name] == value for name, value in warp.items()) and \
+                set(weft) <= set(warp) and self.quarter_turn_swaps:
+            return period / 2.0
+        return period
+
 
     def __init__(self, weave, **options):
         self.weave = weave
@@ -177,4 +438,6 @@ class ModelTexture:
         return self.model.default_parameters()
 
     def resolve(self, params: dict | None) -> dict[str, float]:
-        return self.model.resolve(params)
+        """The model's resolved parameters; an ``orientation`` other than 0 is refused
+        (:func:`texture_parameters`)."""
+        return self.model.resolve(texture_parameters(params, self.model.kind))

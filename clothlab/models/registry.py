@@ -19,6 +19,9 @@ MODEL_KINDS = {
     "surface": ("clothlab.models.surface.model", "SurfaceModel"),
     "neural": ("clothlab.models.neural.model", "NeuralModel"),
 }
+#: Composite kinds (clothlab.models.composite): name -> (specular kind, diffuse kind).
+COMPOSITE_KINDS = {f"{s}+{d}": (s, d) for s in ("irawan", "kang") for d in ("lambert", "oren-nayar")}
+MODEL_KINDS.update({name: ("clothlab.models.composite", "composite_class") for name in COMPOSITE_KINDS})
 DEFAULT_KIND = "irawan"
 
 
@@ -29,13 +32,16 @@ def model_class(kind: str):
     except KeyError:
         raise ConfigError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}",
                           field="model.kind") from None
+    if kind in COMPOSITE_KINDS:
+        return getattr(import_module(module), name)(kind, *(model_class(part) for part in COMPOSITE_KINDS[kind]))
     return getattr(import_module(module), name)
 
 
 def build_model(kind: str, weave, quadrature=None, **options):
     """An instance of the model ``kind`` for ``weave``; ``quadrature`` = (rule, nodes) for integrating models."""
     cls = model_class(kind)
-    accepted = [p.name for p in inspect.signature(cls.__init__).parameters.values()
+    takes_options = getattr(cls, "specular_class", cls)  # a composite passes its options to its specular part
+    accepted = [p.name for p in inspect.signature(takes_options.__init__).parameters.values()
                 if p.kind == p.KEYWORD_ONLY]
     for name in options:
         if name not in accepted:

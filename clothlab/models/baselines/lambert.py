@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.models.base import Model, as_directions, front_facing
+from clothlab.models.base import ISOTROPIC, Model, as_directions, front_facing
 from clothlab.params import ParamTable
 
 
@@ -28,6 +28,7 @@ class LambertModel(Model):
     component_names = ("diffuse",)
     coefficient_meaning = "kd: diffuse albedo (Lambert)"
     default_free = ()
+    orientation_period = ISOTROPIC  # f_r does not depend on the azimuths
 
     def default_parameters(self) -> dict[str, float]:
         return {}

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.models.base import Model, as_directions, front_facing
+from clothlab.models.base import ISOTROPIC, Model, as_directions, front_facing
 from clothlab.params import ParamSpec, ParamTable
 
 OREN_NAYAR_PARAMS = ParamTable([
@@ -57,6 +57,7 @@ class OrenNayarModel(Model):
     component_names = ("diffuse",)
     coefficient_meaning = "kd: facet albedo (rho of Oren & Nayar 1994, eq. 30)"
     default_free = ("sigma",)
+    orientation_period = ISOTROPIC  # f_r depends on the azimuths only through phi_o - phi_i
 
     def default_parameters(self) -> dict[str, float]:
         return {spec.name: float(spec.default) for spec in self.params}

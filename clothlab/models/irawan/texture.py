@@ -62,6 +62,7 @@ import numpy as np
 
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
+from clothlab.models.base import texture_parameters
 from clothlab.models.components import combine
 from clothlab.models.irawan.integrals import (
     COMPONENTS,
@@ -136,6 +137,7 @@ class IrawanTexture:
     def resolve(self, params: dict | None) -> dict[str, float]:
         """The weave's parameters overridden by ``params``, validated (as :meth:`IrawanModel.resolve`)."""
         full = self.default_parameters()
+        params = texture_parameters(params, "irawan")  # the weave's own frame: orientation 0 only
         if params:
             full.update(IRAWAN_PARAMS.validate(params))
         return full

@@ -114,6 +114,7 @@ class SurfaceModel(Model):
         "that yarn type (eq. 1-2, the fibre microflake layer, single scattering: albedo <= ks); components are "
         "tile averages, so each carries its yarn type's visible area")
     default_free = ("warp.umax", "weft.umax", "warp.alpha", "weft.alpha", "warp.beta", "weft.beta")
+    quarter_turn_swaps = False  # the yarns' placement in the weave shapes the tile average (measured)
 
     def __init__(self, weave: Weave, *, tile_nodes=None):
         self.weave = weave

@@ -1,0 +1,99 @@
+"""``clothlab select fabric.yaml`` (= ``clothlab fit --select fabric.yaml``): fit candidate weaves, model kinds
+and orientation starts, rank them by cross-validated error and AIC/BIC, refit the winner and save it as
+``fits/<name>/`` with the comparison table (``selection.csv``, ``selection.md``); :mod:`clothlab.fit.select`,
+docs/select.md."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+from clothlab.cli.options import add_force, add_output
+
+
+def add_parser(sub):
+    p = sub.add_parser("select", help="model selection: weaves x kinds x orientations, ranked -> fits/<name>/",
+                       description="Fit every candidate (weave presets or select.weaves, model kinds with their "
+                                   "diffuse term, orientation starts) with a reduced budget, rank them by "
+                                   "cross-validated error (and list AIC / BIC), refit the winner with the "
+                                   "fabric.yaml budget and save it with the comparison table (docs/select.md).")
+    p.add_argument("configs", nargs="+", type=Path, metavar="fabric.yaml", help="one or more fabric.yaml files")
+    add_selection_options(p)
+    add_force(p, "fits/<name>/")
+    add_output(p, "write the fit directories <name>/ under DIR (default: the yaml's output.fits)", metavar="DIR")
+    p.add_argument("--no-posterior", action="store_true", help="skip the posterior of the winner's refit")
+    return p
+
+
+def add_selection_options(p) -> None:
+    """The options shared by ``select`` and ``fit --select``."""
+    p.add_argument("--weaves", metavar="LIST", help="comma-separated candidate weaves (preset names, preset:<name> "
+                                                    "or .wv files); default select.weaves, else every preset")
+    p.add_argument("--kinds", metavar="LIST", help="comma-separated candidate model kinds, e.g. "
+                                                   "irawan,irawan+oren-nayar (default select.kinds)")
+    p.add_argument("--orientation-starts", type=int, metavar="N", help="orientation starts per weave and kind "
+                                                                       "(default select.orientation_starts, 2)")
+    p.add_argument("--candidate-evals", type=int, metavar="N", help="evaluations per candidate fit "
+                                                                    "(default select.max_evals, 600)")
+    p.add_argument("--candidate-cv", type=int, metavar="K", help="cross-validation folds per candidate "
+                                                                 "(default select.cv_folds, 5; 0: rank by BIC)")
+
+
+def _settings(cfg, args):
+    from clothlab.config.checks import Location, as_choice
+    from clothlab.errors import ConfigError
+    from clothlab.fit.select import settings_from_config
+    from clothlab.models.registry import MODEL_KINDS
+    from clothlab.weave.presets import PRESET_PREFIX, canonical_preset_name
+
+    weaves = kinds = None
+    if args.weaves:
+        weaves = []
+        for item in (w.strip() for w in args.weaves.split(",") if w.strip()):
+            if item.endswith(".wv"):
+                weaves.append(str(Path(item).absolute()))
+            else:
+                weaves.append(PRESET_PREFIX + canonical_preset_name(item.removeprefix(PRESET_PREFIX)))
+    if args.kinds:
+        kinds = [as_choice(k.strip(), Location(None, "--kinds"), MODEL_KINDS) for k in args.kinds.split(",")]
+    for flag, value, low in (("--orientation-starts", args.orientation_starts, 1),
+                             ("--candidate-evals", args.candidate_evals, 1), ("--candidate-cv", args.candidate_cv, 0)):
+        if value is not None and (value < low or (flag == "--candidate-cv" and value == 1)):
+            raise ConfigError(f"{flag} must be at least {low}{' and not 1' if low == 0 else ''}, got {value}",
+                              field=flag)
+    return settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
+                                max_evals=args.candidate_evals, cv_folds=args.candidate_cv)
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from clothlab.atomic import prepare_result
+    from clothlab.config import apply_overrides, load_config
+    from clothlab.fit.select import save_selection, select
+
+    with contextlib.ExitStack() as held:
+        jobs = []
+        for path in args.configs:  # every yaml checked, no result overwritten, before the first selection runs
+            cfg = apply_overrides(load_config(path), rule=getattr(args, "rule", None),
+                                  nodes=getattr(args, "nodes", None), max_evals=getattr(args, "max_evals", None),
+                                  seed=getattr(args, "seed", None))  # fit --select passes fit's options
+            if getattr(args, "cv", None) is not None:
+                cfg = replace(cfg, fit=replace(cfg.fit, cv_folds=args.cv))
+            if getattr(args, "no_posterior", False):
+                cfg = replace(cfg, fit=replace(cfg.fit, posterior=None))
+            settings = _settings(cfg, args)
+            held.enter_context(prepare_result((args.output or cfg.output.fits) / cfg.name, force=args.force))
+            jobs.append((cfg, settings))
+        for cfg, settings in jobs:
+            selection = select(cfg, settings, fits_dir=args.output)
+            out = save_selection(selection, force=args.force, fits_dir=args.output)
+            print(present_selection(selection, out))
+    return 0
+
+
+def present_selection(selection, saved_to) -> str:
+    """The ranked table (as saved in selection.md) and where the winner's fit went."""
+    from clothlab.fit.select import table_markdown
+
+    return f"{table_markdown(selection)}\n  winner: {selection.ranked[0].row['candidate']}; saved to {saved_to}"

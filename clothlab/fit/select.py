@@ -1,0 +1,408 @@
+"""Model selection: fit a set of candidate weaves, orientations and diffuse terms, rank them, refit the winner
+(``clothlab select fabric.yaml`` = ``clothlab fit --select fabric.yaml``; issue 14 item 3, docs/select.md).
+
+Candidates (:func:`candidates`) are the product of
+
+* weaves: ``select.weaves`` (default every shipped preset, :data:`clothlab.weave.presets.PRESET_NAMES`);
+* kinds, i.e. the specular model and its diffuse term: ``select.kinds`` (default ``irawan`` - the IM yarn
+  highlights with the IM model's Lambertian - and ``irawan+oren-nayar``, the same with an Oren & Nayar
+  diffuse, :mod:`clothlab.models.composite`);
+* orientation starts: ``select.orientation_starts`` (default 2) starts j = 1..n with ``orientation``
+  freed in a box of one period P centred on the start.  The starts are the n best local minima of a scan of
+  the objective over :data:`SCAN_POINTS` orientations across one period, the other parameters at their
+  starts (:func:`orientation_scan`; the objective is multimodal in the orientation, and a reduced budget
+  does not find the basin by itself).  Isotropic kinds get one start and do not free it.
+
+The free parameters of a candidate are fabric.yaml's ``fit.free`` that the candidate's kind declares (its
+``default_free`` when none is), its diffuse part's defaults (``sigma``) and ``orientation``; the starts are
+``model.params`` restricted the same way, else the weave's values.
+
+Each candidate is one independent task (:func:`fit_candidate`: a :class:`CandidateTask` in, a
+:class:`CandidateResult` out, nothing shared), so a task scheduler can distribute the list.  A candidate is
+fitted with a reduced budget (``select.max_evals``, default 600 evaluations, one start, polish
+``max_evals // 4``) and cross-validated (``select.cv_folds``, default 5, through
+:func:`clothlab.fit.runner.run_fit`, i.e. :mod:`clothlab.fit.crossval`; its fold scheme is ``auto``).
+
+Ranking (:func:`rank`): by the cross-validated (held-out) mean relative error, candidates whose
+cross-validation failed after those with one; the table also lists the information criteria
+
+    AIC = n ln(F) + 2 k,        BIC = n ln(F) + k ln(n)
+
+with F the objective at the optimum (the mean squared metric residual, :mod:`clothlab.fit.problem`), n the
+number of fitted values (rows x channels) and k the free parameters plus the linear coefficients
+(components x channels).  Likelihood assumed: the metric residuals are independent Gaussian with one unknown
+variance, profiled out (-2 ln L = n ln F + const), so only differences between candidates on the same data
+mean anything.
+
+The winner is refitted with fabric.yaml's own budget, cross-validation and posterior settings (its box in
+``orientation`` centred on the candidate's value, so the optimum is interior) and saved as a normal fit
+directory, ``fits/<name>/``, with ``selection.csv`` and ``selection.md`` (the comparison table) beside
+fit.json, whose key ``selection`` (:func:`selection_summary`) holds the table rows (``candidates``, ranked),
+the ranking rule, the likelihood note and the budgets.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from clothlab.fit.periodic import wrap
+from clothlab.models.base import ORIENTATION
+from clothlab.models.registry import model_class
+from clothlab.progress import Progress, get_logger
+from clothlab.weave.presets import PRESET_NAMES, PRESET_PREFIX
+
+log = get_logger(__name__)
+
+DEFAULT_KINDS = ("irawan", "irawan+oren-nayar")
+DEFAULT_ORIENTATION_STARTS = 2
+DEFAULT_MAX_EVALS = 600
+DEFAULT_CV_FOLDS = 5
+#: orientations of the scan that places the orientation starts (every 5 deg over a half turn)
+SCAN_POINTS = 36
+RANKING = ("cross-validated held-out mean relative error (ascending); candidates whose cross-validation failed "
+           "after those with one, by BIC")
+LIKELIHOOD = ("AIC = n ln(F) + 2k, BIC = n ln(F) + k ln(n): F the objective at the optimum (mean squared metric "
+              "residual), n the fitted values (rows x channels), k the free parameters plus the linear "
+              "coefficients (components x channels); residuals assumed independent Gaussian with one unknown "
+              "variance (profiled out), so only differences between candidates on the same data mean anything")
+TABLE_COLUMNS = ("rank", "candidate", "weave", "kind", "orientation_start", "orientation", "cv_mean", "cv_p50",
+                 "cv_p80", "in_sample_p50", "in_sample_p80", "objective", "n", "k", "aic", "bic", "cv_scheme",
+                 "evaluations", "wall_time_s", "note")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate: weave (``preset:<name>`` or a .wv path), model kind and which orientation start (1 = the
+    scan's best, :func:`orientation_scan`; None: orientation not freed)."""
+
+    weave: str
+    kind: str
+    orientation_start: int | None = None
+
+    @property
+    def name(self) -> str:
+        weave = self.weave[len(PRESET_PREFIX):] if self.weave.startswith(PRESET_PREFIX) else self.weave
+        start = "" if self.orientation_start is None else f" #{self.orientation_start}"
+        return f"{weave} {self.kind}{start}"
+
+
+@dataclass(frozen=True)
+class SelectSettings:
+    """What :func:`select` tries: weaves, kinds, orientation starts, the per-candidate budget and CV folds."""
+
+    weaves: tuple = tuple(PRESET_PREFIX + name for name in PRESET_NAMES)
+    kinds: tuple = DEFAULT_KINDS
+    orientation_starts: int = DEFAULT_ORIENTATION_STARTS
+    max_evals: int = DEFAULT_MAX_EVALS
+    cv_folds: int = DEFAULT_CV_FOLDS
+
+
+@dataclass(frozen=True)
+class CandidateTask:
+    """Everything one candidate fit needs (picklable: a validated config, a measurement, plain settings)."""
+
+    config: object
+    candidate: Candidate
+    max_evals: int
+    cv_folds: int
+    measurement: object = None
+
+
+@dataclass
+class CandidateResult:
+    """What a candidate fit gives the ranking (:data:`TABLE_COLUMNS`) and the winner's refit (``params``)."""
+
+    candidate: Candidate
+    row: dict
+    params: dict = field(default_factory=dict)
+    free: tuple = ()
+    period: float = 0.0
+
+
+def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=None, max_evals=None,
+                         cv_folds=None) -> SelectSettings:
+    """The :class:`SelectSettings` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
+    with the given values (command-line options) replacing it."""
+    sel = config.select
+    chosen = tuple(weaves if weaves is not None else sel.weaves) or SelectSettings.weaves
+    return SelectSettings(weaves=chosen, kinds=tuple(kinds if kinds is not None else sel.kinds),
+                          orientation_starts=int(orientation_starts or sel.orientation_starts),
+                          max_evals=int(max_evals or sel.max_evals),
+                          cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds))
+
+
+def candidates(settings: SelectSettings) -> list[Candidate]:
+    """The candidate list (module docstring), in weave, kind, orientation-start order."""
+    out = []
+    for weave in settings.weaves:
+        for kind in settings.kinds:
+            if model_class(kind).orientation_period == 0.0:
+                out.append(Candidate(weave, kind, None))
+                continue
+            out += [Candidate(weave, kind, j) for j in range(1, max(1, int(settings.orientation_starts)) + 1)]
+    return out
+
+
+def orientation_scan(config, measurement, n_starts: int, points: int = SCAN_POINTS) -> list[float]:
+    """The ``n_starts`` best local minima (deg, best first) of the objective of ``config`` (orientation free
+    or not: the other parameters at their starts) over ``points`` orientations spaced evenly over one period
+    (a cyclic scan; fewer when there are fewer minima, then the next best points)."""
+    from clothlab.fit.problem import build_problem
+
+    problem = build_problem(replace(config, fit=replace(config.fit, free=())), measurement)
+    period = problem.model.params[ORIENTATION].period
+    grid = np.arange(points) * (period / points)
+    values = np.array([problem.solve({**problem.start, ORIENTATION: float(a)}).objective for a in grid])
+    minima = [i for i in range(points) if values[i] <= values[i - 1] and values[i] <= values[(i + 1) % points]]
+    order = sorted(minima, key=lambda i: values[i]) + sorted(set(range(points)) - set(minima), key=lambda i: values[i])
+    return [float(grid[i]) for i in order[:n_starts]]
+
+
+def orientation_span(kind: str) -> float:
+    """The period (deg) of ``orientation`` declared by ``kind`` (the span of its default bounds)."""
+    return float(model_class(kind).params[ORIENTATION].period)
+
+
+def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: int, name: str | None = None,
+                     start: dict | None = None, optimizer=None, posterior=None, orientation: float = 0.0):
+    """``config`` turned into the fit of ``candidate`` (module docstring): kind, weave, free parameters, starts
+    and bounds (``orientation``: the start, the box one period about it); budget ``max_evals`` (one start,
+    polish max_evals // 4) unless ``optimizer`` is given; CV ``cv_folds``; no posterior unless given."""
+    cls = model_class(candidate.kind)
+    table = cls.declared_parameters(config.model.options if cls.kind == config.model.kind else {})
+    free = [n for n in config.fit.free if n in table and n != ORIENTATION]
+    if not free:
+        free = list(getattr(cls, "specular_class", cls).default_free)
+    diffuse = getattr(cls, "diffuse_class", None)  # a composite's diffuse term brings its own (sigma)
+    free += [n for n in (diffuse.default_free if diffuse else ()) if n not in free and n in table]
+    params = {k: v for k, v in config.model.params.items() if k in table and k != ORIENTATION}
+    bounds = {k: v for k, v in config.fit.bounds.items() if k in free}
+    if candidate.orientation_start is not None:
+        free.append(ORIENTATION)
+        half = 0.5 * table[ORIENTATION].period
+        params[ORIENTATION] = float(orientation)
+        bounds[ORIENTATION] = (params[ORIENTATION] - half, params[ORIENTATION] + half)
+    if start:
+        params.update({k: float(v) for k, v in start.items() if k in free})
+    if optimizer is None:
+        optimizer = replace(config.fit.optimizer, max_evals=int(max_evals), starts=1, polish=int(max_evals) // 4)
+    options = dict(config.model.options) if cls.kind == config.model.kind or \
+        getattr(cls, "specular_class", None) is model_class(config.model.kind) else {}
+    model = replace(config.model, kind=candidate.kind, weave=candidate.weave, params=params, options=options)
+    fit = replace(config.fit, free=tuple(free), bounds=bounds, optimizer=optimizer, posterior=posterior,
+                  cv_folds=int(cv_folds))
+    return replace(config, name=name or config.name, model=model, fit=fit)
+
+
+def information_criteria(objective: float, n: int, k: int) -> tuple[float, float]:
+    """(AIC, BIC) of a fit with objective F over n values and k estimated numbers (module docstring)."""
+    if not objective > 0.0 or n < 1:
+        return -math.inf, -math.inf
+    log_f = n * math.log(objective)
+    return log_f + 2.0 * k, log_f + k * math.log(n)
+
+
+def fit_candidate(task: CandidateTask) -> CandidateResult:
+    """Fit one candidate (an independent task: nothing shared with other candidates) and summarise it as a
+    table row; a candidate that cannot be fitted (e.g. an invalid geometry) becomes a row with its reason."""
+    from clothlab.errors import ClothlabError
+    from clothlab.fit.runner import run_fit
+
+    cand = task.candidate
+    started = time.perf_counter()
+    row = {c: None for c in TABLE_COLUMNS}
+    row.update(candidate=cand.name, weave=cand.weave, kind=cand.kind, orientation_start=cand.orientation_start)
+    try:
+        cfg = candidate_config(task.config, cand, max_evals=task.max_evals, cv_folds=task.cv_folds)
+        if cand.orientation_start is not None:
+            starts = orientation_scan(cfg, task.measurement, cand.orientation_start)
+            row["orientation_start"] = starts[min(cand.orientation_start, len(starts)) - 1]
+            cfg = candidate_config(task.config, cand, max_evals=task.max_evals, cv_folds=task.cv_folds,
+                                   orientation=row["orientation_start"])
+        result = run_fit(cfg, measurement=task.measurement, posterior_progress=False)
+    except ClothlabError as exc:
+        row.update(note=f"not fitted: {exc}", wall_time_s=time.perf_counter() - started)
+        return CandidateResult(cand, row)
+    problem = result.problem
+    n = int(problem.y.size)
+    k = len(problem.free) + int(np.asarray(result.solution.coefficients).size)
+    aic, bic = information_criteria(float(result.optimum.fun), n, k)
+    params = dict(result.params)
+    period = problem.model.fit_period(params)
+    if ORIENTATION in problem.free and period:
+        params[ORIENTATION] = wrap(params[ORIENTATION], -0.5 * period, period)
+    cv = result.cross_validation or {}
+    held = cv.get("held_out") or {}
+    errors = result.errors["overall"]
+    notes = [w for w in result.warnings if "ended at its" in w]
+    row.update(orientation=params.get(ORIENTATION), cv_mean=held.get("mean"), cv_p50=held.get("p50"),
+               cv_p80=held.get("p80"), in_sample_p50=errors.get("p50"), in_sample_p80=errors.get("p80"),
+               objective=float(result.optimum.fun), n=n, k=k, aic=aic, bic=bic, cv_scheme=cv.get("scheme"),
+               evaluations=int(result.optimum.nevals), wall_time_s=time.perf_counter() - started,
+               note="; ".join(([cv["failed"]] if cv.get("failed") else []) + notes) or None)
+    return CandidateResult(cand, row, params={n_: float(params[n_]) for n_ in problem.free}, free=problem.free,
+                           period=float(period))
+
+
+def rank(results: list[CandidateResult]) -> list[CandidateResult]:
+    """``results`` ordered by :data:`RANKING`; each row gets its ``rank`` (1 = winner; unfitted rows last)."""
+    def key(r):
+        row = r.row
+        fitted = row["objective"] is not None
+        cv = row["cv_mean"]
+        return (not fitted, cv is None, cv if cv is not None else 0.0, row["bic"] if fitted else 0.0)
+
+    ordered = sorted(results, key=key)
+    for i, r in enumerate(ordered, 1):
+        r.row["rank"] = i
+    return ordered
+
+
+@dataclass
+class Selection:
+    """The outcome of :func:`select`: ranked candidate results, the winner's refit (a FitResult), settings."""
+
+    ranked: list
+    winner: object
+    settings: SelectSettings
+    wall_time: float
+
+    def summary(self) -> dict:
+        return selection_summary(self)
+
+
+def selection_summary(selection: Selection) -> dict:
+    """fit.json ``selection``: the ranked table rows (``candidates``; the first is the winner), the ranking
+    rule, the likelihood note, the candidates' budget and what was tried."""
+    s = selection.settings
+    return {"candidates": [dict(r.row) for r in selection.ranked], "winner": selection.ranked[0].row["candidate"],
+            "ranking": RANKING, "information_criteria": LIKELIHOOD,
+            "budget": {"max_evals": s.max_evals, "starts": 1, "polish": s.max_evals // 4, "cv_folds": s.cv_folds},
+            "tried": {"weaves": list(s.weaves), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts},
+            "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time}
+
+
+def select(config, settings: SelectSettings | None = None, *, measurement=None, run_task=None,
+           posterior=None, fits_dir=None) -> Selection:
+    """Fit every candidate (``run_task``, default :func:`fit_candidate`, maps one task to its result: the
+    place for a parallel scheduler), rank them, refit the winner with ``config``'s own budget, CV and
+    posterior (or ``posterior`` given here) and return the :class:`Selection`.  Progress: one line per
+    candidate."""
+    from clothlab.errors import ConfigError
+    from clothlab.fit.runner import run_fit
+    from clothlab.io.loader import load_measurement
+
+    started = time.perf_counter()
+    settings = settings or SelectSettings()
+    if measurement is None:
+        measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
+                                       else config.measurement.format, **config.measurement.options)
+    run_task = run_task or fit_candidate
+    tasks = [CandidateTask(config, c, settings.max_evals, settings.cv_folds, measurement)
+             for c in candidates(settings)]
+    if not tasks:
+        raise ConfigError("no candidates: select.weaves and select.kinds must each name at least one",
+                          field="select")
+    results = []
+    with Progress(len(tasks), "select: candidates", unit="fit") as bar:
+        for i, task in enumerate(tasks, 1):
+            result = run_task(task)
+            row = result.row
+            log.info("select: candidate %d/%d %s: cv mean %s, BIC %s%s", i, len(tasks), row["candidate"],
+                     _short(row["cv_mean"]), _short(row["bic"]), f" ({row['note']})" if row["note"] else "")
+            results.append(result)
+            bar.update(1)
+    ranked = rank(results)
+    best = ranked[0]
+    if best.row["objective"] is None:
+        raise ConfigError(f"no candidate could be fitted: {best.row['note']}", field="select")
+    log.info("select: winner %s; refitting with the full budget", best.row["candidate"])
+    winner_cfg = candidate_config(config, best.candidate, max_evals=config.fit.optimizer.max_evals,
+                                  cv_folds=config.fit.cv_folds, start=best.params, optimizer=config.fit.optimizer,
+                                  posterior=posterior or config.fit.posterior,
+                                  orientation=best.params.get(ORIENTATION, 0.0))  # its box centred there
+    winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir)
+    return Selection(ranked, winner, settings, time.perf_counter() - started)
+
+
+def _short(value) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def _cell(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def table_columns(selection: Selection) -> dict:
+    """The comparison table as columns (for selection.csv)."""
+    return {c: [_cell(r.row[c]) for r in selection.ranked] for c in TABLE_COLUMNS}
+
+
+def table_markdown(selection: Selection) -> str:
+    """The comparison table as markdown (errors in %), with the ranking rule and the likelihood note."""
+    head = ("rank", "candidate", "orientation (deg)", "CV mean %", "CV p50 %", "CV p80 %", "p50 %", "p80 %",
+            "k", "AIC", "BIC", "note")
+    lines = [f"# Model selection: {selection.winner.config.name}", "",
+             f"Ranked by {RANKING}.  {LIKELIHOOD}.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def pct(v):
+        return "" if v is None else f"{100.0 * v:.2f}"
+
+    for r in selection.ranked:
+        row = r.row
+        cells = (row["rank"], row["candidate"], "" if row["orientation"] is None else f"{row['orientation']:.2f}",
+                 pct(row["cv_mean"]), pct(row["cv_p50"]), pct(row["cv_p80"]), pct(row["in_sample_p50"]),
+                 pct(row["in_sample_p80"]), row["k"] if row["k"] is not None else "",
+                 "" if row["aic"] is None else f"{row['aic']:.1f}", "" if row["bic"] is None else f"{row['bic']:.1f}",
+                 (row["note"] or "").replace("|", "/"))
+        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def save_selection(selection: Selection, *, force: bool = False, fits_dir=None):
+    """Write the winner's fit directory (as :func:`clothlab.fit.store.save_fit`, with fit.json ``selection``
+    and ``selection.csv``) and ``selection.md`` in it; returns the directory."""
+    from clothlab.atomic import atomic_write_text
+    from clothlab.fit.store import (
+        check_finite_result,
+        checkpoint_path,
+        fit_summary,
+        posterior_files,
+        prediction_table,
+        slice_table,
+        trace_table,
+        write_fit_directory,
+    )
+    from clothlab.weave.wvformat import format_wv
+
+    result = selection.winner
+    cfg = result.config
+    dest = (fits_dir if fits_dir is not None else cfg.output.fits) / cfg.name
+    predictions = prediction_table(result)
+    check_finite_result(result, predictions)
+    fit = fit_summary(result)
+    fit["selection"] = selection_summary(selection)
+    extra = {**posterior_files(result), "selection.csv": table_columns(selection)}
+    out = write_fit_directory(dest, fit=fit, predictions=predictions, slices=slice_table(result),
+                              trace=trace_table(result),
+                              config_text=cfg.path.read_text() if cfg.path is not None else None,
+                              weave_text=format_wv(result.problem.model.fitted_weave(result.params)), extra=extra,
+                              force=force)
+    atomic_write_text(out / "selection.md", table_markdown(selection))
+    if result.posterior is not None:  # as save_fit: the directory holds the result, the checkpoint has served
+        checkpoint_path(cfg, fits_dir).unlink(missing_ok=True)
+    return out
+
+
+__all__ = ["Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection", "candidate_config",
+           "candidates", "fit_candidate", "information_criteria", "rank", "save_selection",
+           "select", "selection_summary", "settings_from_config", "table_columns", "table_markdown"]
