@@ -22,8 +22,19 @@ import sys
 
 from clothlab import __version__
 from clothlab.atomic import interrupts_recorded, was_interrupted
-from clothlab.cli import (bench, calibrate, check, fit, fit_btf, import_table, render, report, select, simulate,
-                          train_surrogate)
+from clothlab.cli import (
+    bench,
+    calibrate,
+    check,
+    fit,
+    fit_btf,
+    import_table,
+    render,
+    report,
+    select,
+    simulate,
+    train_surrogate,
+)
 from clothlab.cli import eval as eval_
 from clothlab.cli.options import DEPRECATED
 from clothlab.errors import ClothlabError
