@@ -122,8 +122,10 @@ def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
 
 
 def run(args) -> int:
+    import json
     import shutil
 
+    from clothlab.atomic import atomic_write_bytes
     from clothlab.errors import ConfigError, ResultExistsError
     from clothlab.neural.data import DataSpec
     from clothlab.neural.encodings import PATTERN_ORDER, material_vector, yarn_extent
@@ -164,6 +166,17 @@ def run(args) -> int:
                           TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed, yarn_bins=args.yarn_bins),
                           budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
                           heldout_materials=heldout)
+    from clothlab.neural.run import write_report_page
+
+    latent = None
+    if args.vary:  # Fig. 8: between the first and the last grid material
+        from clothlab.neural.interpolation import latent_interpolation, plot_latent_interpolation
+
+        last = len(sets) - len(heldout) - 1
+        latent = latent_interpolation(result.surrogate, model, 0, last, sets[0], sets[last], names)
+        plot_latent_interpolation(latent, out / "latent.png")
+        atomic_write_bytes(out / "latent.json", (json.dumps(latent, indent=2) + "\n").encode())
+    write_report_page(out, result.metrics, latent=latent)
     m = result.metrics
     print(f"{out / 'surrogate.npz'}: {m['steps']} steps, {m['queries']:,} queries, "
           f"{m['label_cpu_s'] + m['cpu_s']:.0f} CPU-s")

@@ -148,7 +148,8 @@ def generate(directory, spec: DataSpec, label_sources, *, stop=None) -> int:
     the chunks written so far stay, and a later call resumes."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    todo = [(m, c) for m in range(len(label_sources)) for c in range(spec.chunks_per_material())
+    # cell-major order: a run stopped by its budget has labelled every material alike
+    todo = [(m, c) for c in range(spec.chunks_per_material()) for m in range(len(label_sources))
             if not chunk_path(directory, m, c).exists()]
     written = 0
     with Progress(len(todo), "labelling footprint queries", unit="chunk") as bar:

@@ -87,6 +87,21 @@ class Surrogate:
         return (spatial.astype(dt),
                 direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector).astype(dt))
 
+    def latent(self, material) -> np.ndarray:
+        """z (latent,) of a trained material's row or of an encoder input vector."""
+        if isinstance(material, int | np.integer):
+            return self.network.encode(self.materials[int(material)][None])[0]
+        return self.network.encode(np.asarray(material, dtype=np.float64).reshape(1, -1))[0]
+
+    def query_latent(self, z, centre, size, wi, wo) -> np.ndarray:
+        """:meth:`query` with the decoder reading latent ``z`` (latent,) directly (Fig. 8's interpolation)."""
+        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+        plan = DecoderPlan(self.network, self.network.fusion_bias(np.asarray(z).reshape(1, -1))[0])
+        spatial, angular = self.features(centre, size, wi, wo)
+        out = np.concatenate([plan(spatial[i:i + CHUNK], angular[i:i + CHUNK]) for i in range(0, len(wi), CHUNK)])
+        values = decode_outputs(out.astype(np.float64), self._specular, self.k)
+        return np.where(((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))[:, None], values, 0.0)
+
     def _plan(self, material) -> DecoderPlan:
         """The decoder plan of material row ``material`` (int, cached) or of an encoder input vector (new)."""
         if not isinstance(material, int | np.integer):
