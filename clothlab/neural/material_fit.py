@@ -96,3 +96,33 @@ def unit_to_parameter(spec, t: float) -> float:
     :func:`clothlab.neural.encodings.normalised_parameters`)."""
     lo, hi = (float(spec.to_internal(b)) for b in spec.bounds)
     return float(spec.from_internal(lo + t * (hi - lo)))
+
+
+def refine_material(model, wi, wo, values, params: dict, free, *, max_nfev: int = 60) -> tuple[dict, dict, float]:
+    """Refine the ``free`` parameters with the exact ``model`` (its far view, ``model.components``) from
+    ``params`` (e.g. the fast fit's): bounded least squares (scipy ``least_squares``, trust-region
+    reflective) in the normalised coordinates, coefficients by NNLS at every evaluation.  Returns (parameters,
+    coefficients by component, RMS residual)."""
+    from scipy.optimize import least_squares
+
+    from clothlab.neural.encodings import normalised_parameters
+
+    y = np.asarray(values, dtype=np.float64).reshape(-1)
+    free = list(free)
+    table = model.params
+
+    def design(x):
+        p = {**params, **{k: unit_to_parameter(table[k], t) for k, t in zip(free, x, strict=True)}}
+        comps = model.components(wi, wo, p, warn=False)
+        return np.column_stack([np.asarray(comps[c]).reshape(-1) for c in model.component_names]), p
+
+    def residual(x):
+        a, _ = design(x)
+        c, _ = nnls(a, y)
+        return a @ c - y
+
+    x0 = np.clip(normalised_parameters(params, table, free), 1e-6, 1 - 1e-6)
+    result = least_squares(residual, x0, bounds=(0.0, 1.0), max_nfev=max_nfev, diff_step=1e-4)
+    a, p = design(result.x)
+    c, res = nnls(a, y)
+    return p, dict(zip(model.component_names, c.tolist(), strict=True)), float(res / np.sqrt(y.size))

@@ -87,11 +87,16 @@ class NeuralModel(Model):
         names = self._encoding.get("parameters", self.params.names())
         return np.concatenate([normalised_parameters(self.resolve(params), self.params, names), self._pattern])
 
-    def fit_material(self, wi, wo, values, free=None, params: dict | None = None, **options):
+    def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
+                     **options):
         """Fast approximate fit of the ``free`` parameters (default ``default_free``) through the encoder
         (:func:`clothlab.neural.material_fit.fit_material`) to far-view values (N,) at directions (N, 3),
-        starting from ``params``; returns (fitted parameters, the :class:`MaterialFit`)."""
-        from clothlab.neural.material_fit import fit_material, unit_to_parameter
+        starting from ``params``; returns (fitted parameters, the :class:`MaterialFit`).  ``refine``: then
+        refine with the exact model the network learnt (the sidecar's ``kind``;
+        :func:`~clothlab.neural.material_fit.refine_material`), whose coefficients and RMS replace the fast
+        fit's."""
+        from clothlab.models.registry import build_model
+        from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
 
         names = list(self._encoding.get("parameters", self.params.names()))
         free = list(free or self.default_free)
@@ -99,6 +104,10 @@ class NeuralModel(Model):
                               {k: names.index(k) for k in free}, size=FAR_SIZE, **options)
         fitted = {**self.resolve(params), **{k: unit_to_parameter(self.params[k], t) for k, t in result.unit.items()}}
         result.params = {k: fitted[k] for k in free}
+        if refine:
+            exact = build_model(self._encoding.get("kind", "irawan"), self.weave)
+            fitted, result.coefficients, result.rms = refine_material(exact, wi, wo, values, fitted, free)
+            result.params = {k: fitted[k] for k in free}
         return fitted, result
 
     def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
