@@ -63,8 +63,9 @@ FAMILY = "families/silk-shantung-alpha-beta.npz"
 
 def test_fast_fit_through_the_encoder_then_exact_refinement_recover_simulated_parameters():
     """IM far-view data (noise-free) of an unseen material of the shipped alpha-beta network.  The fast fit
-    recovers the linear coefficients to 25 % (18 % measured here) (they are the large, well-determined part of the signal) but
-    alpha and beta only roughly: over the network's range they move the far view by ~5-10 %, no more than
+    recovers the linear coefficients to 25 % (18 % measured here; they are the large, well-determined part
+    of the signal) but alpha and beta only roughly: over the network's range they move the far view by
+    ~5-10 %, no more than
     the network's own error on unseen materials (0.07-0.09 relative RMSE), so the test asserts only that
     its residual is at that level.  Refined with the exact model from there, the parameters come back to
     1e-4 (noise-free data)."""
