@@ -88,3 +88,18 @@ def test_neural_lod_needs_the_weaves_network():
     })
     with pytest.raises(ConfigError, match="shipped"):
         render(scene, shader="neural-lod")
+
+
+def test_neural_lod_benchmark_rows_compare_error_and_time_side_by_side(tmp_path):
+    from clothlab.studies.render_lod import neural_lod_benchmark, neural_lod_lines
+
+    f = neural_lod_benchmark(True, figures_dir=tmp_path, resolution=(8, 6), distances=(5.0, 640.0),
+                             reference_spp=4, repeats=1)
+    near, far = f["rows"]
+    for r in f["rows"]:
+        assert r["neural_better"] == (r["neural_lod_relative_error"] < r["im_lod_relative_error"]
+                                      and r["neural_time_ratio"] <= 1.1)
+    # far away both shaders are the reflectance model once per pixel: the same image, the same error
+    assert far["neural_lod_relative_error"] == pytest.approx(far["im_lod_relative_error"], rel=1e-12)
+    assert near["footprint_max_tiles"] < far["footprint_min_tiles"]
+    assert (tmp_path / "neural_lod.png").stat().st_size > 0 and "neural-lod" in "\n".join(neural_lod_lines(f))
