@@ -30,6 +30,7 @@ from clothlab.neural.encodings import (
 from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
 from clothlab.neural.serialise import load_surrogate, save_surrogate
 from clothlab.neural.training import TrainSpec, train
+from clothlab.weave.patterns import get_pattern
 from clothlab.weave.presets import get_preset
 
 FABRIC = "silk-shantung"
@@ -204,7 +205,7 @@ def test_neural_kind_answers_through_the_surrogate(weights, model):
     assert not np.allclose(other["specular_warp"], comps["specular_warp"])
     np.testing.assert_array_equal(neural.components(wi, wo, {"alpha": 0.3})["specular_warp"], other["specular_warp"])
     with pytest.raises(ConfigError, match="model.options.weights"):
-        build_model("neural", get_preset("cotton-denim"))
+        build_model("neural", get_pattern("plain"))  # a weave without shipped weights
 
 
 def test_whole_tile_split_is_exact_for_whole_tiles_and_agrees_with_plain_mc(model):

@@ -32,6 +32,17 @@ def add_parser(sub):
     p.add_argument("--width", type=int, default=64, help="decoder width (default 64)")
     p.add_argument("--spatial", type=int, default=32, help="spatial feature width (default 32)")
     p.add_argument("--seed", type=int, default=0, help="data and initialisation seed (default 0)")
+    p.add_argument("--small-sizes", type=int, default=0, metavar="N",
+                   help="extra footprint sizes per centre, log-stratified in 0.01-0.12 tile (default 0: Table 2)")
+    p.add_argument("--row-centres", action="store_true",
+                   help="every query its own footprint centre in its grid cell (default: one centre per cell, "
+                        "Table 2)")
+    p.add_argument("--yarn-bins", type=int, default=0, metavar="N",
+                   help="one-blob bins of the yarn-local position features (default 0: none, as the paper)")
+    p.add_argument("--vary", action="append", default=[], metavar="NAME=LO:HI:N",
+                   help="a multi-material network: N values of parameter NAME from LO to HI (geometric for "
+                        "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
+                        "between neighbouring values are labelled too and held out (unseen materials)")
     add_force(p, "output directory")
     return p
 
@@ -74,19 +85,59 @@ def _labels(choice: str, model, params: dict, samples: int, seed: int):
                                    tile_average=ModelLabels(model, params))
 
 
+def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
+    """Parameter sets of ``--vary NAME=LO:HI:N`` (all combinations, then the held-out midpoints) and the
+    indices of the held-out ones; ``[base], []`` without ``--vary``."""
+    import itertools
+
+    import numpy as np
+
+    from clothlab.errors import ConfigError
+
+    axes, mids = [], []
+    for text in vary:
+        try:
+            name, rng = text.split("=", 1)
+            lo, hi, n = rng.split(":")
+            lo, hi, n = float(lo), float(hi), int(n)
+        except ValueError:
+            raise ConfigError(f"expected NAME=LO:HI:N, got {text!r}", field="--vary") from None
+        if name not in table.names():
+            raise ConfigError(f"unknown parameter {name!r}; parameters: {', '.join(table.names())}", field="--vary")
+        spec = table[name]
+        if n < 2 or not (spec.bounds[0] <= lo < hi <= spec.bounds[1]):
+            raise ConfigError(f"{name}: need N >= 2 and {spec.bounds[0]:g} <= LO < HI <= {spec.bounds[1]:g}",
+                              field="--vary")
+        t = np.linspace(spec.to_internal(lo), spec.to_internal(hi), 2 * n - 1)
+        values = [float(spec.from_internal(x)) for x in t]
+        axes.append((name, values[::2]))
+        mids.append((name, values[1::2]))
+    if not axes:
+        return [dict(base)], []
+    sets = [dict(base, **dict(zip([a[0] for a in axes], combo, strict=True)))
+            for combo in itertools.product(*[a[1] for a in axes])]
+    held = [dict(base, **dict(zip([a[0] for a in mids], combo, strict=True)))
+            for combo in itertools.product(*[a[1] for a in mids])]
+    return sets + held, list(range(len(sets), len(sets) + len(held)))
+
+
 def run(args) -> int:
+    import json
     import shutil
 
+    from clothlab.atomic import atomic_write_bytes
     from clothlab.errors import ConfigError, ResultExistsError
     from clothlab.neural.data import DataSpec
-    from clothlab.neural.encodings import PATTERN_ORDER, material_vector
+    from clothlab.neural.encodings import PATTERN_ORDER, material_vector, yarn_extent
     from clothlab.neural.run import run_training
     from clothlab.neural.training import TrainSpec
+    from clothlab.weave.wvformat import format_wv
 
     if args.output is None:
         raise ConfigError("give the output directory with -o DIR", field="-o")
     for name, value, lo in (("--budget", args.budget, 0.01), ("--samples", args.samples, 1),
-                            ("--pairs", args.pairs, 1), ("--width", args.width, 4), ("--spatial", args.spatial, 4)):
+                            ("--pairs", args.pairs, 1), ("--width", args.width, 4), ("--spatial", args.spatial, 4),
+                            ("--small-sizes", args.small_sizes, 0), ("--yarn-bins", args.yarn_bins, 0)):
         if not value >= lo:
             raise ConfigError(f"expected a number >= {lo}, got {value}", field=name)
     out = Path(args.output)
@@ -95,20 +146,42 @@ def run(args) -> int:
             raise ResultExistsError(f"{out} exists; give --resume to continue it or --force to replace it",
                                     path=out)
         shutil.rmtree(out)
+    import numpy as np
+
     weave, model, params = _model(args.source, args.target)
-    labels = _labels(args.labels, model, params, args.samples, args.seed)
     p = model.resolve(params)
+    sets, heldout = material_grid(model.params, p, args.vary)
+    labels = [_labels(args.labels, model, q, args.samples, args.seed) for q in sets]
     names = model.params.names()
-    materials = material_vector(weave, p, model.params, names)[None]
+    materials = np.stack([material_vector(weave, q, model.params, names) for q in sets])
     encoding = {"parameters": names, "pattern_order": PATTERN_ORDER, "kind": model.kind, "weave": weave.name,
-                "labels": type(labels).__name__, "params": p}
-    result = run_training(out, [labels], materials, DataSpec(pairs=args.pairs, seed=args.seed),
-                          TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed),
-                          budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume)
+                "labels": type(labels[0]).__name__, "params": p, "weave_wv": format_wv(weave)}
+    if args.vary:
+        encoding["materials_params"] = [{k: q[k] for k in names} for q in sets]
+        encoding["heldout_materials"] = heldout
+    if args.yarn_bins:
+        encoding["yarn_extent"] = yarn_extent(p)
+    data_spec = DataSpec(pairs=args.pairs, seed=args.seed, small_sizes=args.small_sizes, row_centres=args.row_centres)
+    result = run_training(out, labels, materials, data_spec,
+                          TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed, yarn_bins=args.yarn_bins),
+                          budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
+                          heldout_materials=heldout)
+    from clothlab.neural.run import write_report_page
+
+    latent = None
+    if args.vary:  # Fig. 8: between the first and the last grid material
+        from clothlab.neural.interpolation import latent_interpolation, plot_latent_interpolation
+
+        last = len(sets) - len(heldout) - 1
+        latent = latent_interpolation(result.surrogate, model, 0, last, sets[0], sets[last], names)
+        plot_latent_interpolation(latent, out / "latent.png")
+        atomic_write_bytes(out / "latent.json", (json.dumps(latent, indent=2) + "\n").encode())
+    write_report_page(out, result.metrics, latent=latent)
     m = result.metrics
     print(f"{out / 'surrogate.npz'}: {m['steps']} steps, {m['queries']:,} queries, "
           f"{m['label_cpu_s'] + m['cpu_s']:.0f} CPU-s")
-    for b in m.get("heldout_pairs", []):
-        print(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: held-out relative RMSE {b['relative_rmse']:.3f}"
-              f" ({b['rows']} queries)")
+    for key, what in (("heldout_pairs", "held-out pairs"), ("heldout_materials", "unseen materials")):
+        for b in m.get(key, []):
+            print(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
+                  f"{b['relative_rmse']:.3f} ({b['rows']} queries)")
     return 0

@@ -34,6 +34,7 @@ from clothlab.progress import Progress, get_logger
 LOG = get_logger("neural.data")
 SIZE_RANGES = ((0.0, 1.0), (1.0, 5.0))
 MIN_SIZE = 0.01  # tiles
+SMALL_RANGE = (0.01, 0.12)  # tiles: the range of DataSpec.small_sizes
 MIN_Z = 0.05
 COLUMNS = ("material", "u", "v", "size", "wi_x", "wi_y", "wi_z", "wo_x", "wo_y", "wo_z", "heldout_pair")
 
@@ -48,9 +49,14 @@ class DataSpec:
     pairs: int = 64
     heldout_pairs: float = 0.1
     seed: int = 0
+    small_sizes: int = 0
+    row_centres: bool = False
+
+    def sizes_per_centre(self) -> int:
+        return self.sizes * len(SIZE_RANGES) + self.small_sizes
 
     def rows_per_chunk(self) -> int:
-        return self.sizes * len(SIZE_RANGES) * self.pairs
+        return self.sizes_per_centre() * self.pairs
 
     def chunks_per_material(self) -> int:
         return self.centres * self.centres
@@ -85,6 +91,10 @@ def chunk_queries(spec: DataSpec, material: int, cell: int) -> np.ndarray:
     centre = (np.array([cell % c, cell // c]) + rng.random(2)) / c
     sizes = np.concatenate([lo + (hi - lo) * (np.arange(spec.sizes) + rng.random(spec.sizes)) / spec.sizes
                             for lo, hi in SIZE_RANGES])
+    if spec.small_sizes:  # extra small footprints, log-stratified in SMALL_RANGE (beyond Table 2)
+        lo, hi = np.log(SMALL_RANGE)
+        strata = (np.arange(spec.small_sizes) + rng.random(spec.small_sizes)) / spec.small_sizes
+        sizes = np.concatenate([sizes, np.exp(lo + (hi - lo) * strata)])
     sizes = np.maximum(sizes, MIN_SIZE)
     n = spec.rows_per_chunk()
     heldout = heldout_cells(spec)
@@ -96,6 +106,8 @@ def chunk_queries(spec: DataSpec, material: int, cell: int) -> np.ndarray:
     rows[:, 3] = np.repeat(sizes, spec.pairs)
     rows[:, 4:7], rows[:, 7:10] = wi, wo
     rows[:, 10] = heldout[cell_i, cell_o]
+    if spec.row_centres:  # every row its own centre in the chunk's cell (Table 2 has one per cell)
+        rows[:, 1:3] = (np.array([cell % c, cell // c]) + rng.random((n, 2))) / c
     return rows
 
 
@@ -136,7 +148,8 @@ def generate(directory, spec: DataSpec, label_sources, *, stop=None) -> int:
     the chunks written so far stay, and a later call resumes."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    todo = [(m, c) for m in range(len(label_sources)) for c in range(spec.chunks_per_material())
+    # cell-major order: a run stopped by its budget has labelled every material alike
+    todo = [(m, c) for c in range(spec.chunks_per_material()) for m in range(len(label_sources))
             if not chunk_path(directory, m, c).exists()]
     written = 0
     with Progress(len(todo), "labelling footprint queries", unit="chunk") as bar:

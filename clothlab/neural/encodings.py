@@ -48,12 +48,44 @@ def size_coordinate(size) -> np.ndarray:
     return np.log1p(s / SIZE_S0) / math.log1p(SIZE_MAX / SIZE_S0)
 
 
-def spatial_features(centre: np.ndarray, size: np.ndarray, bins: int = BLOB_BINS) -> np.ndarray:
-    """(N, 3 bins): one-blob of the footprint centre u, v (tiles, periodic) and size (tiles)."""
+def spatial_features(centre: np.ndarray, size: np.ndarray, bins: int = BLOB_BINS,
+                     size_bins: int | None = None) -> np.ndarray:
+    """(N, 2 bins + size_bins): one-blob of the footprint centre u, v (tiles, periodic; ``bins`` each) and of
+    the size (tiles; ``size_bins``, default ``bins``)."""
     centre = np.asarray(centre, dtype=np.float64)
     return np.concatenate([one_blob(np.mod(centre[:, 0], 1.0), bins, True),
                            one_blob(np.mod(centre[:, 1], 1.0), bins, True),
-                           one_blob(size_coordinate(size), bins)], axis=1)
+                           one_blob(size_coordinate(size), bins if size_bins is None else size_bins)], axis=1)
+
+
+def yarn_features(weave, centre: np.ndarray, extent: dict, bins: int = BLOB_BINS) -> np.ndarray:
+    """(N, 1 + 2 bins) yarn-local position of the footprint centre (tiles): 1 on weft segments (else 0), then
+    the one-blob of the across- and along-yarn coordinates (Irawan & Marschner 2012, sec. 7.2: x, y in cells
+    from the segment centre, :func:`clothlab.weave.lookup.locate_segments`) divided by the half width and
+    half length ``extent[kind] = (w / 2, l / 2)`` (cells) and mapped from [-1, 1] to [0, 1] (clipped).
+
+    Not in the paper: its decoder sees only the position one-blob.  The IM texture's value at a point is a
+    function of these local coordinates and the directions (the yarn normal and tangent follow from them),
+    shared by every segment of a type, so the network can pool what it learns over the segments of a tile
+    (docs/neural.md: the ablation at footprints below 0.12 tile)."""
+    from clothlab.weave.lookup import locate_segments
+
+    centre = np.asarray(centre, dtype=np.float64)
+    seg, x, y = locate_segments(weave, centre[:, 0], centre[:, 1])
+    kinds = [s.kind for s in weave.segments]
+    half = np.array([extent[k] for k in kinds], dtype=np.float64)[seg]
+    weft = np.array([k == "weft" for k in kinds], dtype=np.float64)[seg]
+    t = [np.clip(0.5 * (c / h + 1.0), 0.0, 1.0) for c, h in ((x, half[:, 0]), (y, half[:, 1]))]
+    return np.concatenate([weft[:, None], one_blob(t[0], bins), one_blob(t[1], bins)], axis=1)
+
+
+def yarn_extent(params: dict) -> dict:
+    """{kind: (w / 2, l / 2)} (cells) from the IM yarn parameters ``<kind>.w``, ``<kind>.l``."""
+    return {k: (0.5 * float(params[f"{k}.w"]), 0.5 * float(params[f"{k}.l"])) for k in ("warp", "weft")}
+
+
+def n_yarn_features(bins: int) -> int:
+    return 1 + 2 * bins if bins else 0
 
 
 def direction_features(wi: np.ndarray, wo: np.ndarray, half_vector: bool = True) -> np.ndarray:

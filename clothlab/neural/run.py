@@ -83,3 +83,32 @@ def write_plots(directory: Path, result: TrainResult) -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(directory / "heldout.png", dpi=110)
+
+
+def write_report_page(directory: Path, metrics: dict, *, latent: dict | None = None) -> Path:
+    """``report.html`` beside the PNGs: loss vs CPU time, held-out error by footprint size (tables of the
+    held-out pairs and, for a multi-material network, the unseen materials) and, when given, the latent
+    interpolation of Fig. 8 (``latent.png``)."""
+    import html
+
+    directory = Path(directory)
+    parts = ["<!doctype html><meta charset='utf-8'><title>surrogate training</title>",
+             "<h1>Neural surrogate training</h1>",
+             f"<p>{metrics.get('steps', 0)} Adam steps, {metrics.get('queries', 0):,} labelled queries, "
+             f"{metrics.get('label_cpu_s', 0.0) + metrics.get('cpu_s', 0.0):.0f} CPU-s in all.</p>",
+             "<h2>Loss vs time</h2><img src='loss.png'>", "<h2>Held-out error by footprint size</h2>",
+             "<img src='heldout.png'>"]
+    for key, title in (("heldout_pairs", "held-out direction pairs"), ("heldout_materials", "unseen materials")):
+        bins = metrics.get(key)
+        if bins:
+            rows = "".join(f"<tr><td>{b['size_lo']:g}-{b['size_hi']:g}</td><td>{b['relative_rmse']:.3f}</td>"
+                           f"<td>{b['mse']:.3g}</td><td>{b['rows']}</td></tr>" for b in bins)
+            parts.append(f"<h3>{html.escape(title)}</h3><table border=1 cellpadding=3><tr><th>footprint (tiles)"
+                         f"</th><th>relative RMSE of f</th><th>MSE</th><th>queries</th></tr>{rows}</table>")
+    if latent is not None:
+        parts.append("<h2>Latent interpolation (Fig. 8)</h2><img src='latent.png'><p>Decoder at z(t) = (1 - t) "
+                     "z_a + t z_b, the surrogate at the interpolated material vector, and the model at the "
+                     "interpolated parameters (far view).</p>")
+    path = directory / "report.html"
+    atomic_write_bytes(path, "\n".join(parts).encode())
+    return path

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clothlab.neural.encodings import direction_features, spatial_features
+from clothlab.neural.encodings import BLOB_BINS, direction_features, spatial_features, yarn_features
 from clothlab.neural.inference import DecoderPlan
 from clothlab.neural.losses import K_SPECULAR, decode_outputs, is_specular
 from clothlab.neural.network import SurrogateNetwork
@@ -35,10 +35,35 @@ class Surrogate:
         self._specular = is_specular(self.component_names)
         self._bias = None
         self._plans = {}
+        self._weave_cache = None
 
     @property
     def half_vector(self) -> bool:
         return bool(self.encoding.get("half_vector", True))
+
+    @property
+    def position_bins(self) -> int:
+        """One-blob bins of each of u, v (8 in the paper; files without the setting have 8)."""
+        return int(self.encoding.get("position_bins", BLOB_BINS))
+
+    @property
+    def size_bins(self) -> int:
+        return int(self.encoding.get("size_bins", BLOB_BINS))
+
+    @property
+    def yarn_bins(self) -> int:
+        """One-blob bins of the yarn-local coordinates (0: no yarn features; :func:`.yarn_features`)."""
+        return int(self.encoding.get("yarn_bins", 0))
+
+    def _weave(self):
+        """The weave of the yarn features, parsed once from the ``.wv`` text recorded in the encoding."""
+        if self._weave_cache is None:
+            from clothlab.weave.wvformat import parse_wv_text
+
+            if "weave_wv" not in self.encoding:
+                raise ValueError("yarn features need the weave: encoding['weave_wv'] (the .wv text)")
+            self._weave_cache = parse_wv_text(self.encoding["weave_wv"], source="surrogate sidecar")
+        return self._weave_cache
 
     def fusion_biases(self) -> np.ndarray:
         """(M, width) per-material constant of the first fusion layer (computed once)."""
@@ -54,8 +79,28 @@ class Surrogate:
     def features(self, centre, size, wi, wo) -> tuple[np.ndarray, np.ndarray]:
         """float32 spatial and direction features of queries."""
         dt = self.network.dtype
-        return (spatial_features(np.atleast_2d(centre), np.atleast_1d(size)).astype(dt),
+        centre = np.atleast_2d(centre)
+        spatial = spatial_features(centre, np.atleast_1d(size), self.position_bins, self.size_bins)
+        if self.yarn_bins:
+            extent = {k: tuple(v) for k, v in self.encoding["yarn_extent"].items()}
+            spatial = np.concatenate([spatial, yarn_features(self._weave(), centre, extent, self.yarn_bins)], axis=1)
+        return (spatial.astype(dt),
                 direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector).astype(dt))
+
+    def latent(self, material) -> np.ndarray:
+        """z (latent,) of a trained material's row or of an encoder input vector."""
+        if isinstance(material, int | np.integer):
+            return self.network.encode(self.materials[int(material)][None])[0]
+        return self.network.encode(np.asarray(material, dtype=np.float64).reshape(1, -1))[0]
+
+    def query_latent(self, z, centre, size, wi, wo) -> np.ndarray:
+        """:meth:`query` with the decoder reading latent ``z`` (latent,) directly (Fig. 8's interpolation)."""
+        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+        plan = DecoderPlan(self.network, self.network.fusion_bias(np.asarray(z).reshape(1, -1))[0])
+        spatial, angular = self.features(centre, size, wi, wo)
+        out = np.concatenate([plan(spatial[i:i + CHUNK], angular[i:i + CHUNK]) for i in range(0, len(wi), CHUNK)])
+        values = decode_outputs(out.astype(np.float64), self._specular, self.k)
+        return np.where(((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))[:, None], values, 0.0)
 
     def _plan(self, material) -> DecoderPlan:
         """The decoder plan of material row ``material`` (int, cached) or of an encoder input vector (new)."""

@@ -22,7 +22,7 @@ import numpy as np
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError
 from clothlab.neural.data import COLUMNS
-from clothlab.neural.encodings import BLOB_BINS, n_direction_features
+from clothlab.neural.encodings import BLOB_BINS, n_direction_features, n_yarn_features
 from clothlab.neural.losses import column_weights, encode_targets, is_specular, loss_and_gradient
 from clothlab.neural.network import Architecture, SurrogateNetwork
 from clothlab.neural.optimizer import Adam, step_schedule
@@ -43,6 +43,9 @@ class TrainSpec:
     enc_width: int = 128
     latent: int = 64
     half_vector: bool = True
+    position_bins: int = BLOB_BINS
+    size_bins: int = BLOB_BINS
+    yarn_bins: int = 0
     batch: int = 4096
     lr: float = 3e-3
     weight_decay: float = 1e-6
@@ -75,11 +78,13 @@ def split_rows(data: np.ndarray, heldout_materials=()) -> dict[str, np.ndarray]:
 
 
 def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict) -> Surrogate:
-    arch = Architecture(n_material=materials.shape[1], n_spatial=3 * BLOB_BINS,
+    n_spatial = 2 * spec.position_bins + spec.size_bins + n_yarn_features(spec.yarn_bins)
+    arch = Architecture(n_material=materials.shape[1], n_spatial=n_spatial,
                         n_angular=n_direction_features(spec.half_vector), n_out=len(names),
                         enc_width=spec.enc_width, latent=spec.latent, width=spec.width, spatial=spec.spatial)
     return Surrogate(SurrogateNetwork(arch, seed=spec.seed), tuple(names), np.asarray(materials, dtype=np.float64),
-                     {**encoding, "half_vector": spec.half_vector})
+                     {**encoding, "half_vector": spec.half_vector, "position_bins": spec.position_bins,
+                      "size_bins": spec.size_bins, "yarn_bins": spec.yarn_bins})
 
 
 def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray):

@@ -21,7 +21,15 @@ from clothlab.errors import ConfigError, ResultExistsError
 from clothlab.render.camera import PinholeCamera
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Scene, check_render_memory
-from clothlab.render.shade import SHADERS, Counter, FabricModels, Samples, lod_weight, shade
+from clothlab.render.shade import (
+    NEURAL_TEXTURE_RANGE,
+    SHADERS,
+    Counter,
+    FabricModels,
+    Samples,
+    lod_weight,
+    shade,
+)
 
 
 @dataclass
@@ -120,8 +128,9 @@ def _light(light, position):
 def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> dict:
     shaded_pixels = np.unique(samples.pixel)
     n = max(shaded_pixels.size, 1)
-    if shader in ("im-lod", "surface-lod"):
-        b = lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1)
+    if shader in ("im-lod", "surface-lod", "neural-lod"):
+        b = (lod_weight(samples.footprint, *NEURAL_TEXTURE_RANGE) if shader == "neural-lod"
+             else lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1))
         texture_pixels = np.unique(samples.pixel[b < 1.0]).size
         reflectance_only = n - np.unique(samples.pixel[b < 1.0]).size if shaded_pixels.size else 0
         blend_pixels = np.unique(samples.pixel[(b > 0.0) & (b < 1.0)]).size
@@ -144,7 +153,7 @@ def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> d
         "footprint_median_tiles": float(np.median(finite)) if finite.size else float("nan"),
         "footprint_max_tiles": float(finite.max()) if finite.size else float("nan"),
     }
-    for name in ("texture", "reflectance", "kang"):
+    for name in ("texture", "reflectance", "kang", "neural"):
         stats[f"{name}_evaluations"] = int(counter.get(f"{name}_points", 0))
     return stats
 
@@ -212,7 +221,7 @@ def relative_error(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | 
 
 
 #: the antialiasing reference of each shader family: its own texture-level shader, supersampled
-REFERENCE_SHADER = {"im": "im-texture", "kang": "kang-texture"}
+REFERENCE_SHADER = {"im": "im-texture", "kang": "kang-texture", "neural": "im-texture"}
 
 
 def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
@@ -241,10 +250,11 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
         row = {"distance_mm": float(distance)}
         for shader in shaders:
             family = shader.split("-")[0]
-            if family not in references:
-                references[family] = render(s, shader=REFERENCE_SHADER[family], spp=reference_spp, fabric=fabric)
-                row[f"{family}_reference_seconds"] = references[family].timings["total"]
-            reference = references[family]
+            name = REFERENCE_SHADER[family]  # neural-lod shares im-lod's reference
+            if name not in references:
+                references[name] = render(s, shader=name, spp=reference_spp, fabric=fabric)
+            reference = references[name]
+            row[f"{family}_reference_seconds"] = reference.timings["total"]
             mask = reference.coverage >= 1.0
             best, spent, runs = None, 0.0, 0
             while runs < max(1, repeats) and (runs == 0 or spent < repeat_budget_s):

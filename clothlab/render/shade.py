@@ -32,6 +32,17 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
                      = camera distance / fabric.kang.view_distance_mm.
 
+- ``neural-lod``     the IM texture model where the pixel resolves the yarns' cross-sections, the neural
+                     footprint surrogate (Chen, Wang & Wang 2024, sec. 4.3; ``kind: neural``, the weave's shipped
+                     weights) for the footprints of a pixel from there to a few tiles, the IM reflectance model
+                     beyond: texture weight 1 - b_n, b_n = lod_weight(f, *NEURAL_TEXTURE_RANGE); of the rest a
+                     share b_r = lod_weight(f, *NEURAL_REFLECTANCE_RANGE) reflectance, 1 - b_r network.  The
+                     network is queried once per pixel, for a box footprint of side f (tiles) at the mean (u, v)
+                     of the pixel's samples with its first sample's directions: the query *is* the pixel's
+                     filtered value (eq. 3), so it needs no supersampling.  Texture samples as im-lod's
+                     (:func:`blend_texture_samples`).  The scene's IM parameters and coefficients are used; a
+                     parameter set other than the trained one goes through the network's encoder.
+
 Skipping (nothing runs that the scene does not need): a component whose coefficient is zero in every
 channel, or whose yarn type covers no cell of the weave, is not computed (``need=``).
 
@@ -59,7 +70,8 @@ from clothlab.models.components import combine
 from clothlab.render.scene import Fabric, Lod
 from clothlab.weave.model import YARN_KINDS
 
-SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture", "surface-lod", "surface-texture")
+SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture", "surface-lod", "surface-texture",
+           "neural-lod")
 #: finite stand-in for an infinite footprint (grazing differentials) handed to the Kang shader
 MAX_FOOTPRINT = 1e6
 
@@ -315,6 +327,59 @@ def im_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) 
     return out
 
 
+#: footprints (tiles) of the texture -> network blend of neural-lod (the network's error falls below the
+#: supersampled texture's from ~0.03 tile on; docs/neural.md) and of the network -> reflectance blend (from
+#: ~2 tiles the reflectance model is within a few per cent of the footprint average)
+NEURAL_TEXTURE_RANGE = (0.02, 0.045)
+NEURAL_REFLECTANCE_RANGE = (2.0, 4.0)
+
+
+def neural_model(fabric: FabricModels):
+    """The scene's weave as ``kind: neural`` (shipped weights), built once; ConfigError if the fabric's
+    components are not the network's (it learns the IM texture)."""
+    cached = getattr(fabric, "_neural", None)
+    if cached is None:
+        from clothlab.models.registry import build_model
+
+        cached = build_model("neural", fabric.weave)
+        if tuple(cached.component_names) != tuple(fabric.texture.component_names):
+            raise ConfigError(f"neural-lod learns the Irawan-Marschner components {list(cached.component_names)}; "
+                              f"the scene's fabric has {list(fabric.texture.component_names)}", field="fabric.fit")
+        fabric._neural = cached
+    return cached
+
+
+def neural_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
+    """The network's f_r (M, C), one query per pixel (module docstring) shared by the pixel's samples."""
+    if not fabric.need or len(s.u) == 0:
+        return _zeros(fabric, len(s.u))
+    model = neural_model(fabric)
+    order, starts, group = pixel_groups(s.pixel)
+    count = np.diff(np.append(starts, len(s.u)))
+    back = np.empty(len(s.u), dtype=np.intp)
+    back[order] = group
+    centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
+    first = order[starts]
+    comps = counter.run("neural", len(first), model.query, centre, s.footprint[first], s.wi[first], s.wo[first],
+                        fabric.params)
+    return combine({k: comps[k] for k in fabric.need}, fabric.coefficients)[back]
+
+
+def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
+    """neural-lod (module docstring): texture, network or reflectance by the pixel footprint, blended."""
+    b_n = lod_weight(s.footprint, *NEURAL_TEXTURE_RANGE)
+    b_r = lod_weight(s.footprint, *NEURAL_REFLECTANCE_RANGE)
+    out = _zeros(fabric, len(s.u))
+    for weight, values in ((b_n * b_r, reflectance_values), (b_n * (1.0 - b_r), neural_pixel_values)):
+        some = np.flatnonzero(weight > 0.0)
+        if some.size:
+            out[some] += weight[some, None] * values(fabric, s.take(some), counter)
+    index, weight = blend_texture_samples(s.pixel, b_n)
+    if index.size:
+        out[index] += weight[:, None] * texture_values(fabric, s.take(index), counter)
+    return out
+
+
 def kang_values(fabric: FabricModels, s: Samples, counter: Counter, *, lod: bool) -> np.ndarray:
     """Kang's point shader f_r (M, C); ``lod``: with the pixel footprint (eq. 5, optionally Algorithm 1)."""
     texture, params, coefficients = fabric.kang()
@@ -343,4 +408,6 @@ def shade(shader: str, fabric: FabricModels, samples: Samples, lod: Lod, counter
         return im_lod_values(surface_models(fabric), samples, counter, lod)
     if shader == "surface-texture":
         return texture_values(surface_models(fabric), samples, counter)
+    if shader == "neural-lod":
+        return neural_lod_values(fabric, samples, counter)
     raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")

@@ -138,8 +138,23 @@ def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | No
             "mse_ratio_mc16_size_ge_1": mc16["size >= 1"] / max(sur["size >= 1"], 1e-300)}
 
 
+def shipped_fabrics() -> list[str]:
+    """The presets with shipped per-fabric weights (:data:`clothlab.models.neural.model.SHIPPED`)."""
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.weave.presets import PRESET_NAMES
+
+    return [name for name in PRESET_NAMES if (SHIPPED / f"{name}.npz").exists()]
+
+
 def run(context) -> dict:
-    return {**neural_speed(context.quick), "versus_mc": surrogate_vs_mc(context.quick)}
+    """Decoder speed, the MC-vs-surrogate table of every shipped weave and the neural-lod render."""
+    from clothlab.studies.render_lod import neural_lod_benchmark
+
+    fabrics = shipped_fabrics()
+    versus = [surrogate_vs_mc(context.quick, fabric) for fabric in fabrics]
+    return {**neural_speed(context.quick), "versus_mc": versus[0] if versus else {"skipped": "no shipped weights"},
+            "versus_mc_all": versus,
+            "render": neural_lod_benchmark(context.quick, figures_dir=context.figures_dir)}
 
 
 def lines(f: dict) -> list[str]:
@@ -151,7 +166,17 @@ def lines(f: dict) -> list[str]:
                    f"{r['qps_one_worker']:>14,.0f} {r['qps_per_cpu_s_one_worker']:>9,.0f} {r['workers']:>9} "
                    f"{r['qps']:>9,.0f} {r['qps_per_cpu_s']:>9,.0f}   {'met' if r['meets_target'] else 'NOT met'}")
     out.append("  * the default width")
-    v = f.get("versus_mc") or {}
+    for v in f.get("versus_mc_all") or [f.get("versus_mc") or {}]:
+        out += _versus_lines(v)
+    if "render" in f:
+        from clothlab.studies.render_lod import neural_lod_lines
+
+        out += neural_lod_lines(f["render"])
+    return out
+
+
+def _versus_lines(v: dict) -> list[str]:
+    out = []
     if "rows" in v:
         out.append(f"  {v['fabric']}: shipped surrogate vs MC footprint integration, {v['queries']} held-out queries, "
                    f"reference MC {v['reference_samples']} (whole-tile split); MSE of f")

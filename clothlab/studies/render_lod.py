@@ -236,3 +236,100 @@ def plot_render_benchmark(result: dict, path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(path, buffer.getvalue())
     return path
+
+
+NEURAL_SHADERS = ("im-lod", "neural-lod")
+
+
+def neural_lod_benchmark(quick: bool = False, *, figures_dir=None, resolution=None, distances=None, spp: int = 4,
+                         reference_spp: int | None = None, repeats: int | None = None) -> dict:
+    """The receding plane with im-lod and neural-lod (:mod:`clothlab.render.shade`) side by side: per distance
+    the relative L1 error of each against the same im-texture reference (``reference_spp`` stratified samples)
+    and its least shading CPU time of up to ``repeats`` renders; ``neural_better`` lists, per distance,
+    whether neural-lod has the lower error at equal or lower shading time (within ``TIME_SLACK``).  Needs the
+    scene weave's shipped network (``{'skipped': ...}`` otherwise).  ``figures_dir``: ``neural_lod.png``."""
+    from clothlab.models.neural.model import SHIPPED
+
+    scene = receding_plane_scene(tuple(resolution or ((32, 24) if quick else (128, 96))))
+    weave = RECEDING_PLANE["fabric"]["weave"].removeprefix("preset:")
+    if not (SHIPPED / f"{weave}.npz").exists():
+        return {"skipped": f"no shipped network for {weave}"}
+    reference_spp = reference_spp or (16 if quick else 64)
+    repeats = repeats or (3 if quick else 5)
+    distances = tuple(distances or (QUICK_DISTANCES if quick else FULL_DISTANCES))
+    nested = compare_lod(scene, distances, shaders=NEURAL_SHADERS, spp=spp, reference_spp=reference_spp,
+                         repeats=repeats, repeat_budget_s=1.5)
+    rows = flat_rows(nested, NEURAL_SHADERS)
+    for r in rows:
+        err_n, err_i = r["neural_lod_relative_error"], r["im_lod_relative_error"]
+        t_n, t_i = r["neural_lod_shading_cpu_seconds"], r["im_lod_shading_cpu_seconds"]
+        r["neural_lower_error"] = err_n < err_i
+        r["neural_time_ratio"] = t_n / t_i if t_i > 0 else float("nan")
+        r["neural_better"] = bool(err_n < err_i and t_n <= (1.0 + TIME_SLACK) * t_i)
+    result = {"settings": {"scene": "receding plane, cotton denim, tile 1 x 2 mm, 45 deg elevation",
+                           "width_px": scene.camera.resolution[0], "height_px": scene.camera.resolution[1],
+                           "spp": spp, "reference_spp": reference_spp, "repeats": repeats,
+                           "time_slack": TIME_SLACK},
+              "rows": rows, "neural_better_everywhere": all(r["neural_better"] for r in rows)}
+    if figures_dir is not None:
+        result["figure"] = str(plot_neural_lod(result, Path(figures_dir) / "neural_lod.png"))
+    return result
+
+
+#: shading-time tolerance of "equal or lower time" (the CPU times of two renders wander by ~10 %)
+TIME_SLACK = 0.1
+
+
+def neural_lod_lines(result: dict) -> list[str]:
+    """The im-lod vs neural-lod table."""
+    if "skipped" in result:
+        return [f"  neural-lod render: skipped ({result['skipped']})"]
+    s = result["settings"]
+    out = [f"  neural-lod vs im-lod, receding plane {s['width_px']} x {s['height_px']} px, {s['spp']} spp; error: "
+           f"relative L1 vs im-texture at {s['reference_spp']} spp; ms: least shading CPU of up to {s['repeats']}",
+           f"  {'dist mm':>7} {'footprint':>13} | {'err im-lod':>10} {'err neural':>10} | {'ms im-lod':>9} "
+           f"{'ms neural':>9} {'ratio':>6} | better"]
+    for r in result["rows"]:
+        out.append(f"  {r['distance_mm']:7g} {r['footprint_min_tiles']:6.3f}-{r['footprint_max_tiles']:<6.3g} | "
+                   f"{r['im_lod_relative_error']:10.3f} {r['neural_lod_relative_error']:10.3f} | "
+                   f"{1e3 * r['im_lod_shading_cpu_seconds']:9.1f} {1e3 * r['neural_lod_shading_cpu_seconds']:9.1f} "
+                   f"{r['neural_time_ratio']:6.2f} | {'yes' if r['neural_better'] else 'NO'}")
+    out.append(f"  neural-lod lower error at equal or lower shading time (+{100 * s['time_slack']:.0f} %) at every "
+               f"distance: {result['neural_better_everywhere']}")
+    if "figure" in result:
+        out.append(f"  plot: {result['figure']}")
+    return out
+
+
+def plot_neural_lod(result: dict, path) -> Path:
+    """PNG: relative L1 error and shading CPU time against distance, im-lod vs neural-lod."""
+    import io
+
+    from matplotlib.figure import Figure
+
+    from clothlab.atomic import atomic_write_bytes
+
+    rows = result["rows"]
+    d = [r["distance_mm"] for r in rows]
+    figure = Figure(figsize=(9.5, 3.8), layout="constrained")
+    axes = figure.subplots(1, 2)
+    for ax, (name, scale, label) in zip(axes, (("relative_error", 1.0, "relative L1 error vs reference"),
+                                               ("shading_cpu_seconds", 1e3, "shading CPU time (ms)")), strict=True):
+        for shader, colour in (("im-lod", "C0"), ("neural-lod", "C2")):
+            ax.plot(d, [scale * r[f"{_key(shader)}_{name}"] for r in rows], "-o", color=colour, ms=3.5, label=shader)
+        ax.set_xscale("log")
+        ax.set_xlabel("camera distance (mm)")
+        ax.set_title(label, fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes[0].set_ylim(bottom=0.0)
+    axes[1].set_yscale("log")
+    axes[0].legend(fontsize=8)
+    s = result["settings"]
+    figure.suptitle(f"Receding plane (cotton denim): neural-lod vs im-lod, {s['width_px']} x {s['height_px']} px, "
+                    f"{s['spp']} spp; reference im-texture {s['reference_spp']} spp", fontsize=10)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=100)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buffer.getvalue())
+    return path

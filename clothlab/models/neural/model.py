@@ -66,6 +66,9 @@ class NeuralModel(Model):
                               "(an Irawan-Marschner target)", field="model.options.weights")
         self._encoding = self.surrogate.encoding
         self._trained = {k: float(v) for k, v in self._encoding.get("params", {}).items()}
+        # the trained materials' parameters by row (a multi-material network lists them all)
+        self._materials = [{k: float(v) for k, v in q.items()}
+                           for q in self._encoding.get("materials_params", [self._trained])]
         self._pattern = pattern_descriptor(weave, self._encoding.get("pattern_order", 2))  # the encoder's pattern part
 
     def default_parameters(self) -> dict[str, float]:
@@ -74,10 +77,38 @@ class NeuralModel(Model):
     def _material(self, params: dict | None):
         """The trained material's row (0) for its own parameters, else the encoder input of ``params``."""
         p = self.resolve(params)
-        if all(abs(p[k] - v) <= 1e-12 * max(1.0, abs(v)) for k, v in self._trained.items()):
-            return 0
+        for row, trained in enumerate(self._materials):
+            if all(abs(p[k] - v) <= 1e-12 * max(1.0, abs(v)) for k, v in trained.items()):
+                return row
+        return self.material_vector(p)
+
+    def material_vector(self, params: dict | None = None) -> np.ndarray:
+        """The encoder input m of ``params`` (normalised parameters, then the pattern descriptor)."""
         names = self._encoding.get("parameters", self.params.names())
-        return np.concatenate([normalised_parameters(p, self.params, names), self._pattern])
+        return np.concatenate([normalised_parameters(self.resolve(params), self.params, names), self._pattern])
+
+    def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
+                     **options):
+        """Fast approximate fit of the ``free`` parameters (default ``default_free``) through the encoder
+        (:func:`clothlab.neural.material_fit.fit_material`) to far-view values (N,) at directions (N, 3),
+        starting from ``params``; returns (fitted parameters, the :class:`MaterialFit`).  ``refine``: then
+        refine with the exact model the network learnt (the sidecar's ``kind``;
+        :func:`~clothlab.neural.material_fit.refine_material`), whose coefficients and RMS replace the fast
+        fit's."""
+        from clothlab.models.registry import build_model
+        from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
+
+        names = list(self._encoding.get("parameters", self.params.names()))
+        free = list(free or self.default_free)
+        result = fit_material(self.surrogate, wi, wo, values, self.material_vector(params),
+                              {k: names.index(k) for k in free}, size=FAR_SIZE, **options)
+        fitted = {**self.resolve(params), **{k: unit_to_parameter(self.params[k], t) for k, t in result.unit.items()}}
+        result.params = {k: fitted[k] for k in free}
+        if refine:
+            exact = build_model(self._encoding.get("kind", "irawan"), self.weave)
+            fitted, result.coefficients, result.rms = refine_material(exact, wi, wo, values, fitted, free)
+            result.params = {k: fitted[k] for k in free}
+        return fitted, result
 
     def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
         """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles."""

@@ -1,0 +1,96 @@
+"""Multi-material surrogates: the ``--vary`` grid of train-surrogate (held-out midpoints, Fig. 8 page) and
+the fast material fit through the encoder (clothlab.neural.material_fit) on simulated data."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from clothlab.cli.train_surrogate import material_grid
+from clothlab.errors import ConfigError
+from clothlab.models.irawan.parameters import IRAWAN_PARAMS
+from clothlab.neural.material_fit import unit_to_parameter
+
+
+def test_material_grid_is_the_product_with_geometric_midpoints_held_out():
+    base = {"alpha": 0.02, "beta": 1.5, "delta": 0.5}
+    sets, held = material_grid(IRAWAN_PARAMS, base, ["alpha=0.01:0.2:3", "beta=0.5:8:3"])
+    assert len(sets) == 9 + 4 and held == [9, 10, 11, 12]
+    assert sorted({s["alpha"] for s in sets[:9]}) == pytest.approx([0.01, 0.105, 0.2])
+    assert sorted({s["beta"] for s in sets[:9]}) == pytest.approx([0.5, 2.0, 8.0])  # log-declared: geometric
+    assert sorted({s["beta"] for s in sets[9:]}) == pytest.approx([1.0, 4.0])
+    assert all(s["delta"] == 0.5 for s in sets)
+    assert material_grid(IRAWAN_PARAMS, base, []) == ([base], [])
+    for bad in ("alpha=0.01:0.2", "nope=0:1:3", "alpha=0.2:0.01:3", "alpha=0.01:0.2:1", "beta=0.1:2:3"):
+        with pytest.raises(ConfigError):
+            material_grid(IRAWAN_PARAMS, base, [bad])
+
+
+def test_unit_coordinate_inverts_the_normalisation():
+    from clothlab.neural.encodings import normalised_parameters
+
+    for name, value in (("alpha", 0.123), ("beta", 3.7)):
+        t = normalised_parameters({name: value}, IRAWAN_PARAMS, [name])[0]
+        assert unit_to_parameter(IRAWAN_PARAMS[name], t) == pytest.approx(value, rel=1e-12)
+
+
+def test_cli_vary_trains_a_multi_material_network_with_unseen_materials_and_fig_8(tmp_path, capsys):
+    from clothlab.cli.main import main
+    from clothlab.models.registry import build_model
+    from clothlab.weave.presets import get_preset
+
+    model = build_model("irawan", get_preset("silk-shantung"))
+    model.components(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]]))  # compiled before the budget runs
+    out = tmp_path / "family"
+    assert main(["train-surrogate", "preset:silk-shantung", "-o", str(out), "--budget", "0.03", "--labels",
+                 "model", "--pairs", "2", "--width", "8", "--spatial", "8", "--vary", "alpha=0.02:0.2:2",
+                 "--vary", "beta=1:4:2", "-q"]) == 0
+    assert "unseen materials" in capsys.readouterr().out
+    sidecar = json.loads((out / "surrogate.json").read_text())
+    assert len(sidecar["encoding"]["materials_params"]) == 5 and sidecar["encoding"]["heldout_materials"] == [4]
+    assert sidecar["metrics"]["heldout_materials"][0]["rows"] > 0
+    latent = json.loads((out / "latent.json").read_text())
+    assert latent["params"][0] == {"alpha": 0.02, "beta": 1.0} and latent["params"][-1] == pytest.approx(
+        {"alpha": 0.2, "beta": 4.0})
+    assert np.array(latent["latent"]).shape == np.array(latent["model"]).shape == (11, 3)
+    assert (out / "latent.png").stat().st_size > 0 and "Fig. 8" in (out / "report.html").read_text()
+
+
+FAMILY = "families/silk-shantung-alpha-beta.npz"
+
+
+def test_fast_fit_through_the_encoder_then_exact_refinement_recover_simulated_parameters():
+    """IM far-view data (noise-free) of an unseen material of the shipped alpha-beta network.  The fast fit
+    recovers the linear coefficients to 25 % (18 % measured here; they are the large, well-determined part
+    of the signal) but alpha and beta only roughly: over the network's range they move the far view by
+    ~5-10 %, no more than
+    the network's own error on unseen materials (0.07-0.09 relative RMSE), so the test asserts only that
+    its residual is at that level.  Refined with the exact model from there, the parameters come back to
+    1e-4 (noise-free data)."""
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.models.registry import build_model
+    from clothlab.weave.presets import get_preset
+
+    weave = get_preset("silk-shantung")
+    neural = build_model("neural", weave, weights=str(SHIPPED / FAMILY))
+    exact = build_model("irawan", weave)
+    truth = {"alpha": 0.1525, "beta": 4.0}  # a held-out midpoint of the training grid
+    held = neural.sidecar["encoding"]["materials_params"][9:]
+    assert any(all(q[k] == pytest.approx(v, rel=1e-12) for k, v in truth.items()) for q in held)
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-0.8, 0.8, (900, 2))
+    xy = xy[np.sum(xy ** 2, axis=1) < 0.8][:400]
+    d = np.column_stack([xy, np.sqrt(1 - np.sum(xy ** 2, axis=1))])
+    wi, wo = d[:200], d[200:400]
+    c = exact.components(wi, wo, {**exact.resolve({}), **truth})
+    coefficients = {"diffuse": 0.3, "specular_warp": 0.5, "specular_weft": 0.4}
+    y = sum(v * c[k] for k, v in coefficients.items())
+    _, fast = neural.fit_material(wi, wo, y, params=exact.resolve({}), steps=60, starts=2)
+    for k, v in coefficients.items():
+        assert fast.coefficients[k] == pytest.approx(v, rel=0.25)
+    assert fast.rms <= 0.1 * np.sqrt(np.mean(y ** 2))
+    fitted, refined = neural.fit_material(wi, wo, y, params=exact.resolve({}), steps=60, starts=2, refine=True)
+    assert fitted["alpha"] == pytest.approx(0.1525, rel=1e-4) and fitted["beta"] == pytest.approx(4.0, rel=1e-4)
+    assert refined.coefficients["specular_warp"] == pytest.approx(0.5, rel=1e-4)

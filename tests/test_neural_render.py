@@ -1,0 +1,105 @@
+"""The neural-lod shader (clothlab.render.shade): texture model where the pixel resolves the yarns, the
+shipped network once per pixel from ~0.03 tile to a few tiles, the reflectance model beyond; checked on a
+head-on view of silk shantung at three heights against the other shaders and against the network queried
+by hand."""
+
+import numpy as np
+import pytest
+
+from clothlab.models.components import combine
+from clothlab.models.irawan.texture import IrawanTexture
+from clothlab.models.neural.model import NeuralModel
+from clothlab.render import render, scene_from_dict
+from clothlab.render.shade import NEURAL_REFLECTANCE_RANGE, NEURAL_TEXTURE_RANGE, FabricModels
+
+LIGHT = [0.3, -0.2, 1.0]
+
+
+def head_on(height, resolution=(8, 6), fov=20.0):
+    return scene_from_dict({
+        "patch": {"size_mm": [4000, 4000], "tile_mm": [1.0, 2.0], "warp_angle_deg": 30.0},
+        "camera": {"position": [0, 0, height], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov_deg": fov,
+                   "resolution": list(resolution)},
+        "light": {"type": "directional", "direction": LIGHT, "intensity": 2.0},
+        "fabric": {"weave": "preset:silk-shantung"},
+    })
+
+
+def test_near_is_the_texture_model_and_far_the_reflectance_model(monkeypatch):
+    near = head_on(0.3)
+    lod = render(near, shader="neural-lod", spp=4)
+    assert lod.stats["footprint_max_tiles"] < NEURAL_TEXTURE_RANGE[0]
+    np.testing.assert_array_equal(lod.image, render(near, shader="im-texture", spp=4).image)
+    assert lod.stats["neural_evaluations"] == 0 and lod.stats["texture_pixel_fraction"] == 1.0
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a model ran outside its footprint range")
+
+    far = head_on(400.0)
+    reflectance = render(far, shader="im-reflectance", spp=4)
+    monkeypatch.setattr(IrawanTexture, "components", forbidden)
+    monkeypatch.setattr(NeuralModel, "query", forbidden)
+    lod = render(far, shader="neural-lod", spp=4)
+    assert lod.stats["footprint_min_tiles"] > NEURAL_REFLECTANCE_RANGE[1]
+    np.testing.assert_array_equal(lod.image, reflectance.image)
+
+
+def test_between_it_is_one_network_query_per_pixel_for_the_pixel_footprint(monkeypatch):
+    """Footprints 0.05-2 tiles: no texture sample; one query per pixel at the mean (u, v) of its samples, with
+    the pixel footprint; the image is that query's f_r times E cos(theta_i) (flat patch, directional light)."""
+    scene = head_on(8.0)
+    calls = []
+    original = NeuralModel.query
+
+    def spy(self, centre, size, wi, wo, params=None):
+        out = original(self, centre, size, wi, wo, params)
+        calls.append((np.array(centre), np.array(size), np.array(wi), out))
+        return out
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the texture model ran")
+
+    monkeypatch.setattr(NeuralModel, "query", spy)
+    monkeypatch.setattr(IrawanTexture, "components", forbidden)
+    result = render(scene, shader="neural-lod", spp=4)
+    lo, hi = result.stats["footprint_min_tiles"], result.stats["footprint_max_tiles"]
+    assert NEURAL_TEXTURE_RANGE[1] < lo and hi < NEURAL_REFLECTANCE_RANGE[0]
+    (centre, size, wi, out), = calls
+    h, w = scene.camera.resolution[1], scene.camera.resolution[0]
+    assert len(centre) == h * w == result.stats["neural_evaluations"]
+    assert np.all((size >= lo) & (size <= hi))
+    fabric = FabricModels.build(scene.fabric)
+    expected = combine(out, fabric.coefficients) * 2.0 * wi[:, 2:3]
+    np.testing.assert_allclose(result.image.reshape(h * w, -1), expected, rtol=1e-12)
+    assert np.ptp(centre[:, 0]) > 0.5  # the pixels look at different places of the tile
+    one = render(scene, shader="neural-lod", spp=1)  # one sample: the query is at that sample's (u, v)
+    assert not np.allclose(one.image, result.image) and one.image.min() > 0.0
+
+
+def test_neural_lod_needs_the_weaves_network():
+    from clothlab.errors import ConfigError
+
+    scene = scene_from_dict({
+        "patch": {"size_mm": [100, 100], "tile_mm": [1.0, 2.0]},
+        "camera": {"position": [0, 0, 8.0], "look_at": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 20,
+                   "resolution": [4, 3]},
+        "light": {"type": "directional", "direction": LIGHT},
+        "fabric": {"weave": "pattern:plain"},
+    })
+    with pytest.raises(ConfigError, match="shipped"):
+        render(scene, shader="neural-lod")
+
+
+def test_neural_lod_benchmark_rows_compare_error_and_time_side_by_side(tmp_path):
+    from clothlab.studies.render_lod import neural_lod_benchmark, neural_lod_lines
+
+    f = neural_lod_benchmark(True, figures_dir=tmp_path, resolution=(8, 6), distances=(5.0, 640.0),
+                             reference_spp=4, repeats=1)
+    near, far = f["rows"]
+    for r in f["rows"]:
+        assert r["neural_better"] == (r["neural_lod_relative_error"] < r["im_lod_relative_error"]
+                                      and r["neural_time_ratio"] <= 1.1)
+    # far away both shaders are the reflectance model once per pixel: the same image, the same error
+    assert far["neural_lod_relative_error"] == pytest.approx(far["im_lod_relative_error"], rel=1e-12)
+    assert near["footprint_max_tiles"] < far["footprint_min_tiles"]
+    assert (tmp_path / "neural_lod.png").stat().st_size > 0 and "neural-lod" in "\n".join(neural_lod_lines(f))
