@@ -41,6 +41,11 @@ def model():
     return build_model("irawan", get_preset(FABRIC))
 
 
+def material_names(model):
+    """The encoder's parameters: every declared one but orientation (applied outside the network)."""
+    return [n for n in model.params.names() if n != "orientation"]
+
+
 def test_one_blob_is_the_gaussian_kernel_at_the_bin_centres_and_wraps():
     t = np.array([0.3, 0.99])
     centres = (np.arange(8) + 0.5) / 8
@@ -129,7 +134,7 @@ def _tiny_run(model, steps=150):
         generate(Path(tmp), spec, [ModelLabels(model)])
         data, _ = assemble(Path(tmp), spec, 1, 3)
         data = np.array(data)
-    materials = material_vector(model.weave, model.default_parameters(), model.params, model.params.names())[None]
+    materials = material_vector(model.weave, model.default_parameters(), model.params, material_names(model))[None]
     spec = TrainSpec(width=16, spatial=8, enc_width=16, latent=8, batch=256, steps=steps, lr=1e-2, log_every=10)
     return data, train(data, model.component_names, materials, spec)
 
@@ -179,7 +184,7 @@ def test_cli_trains_writes_its_files_refuses_to_overwrite_and_resumes(tmp_path, 
 @pytest.fixture(scope="module")
 def weights(tmp_path_factory, model):
     _, result = _tiny_run(model, steps=60)
-    result.surrogate.encoding.update(parameters=model.params.names(), params=model.default_parameters(),
+    result.surrogate.encoding.update(parameters=material_names(model), params=model.default_parameters(),
                                      weave=model.weave.name, data_spec=DataSpec(centres=2, sizes=3).to_dict())
     return save_surrogate(result.surrogate, tmp_path_factory.mktemp("neural") / "s")
 

@@ -148,11 +148,13 @@ def run(args) -> int:
         shutil.rmtree(out)
     import numpy as np
 
+    from clothlab.models.base import ORIENTATION
+
     weave, model, params = _model(args.source, args.target)
     p = model.resolve(params)
     sets, heldout = material_grid(model.params, p, args.vary)
     labels = [_labels(args.labels, model, q, args.samples, args.seed) for q in sets]
-    names = model.params.names()
+    names = [n for n in model.params.names() if n != ORIENTATION]  # a frame rotation, applied outside the network
     materials = np.stack([material_vector(weave, q, model.params, names) for q in sets])
     encoding = {"parameters": names, "pattern_order": PATTERN_ORDER, "kind": model.kind, "weave": weave.name,
                 "labels": type(labels[0]).__name__, "params": p, "weave_wv": format_wv(weave)}

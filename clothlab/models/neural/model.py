@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import ConfigError
-from clothlab.models.base import Model, as_directions
+from clothlab.models.base import ORIENTATION, Model, as_directions
 from clothlab.models.irawan.integrals import COMPONENTS
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
 from clothlab.neural.encodings import normalised_parameters, pattern_descriptor
@@ -82,9 +82,14 @@ class NeuralModel(Model):
                 return row
         return self.material_vector(p)
 
+    def _material_names(self) -> list[str]:
+        """The parameters the encoder sees: all declared ones but ``orientation`` (a rotation of the
+        directions, applied before the network)."""
+        return [name for name in self.params.names() if name != ORIENTATION]
+
     def material_vector(self, params: dict | None = None) -> np.ndarray:
         """The encoder input m of ``params`` (normalised parameters, then the pattern descriptor)."""
-        names = self._encoding.get("parameters", self.params.names())
+        names = self._encoding.get("parameters", self._material_names())
         return np.concatenate([normalised_parameters(self.resolve(params), self.params, names), self._pattern])
 
     def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
@@ -98,7 +103,7 @@ class NeuralModel(Model):
         from clothlab.models.registry import build_model
         from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
 
-        names = list(self._encoding.get("parameters", self.params.names()))
+        names = list(self._encoding.get("parameters", self._material_names()))
         free = list(free or self.default_free)
         result = fit_material(self.surrogate, wi, wo, values, self.material_vector(params),
                               {k: names.index(k) for k in free}, size=FAR_SIZE, **options)
