@@ -149,7 +149,10 @@ def test_regenerated_examples_reproduce_the_shipped_measurements():
 
     with StudyData(None) as data:
         fabrics = sorted(p.parent.name for p in data.measurements.glob("*/fabric.yaml"))
-        assert fabrics == sorted(p.parent.name for p in (REPO / "measurements").glob("*/fabric.yaml"))
+        shipped = {p.parent.name for p in (REPO / "measurements").glob("*/fabric.yaml")}
+        # the scattered example is made by its own `clothlab simulate --sampling` command (its README), not by
+        # the paper-examples generator the studies regenerate
+        assert set(fabrics) == shipped - {"scattered-twill"}
         for fabric in fabrics:
             for table in ("clean.csv", "noisy.csv"):
                 got = read_table(data.measurements / fabric / table)

@@ -10,6 +10,7 @@ import os
 import signal
 import socket
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,3 +167,26 @@ def test_posterior_through_the_dask_pool_is_the_in_process_chain(cluster):
     np.testing.assert_array_equal(pooled.log_prob, reference.log_prob)
     auto = run_posterior(problem, truth, seed=5, runner=runner, pool="auto", **FAST)
     np.testing.assert_array_equal(auto.chain, reference.chain)
+
+
+@pytest.mark.slow
+def test_model_selection_candidates_as_tasks_match_the_in_process_loop(tmp_path, cluster):
+    """`clothlab select --workers 2`: one task per candidate; the ranking, every candidate's objective and
+    orientation, and the winner's parameters equal the in-process loop's (issue 13 item 2)."""
+    from dataclasses import replace
+
+    from clothlab.config import apply_overrides, load_config
+    from clothlab.fit.select import SelectSettings, select
+
+    runner, _ = cluster
+    example = Path(__file__).parent.parent / "measurements" / "scattered-twill" / "fabric.yaml"
+    cfg = apply_overrides(load_config(example), max_evals=80)
+    cfg = replace(cfg, fit=replace(cfg.fit, posterior=None, cv_folds=0))
+    settings = SelectSettings(weaves=("preset:wool-gabardine", "preset:cotton-denim"), kinds=("irawan",),
+                              orientation_starts=1, max_evals=60, cv_folds=0)
+    here = select(cfg, settings, fits_dir=tmp_path / "a")
+    there = select(cfg, settings, fits_dir=tmp_path / "b", runner=runner)
+    assert [r.row["candidate"] for r in here.ranked] == [r.row["candidate"] for r in there.ranked]
+    for a, b in zip(here.ranked, there.ranked, strict=True):
+        assert a.row["objective"] == b.row["objective"] and a.params == b.params
+    assert here.winner.params == there.winner.params

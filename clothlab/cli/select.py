@@ -8,7 +8,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output
+from clothlab.cli.options import add_force, add_output, add_parallel
 
 
 def add_parser(sub):
@@ -22,6 +22,7 @@ def add_parser(sub):
     add_force(p, "fits/<name>/")
     add_output(p, "write the fit directories <name>/ under DIR (default: the yaml's output.fits)", metavar="DIR")
     p.add_argument("--no-posterior", action="store_true", help="skip the posterior of the winner's refit")
+    add_parallel(p, "the candidate fits (one task per candidate)")
     return p
 
 
@@ -69,6 +70,7 @@ def run(args) -> int:
     from dataclasses import replace
 
     from clothlab.atomic import prepare_result
+    from clothlab.cli.options import parallel_requested, runner_of
     from clothlab.config import apply_overrides, load_config
     from clothlab.fit.select import save_selection, select
 
@@ -85,8 +87,9 @@ def run(args) -> int:
             settings = _settings(cfg, args)
             held.enter_context(prepare_result((args.output or cfg.output.fits) / cfg.name, force=args.force))
             jobs.append((cfg, settings))
+        runner = held.enter_context(runner_of(args)) if parallel_requested(args) else None
         for cfg, settings in jobs:
-            selection = select(cfg, settings, fits_dir=args.output)
+            selection = select(cfg, settings, fits_dir=args.output, runner=runner)
             out = save_selection(selection, force=args.force, fits_dir=args.output)
             print(present_selection(selection, out))
     return 0

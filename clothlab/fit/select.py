@@ -287,11 +287,12 @@ def selection_summary(selection: Selection) -> dict:
 
 
 def select(config, settings: SelectSettings | None = None, *, measurement=None, run_task=None,
-           posterior=None, fits_dir=None) -> Selection:
+           posterior=None, fits_dir=None, runner=None) -> Selection:
     """Fit every candidate (``run_task``, default :func:`fit_candidate`, maps one task to its result: the
     place for a parallel scheduler), rank them, refit the winner with ``config``'s own budget, CV and
     posterior (or ``posterior`` given here) and return the :class:`Selection`.  Progress: one line per
-    candidate."""
+    candidate.  ``runner`` (:class:`clothlab.parallel.Runner`, e.g. Dask workers): the candidates as one task
+    each, results in candidate order, identical to the in-process loop."""
     from clothlab.errors import ConfigError
     from clothlab.fit.runner import run_fit
     from clothlab.io.loader import load_measurement
@@ -307,15 +308,25 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
     if not tasks:
         raise ConfigError("no candidates: select.weaves and select.kinds must each name at least one",
                           field="select")
-    results = []
-    with Progress(len(tasks), "select: candidates", unit="fit") as bar:
-        for i, task in enumerate(tasks, 1):
-            result = run_task(task)
-            row = result.row
-            log.info("select: candidate %d/%d %s: cv mean %s, BIC %s%s", i, len(tasks), row["candidate"],
-                     _short(row["cv_mean"]), _short(row["bic"]), f" ({row['note']})" if row["note"] else "")
-            results.append(result)
-            bar.update(1)
+    def logged(i, result) -> None:
+        row = result.row
+        log.info("select: candidate %d/%d %s: cv mean %s, BIC %s%s", i, len(tasks), row["candidate"],
+                 _short(row["cv_mean"]), _short(row["bic"]), f" ({row['note']})" if row["note"] else "")
+
+    if runner is not None:
+        from clothlab.parallel.runner import raise_failures
+
+        results = raise_failures(runner.map(run_task, tasks, names=[t.candidate.name for t in tasks],
+                                            desc="select: candidates"), "candidate fits")
+        for i, result in enumerate(results, 1):
+            logged(i, result)
+    else:
+        results = []
+        with Progress(len(tasks), "select: candidates", unit="fit") as bar:
+            for i, task in enumerate(tasks, 1):
+                results.append(run_task(task))
+                logged(i, results[-1])
+                bar.update(1)
     ranked = rank(results)
     best = ranked[0]
     if best.row["objective"] is None:
