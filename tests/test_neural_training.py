@@ -112,6 +112,21 @@ def test_generation_resumes_to_the_same_data_and_is_memory_mapped(tmp_path, mode
     np.testing.assert_allclose(a[:, 12], comps["specular_warp"])
 
 
+def test_generation_on_a_runner_writes_the_same_chunks(tmp_path, model):
+    """Chunks labelled as Runner tasks (issue 13 item 4) are the in-process files byte for byte, and the
+    budget still stops between rounds."""
+    from clothlab.parallel import InProcessRunner
+
+    spec = DataSpec(centres=2, sizes=2, pairs=4)
+    labels = [ModelLabels(model), ModelLabels(model)]
+    assert generate(tmp_path / "a", spec, labels) == 2 * spec.chunks_per_material()
+    with InProcessRunner() as runner:
+        assert generate(tmp_path / "b", spec, labels, runner=runner, stop=lambda: True) == 0
+        assert generate(tmp_path / "b", spec, labels, runner=runner) == 2 * spec.chunks_per_material()
+    for a in sorted((tmp_path / "a").glob("chunk-*.npy")):
+        assert a.read_bytes() == (tmp_path / "b" / a.name).read_bytes()
+
+
 def test_monte_carlo_labels_of_whole_tiles_approach_the_reflectance_model(model):
     """A box of 2 x 2 tiles averages the texture exactly over whole tiles: the reflectance model (the
     texture model's tile-average identity), up to the MC error of the estimate."""

@@ -190,3 +190,20 @@ def test_model_selection_candidates_as_tasks_match_the_in_process_loop(tmp_path,
     for a, b in zip(here.ranked, there.ranked, strict=True):
         assert a.row["objective"] == b.row["objective"] and a.params == b.params
     assert here.winner.params == there.winner.params
+
+
+def test_surrogate_training_chunks_on_dask_are_the_in_process_files(tmp_path, cluster):
+    """The surrogate's labelling chunks as Dask tasks (issue 13 item 4): byte-identical .npy files, whatever
+    the number of workers or the order the chunks finish in."""
+    from clothlab.models.irawan.model import IrawanModel
+    from clothlab.neural.data import DataSpec, generate
+    from clothlab.neural.labels import ModelLabels
+    from clothlab.weave.presets import get_preset
+
+    runner, _ = cluster
+    spec = DataSpec(centres=2, sizes=2, pairs=4)
+    labels = [ModelLabels(IrawanModel(get_preset("silk-shantung")))]
+    generate(tmp_path / "seq", spec, labels)
+    assert generate(tmp_path / "dask", spec, labels, runner=runner) == spec.chunks_per_material()
+    files = sorted((tmp_path / "seq").glob("chunk-*.npy"))
+    assert files and all(f.read_bytes() == (tmp_path / "dask" / f.name).read_bytes() for f in files)

@@ -4,9 +4,10 @@ curve and held-out errors by footprint size (JSON + PNG) into ``-o DIR``."""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output
+from clothlab.cli.options import add_force, add_output, add_parallel
 
 TARGETS = {"im": "irawan", "surface": "surface"}
 LABELS = ("mc", "sat", "model")
@@ -44,6 +45,7 @@ def add_parser(sub):
                         "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
                         "between neighbouring values are labelled too and held out (unseen materials)")
     add_force(p, "output directory")
+    add_parallel(p, "the labelling chunks (one task per chunk; identical data)")
     return p
 
 
@@ -164,10 +166,14 @@ def run(args) -> int:
     if args.yarn_bins:
         encoding["yarn_extent"] = yarn_extent(p)
     data_spec = DataSpec(pairs=args.pairs, seed=args.seed, small_sizes=args.small_sizes, row_centres=args.row_centres)
-    result = run_training(out, labels, materials, data_spec,
-                          TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed, yarn_bins=args.yarn_bins),
-                          budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
-                          heldout_materials=heldout)
+    from clothlab.cli.options import parallel_requested, runner_of
+
+    with runner_of(args) if parallel_requested(args) else contextlib.nullcontext() as runner:
+        result = run_training(out, labels, materials, data_spec,
+                              TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed,
+                                        yarn_bins=args.yarn_bins),
+                              budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
+                              heldout_materials=heldout, runner=runner)
     from clothlab.neural.run import write_report_page
 
     latent = None

@@ -142,24 +142,48 @@ def generate_chunk(spec: DataSpec, labels, material: int, cell: int) -> np.ndarr
     return np.concatenate([q, y], axis=1)
 
 
-def generate(directory, spec: DataSpec, label_sources, *, stop=None) -> int:
+def _label_chunk(shared, item) -> bytes:
+    """One chunk as .npy bytes (a task: ``shared`` = (spec, label sources), ``item`` = (material, cell);
+    seeded, so where it runs is irrelevant)."""
+    spec, label_sources = shared
+    m, c = item
+    buffer = io.BytesIO()
+    np.save(buffer, generate_chunk(spec, label_sources[m], m, c), allow_pickle=False)
+    return buffer.getvalue()
+
+
+def generate(directory, spec: DataSpec, label_sources, *, stop=None, runner=None) -> int:
     """Write every missing chunk of every material (``label_sources[m]`` labels material m) into
     ``directory``; returns the number of chunks written.  ``stop()`` returning True ends early (a budget);
-    the chunks written so far stay, and a later call resumes."""
+    the chunks written so far stay, and a later call resumes.  ``runner`` (:class:`clothlab.parallel.Runner`,
+    e.g. Dask workers): the chunks as tasks, in rounds of a few per worker with ``stop`` checked between
+    rounds; every chunk is seeded by (seed, material, cell), so the files are identical to the in-process ones."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     # cell-major order: a run stopped by its budget has labelled every material alike
     todo = [(m, c) for c in range(spec.chunks_per_material()) for m in range(len(label_sources))
             if not chunk_path(directory, m, c).exists()]
     written = 0
+    if runner is not None:
+        from clothlab.parallel.runner import raise_failures
+
+        shared = runner.share((spec, label_sources))
+        step = max(1, 4 * runner.workers)
+        for start in range(0, len(todo), step):
+            if stop is not None and stop():
+                break
+            items = todo[start:start + step]
+            blocks = raise_failures(runner.map(_label_chunk, items, shared=shared, desc="labelling chunks",
+                                               names=[f"chunk {m}/{c}" for m, c in items]), "label chunks")
+            for (m, c), data in zip(items, blocks, strict=True):
+                atomic_write_bytes(chunk_path(directory, m, c), data)
+                written += 1
+        return written
     with Progress(len(todo), "labelling footprint queries", unit="chunk") as bar:
         for m, c in todo:
             if stop is not None and stop():
                 break
-            block = generate_chunk(spec, label_sources[m], m, c)
-            buffer = io.BytesIO()
-            np.save(buffer, block, allow_pickle=False)
-            atomic_write_bytes(chunk_path(directory, m, c), buffer.getvalue())
+            atomic_write_bytes(chunk_path(directory, m, c), _label_chunk((spec, label_sources), (m, c)))
             written += 1
             bar.update(1)
     return written

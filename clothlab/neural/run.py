@@ -26,9 +26,11 @@ LOG = get_logger("neural.run")
 
 def run_training(directory, label_sources, materials, data_spec: DataSpec, train_spec: TrainSpec, *,
                  budget_s: float, label_share: float = 0.5, heldout_materials=(), encoding: dict | None = None,
-                 resume: bool = False, plots: bool = True) -> TrainResult:
+                 resume: bool = False, plots: bool = True, runner=None) -> TrainResult:
     """Label and train within ``budget_s`` CPU seconds; ``label_sources[m]`` and ``materials[m]`` (encoder
-    input) describe material m.  Returns the result after writing every file of the directory."""
+    input) describe material m.  Returns the result after writing every file of the directory.  ``runner``
+    (:class:`clothlab.parallel.Runner`): the labelling chunks as tasks on its workers, their CPU counted as
+    wall time x workers."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     manifest = directory / "data" / "data.json"
@@ -38,8 +40,15 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
                           "--pairs and --seed, or start a new directory", path=directory)
     start = time.process_time()
     names = tuple(label_sources[0].component_names)
-    written = generate(directory / "data", data_spec, label_sources,
-                       stop=lambda: time.process_time() - start > label_share * budget_s)
+    wall = time.perf_counter()
+    if runner is None:
+        def used() -> float:
+            return time.process_time() - start
+    else:
+        def used() -> float:
+            return (time.perf_counter() - wall) * runner.workers
+    written = generate(directory / "data", data_spec, label_sources, stop=lambda: used() > label_share * budget_s,
+                       runner=runner)
     data, sha = assemble(directory / "data", data_spec, len(label_sources), len(names))
     label_s = time.process_time() - start
     LOG.info(f"{written} chunks labelled ({data.shape[0]:,} queries in all) in {label_s:.1f} CPU-s")
