@@ -68,8 +68,11 @@ def _figure_jobs(record: FitRecord, percentiles) -> list[tuple[str, object]]:
     if record.trace is not None:
         jobs.append(("trace", lambda: plots.plot_fit_trace(record.trace)))
     if record.posterior_samples:
-        truths = {n: e.get("truth") for n, e in (record.posterior or {}).get("parameters", {}).items()}
-        jobs.append(("corner", lambda: plots.plot_corner(record.posterior_samples, truths)))
+        declared = (record.posterior or {}).get("parameters", {})
+        truths = {n: e.get("truth") for n, e in declared.items()}
+        units = {n: e.get("unit") or (record.fit.get("parameters", {}).get(n) or {}).get("unit")
+                 for n, e in declared.items()}
+        jobs.append(("corner", lambda: plots.plot_corner(record.posterior_samples, truths, units)))
     return jobs
 
 
