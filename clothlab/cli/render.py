@@ -1,5 +1,6 @@
-"""``clothlab render scene.yaml -o STEM``: a flat or cylindrical cloth patch to EXR and PNG, the texture model
-only where the pixel footprint resolves yarns."""
+"""``clothlab render scene.yaml [-o STEM]``: a flat or cylindrical cloth patch to EXR and PNG, the texture model
+only where the pixel footprint resolves yarns.  Without ``-o`` the files are ``renders/<scene file stem>.exr``
+and ``.png`` (:data:`DEFAULT_DIR`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from pathlib import Path
 from clothlab.cli.options import LazyText, add_force, add_output, names_of, one_of
 
 SHADERS = names_of("clothlab.render.shade", "SHADERS")
+#: Directory of the default output stem (``renders/<scene stem>``), relative to the working directory.
+DEFAULT_DIR = Path("renders")
 
 
 def add_parser(sub):
@@ -16,7 +19,7 @@ def add_parser(sub):
                        description="Render a scene YAML to STEM.exr (linear) and STEM.png (sRGB).")
     p.add_argument("scene", type=Path,
                    help="scene YAML: patch, camera, light, fabric and render sections (format: clothlab.render.scene)")
-    add_output(p, "output path stem (writes STEM.exr, STEM.png)", metavar="STEM", required=True)
+    add_output(p, "output path stem (writes STEM.exr, STEM.png; default renders/<scene file stem>)", metavar="STEM")
     p.add_argument("--shader", default="im-lod", type=one_of(SHADERS, "shader"),
                    help=LazyText(lambda: f"one of {', '.join(SHADERS())} (default im-lod)"))
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
@@ -27,7 +30,8 @@ def add_parser(sub):
 def run(args) -> int:
     from clothlab.render import render_to_files
 
-    result, exr, png = render_to_files(args.scene, args.output, shader=args.shader, spp=args.spp, force=args.force)
+    output = args.output if args.output is not None else DEFAULT_DIR / Path(args.scene).stem
+    result, exr, png = render_to_files(args.scene, output, shader=args.shader, spp=args.spp, force=args.force)
     print(present_render(args.scene, result, exr, png))
     return 0
 

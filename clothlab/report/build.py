@@ -19,7 +19,7 @@ import numpy as np
 
 from clothlab.atomic import atomic_directory
 from clothlab.config.schema import DEFAULT_PERCENTILES
-from clothlab.errors import InputError
+from clothlab.errors import ClothlabError, InputError
 from clothlab.report import html, plots
 from clothlab.report.data import (
     PAPER_RELATIVE_ERRORS,
@@ -34,27 +34,91 @@ from clothlab.report.data import (
     model_setting,
     optimisation_seconds,
     paper_fabric,
+    paper_figures_apply,
     percentile_key,
+    selection_rows,
 )
+from clothlab.report.sampling import SamplingLayout, sampling_layout
 
 PNG_DPI = 110
 #: Relative tolerance when the errors recorded in fit.json are compared with those recomputed here.
 ERROR_AGREEMENT_RTOL = 1e-3
 
 
+#: Every PNG stays below this height (px): the resolution drops for a figure taller than it at PNG_DPI.
+MAX_PNG_HEIGHT = 2990
+
+
 def save_figure(fig, path) -> None:
-    """Save a figure as PNG at :data:`PNG_DPI` and release its memory.
+    """Save a figure as PNG at :data:`PNG_DPI` (lower when that would make it taller than
+    :data:`MAX_PNG_HEIGHT` px) and release its memory.
 
     The axes are detached rather than ``fig.clear()``-ed: clearing resets every axes (new ticks, spines and
     locators) only for them to be thrown away, about 0.3 s over a report's figures."""
-    fig.savefig(path, dpi=PNG_DPI, pil_kwargs={"compress_level": 1})
+    dpi = min(PNG_DPI, MAX_PNG_HEIGHT / fig.get_figheight())
+    fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": 1})
     for ax in list(fig.axes):
         fig.delaxes(ax)
     fig.clear()
 
 
-def _figure_jobs(record: FitRecord, percentiles) -> list[tuple[str, object]]:
-    """(name, zero-argument figure builder) for each figure the fit's files allow, in page order."""
+def _figure_jobs(record: FitRecord, percentiles, layout: SamplingLayout | None = None,
+                 notes: list[str] | None = None) -> list[tuple[str, object]]:
+    """(name, zero-argument figure builder) for each figure the fit's files allow, in page order: the grid
+    figures, or for a scattered sampling (:mod:`clothlab.report.sampling`) the scattered ones
+    (:func:`_scattered_jobs`); then the figures common to both.  Report notes are appended to ``notes``."""
+    layout = layout or sampling_layout(record.predictions)
+    notes = notes if notes is not None else []
+    jobs = _scattered_jobs(record, notes) if layout.scattered else _grid_jobs(record)
+    jobs.append(("error_histogram", lambda: plots.plot_error_histogram(record.predictions, percentiles)))
+    if record.fit.get("parameters"):
+        jobs.append(("parameters", lambda: plots.plot_parameters(record.fit)))
+    if record.trace is not None:
+        jobs.append(("trace", lambda: plots.plot_fit_trace(record.trace)))
+    if record.posterior_samples:
+        declared = (record.posterior or {}).get("parameters", {})
+        truths = {n: e.get("truth") for n, e in declared.items()}
+        units = {n: e.get("unit") or (record.fit.get("parameters", {}).get(n) or {}).get("unit")
+                 for n, e in declared.items()}
+        jobs.append(("corner", lambda: plots.plot_corner(record.posterior_samples, truths, units)))
+    return jobs
+
+
+def _scattered_jobs(record: FitRecord, notes: list[str]) -> list[tuple[str, object]]:
+    """Model maps at a few representative incident directions, slices where samples lie near their planes,
+    residuals against the angles and the parity plot; the fitted model is rebuilt for the maps and slices
+    (:mod:`clothlab.report.modelview`)."""
+    from clothlab.report import scatter_plots as sp
+    from clothlab.report.data import shown_channel
+    from clothlab.report.modelview import load_fitted_model
+    from clothlab.report.sampling import representative_incidents
+
+    panels = representative_incidents(record.predictions)
+    model, why = load_fitted_model(record.path)
+    maps = None
+    if model is not None:
+        try:
+            maps = sp.model_maps(model, panels, shown_channel(record.channels)[0])
+        except (ClothlabError, ValueError, FloatingPointError) as exc:
+            why = f"the fitted model could not be evaluated ({exc}): the maps show the measured points only"
+            model = None
+    if why:
+        notes.append(why)
+    chosen = sp.slice_panels(record.predictions, panels)
+    jobs = [("hemispheres", lambda: sp.plot_scattered_hemispheres(record.predictions, panels, maps))]
+    if chosen:
+        jobs.append(("slices", lambda: sp.plot_scattered_slices(record.predictions, chosen, model)))
+    else:
+        notes.append(f"no incidence-plane slices: none of the {len(panels)} incident directions shown has "
+                     f"{sp.MIN_SLICE_POINTS} or more samples within {plots.PLANE_TOLERANCE_DEG:g} deg of its plane.")
+    if model is not None:
+        notes.extend(model.notes)
+    jobs += [("residuals", lambda: sp.plot_residuals(record.predictions)),
+             ("parity", lambda: sp.plot_parity(record.predictions))]
+    return jobs
+
+
+def _grid_jobs(record: FitRecord) -> list[tuple[str, object]]:
     jobs = [("hemispheres", lambda: plots.plot_hemisphere_comparison(record.predictions))]
     if record.slices is not None:
         bands = ((record.posterior or {}).get("predictive_slices") or {}).get("bands")
@@ -62,14 +126,6 @@ def _figure_jobs(record: FitRecord, percentiles) -> list[tuple[str, object]]:
             bands = None
         jobs.append(("slices", lambda: plots.plot_incidence_slices(record.predictions, record.slices,
                                                                    bands=bands)))
-    jobs.append(("error_histogram", lambda: plots.plot_error_histogram(record.predictions, percentiles)))
-    if record.fit.get("parameters"):
-        jobs.append(("parameters", lambda: plots.plot_parameters(record.fit)))
-    if record.trace is not None:
-        jobs.append(("trace", lambda: plots.plot_fit_trace(record.trace)))
-    if record.posterior_samples:
-        truths = {n: e.get("truth") for n, e in (record.posterior or {}).get("parameters", {}).items()}
-        jobs.append(("corner", lambda: plots.plot_corner(record.posterior_samples, truths)))
     return jobs
 
 
@@ -112,11 +168,14 @@ def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percent
     record = load_fit_dir(fit_dir)
     errors = error_percentiles(record.predictions, record.channels, percentiles)
     notes = list(record.notes) + _agreement_notes(record.fit.get("errors"), errors, percentiles)
+    layout = sampling_layout(record.predictions)
+    if layout.scattered:  # slices.csv holds exitant-direction planes: not what a scattered report shows
+        notes = [n for n in notes if not n.startswith("slices.csv")]
     dest = Path(reports_dir) / record.name
 
     with atomic_directory(dest, force=force) as tmp:
         figures = {}
-        for name, build in _figure_jobs(record, percentiles):
+        for name, build in _figure_jobs(record, percentiles, layout, notes):
             filename = f"{name}.png"
             save_figure(build(), tmp / filename)
             figures[name] = filename
@@ -145,11 +204,14 @@ def build_report(fit_dir, reports_dir="reports", *, force: bool = False, percent
             "notes": notes,
             "figures": figures,
             "posterior_present": record.posterior is not None,
+            "sampling": {"kind": layout.kind, "reason": layout.reason},
+            "selection": selection_rows(fit),
         }
         (tmp / "summary.json").write_text(
             json.dumps(_finite_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
         page = html.render_report_html(fit, figures, {"errors": errors, "percentiles": percentiles,
-                                                      "notes": notes, "posterior": record.posterior})
+                                                      "notes": notes, "posterior": record.posterior,
+                                                      "sampling": layout})
         (tmp / "index.html").write_text(page, encoding="utf-8")
     return dest
 
@@ -172,7 +234,7 @@ def _comparison_row(record: FitRecord, reports_dir: Path, dest: Path) -> dict:
         "pairs_per_second": (fit.get("evaluation_speed") or {}).get("pairs_per_second"),
         "simulated": is_simulated((fit.get("measurement") or {}).get("provenance")),
         "generated_by": ((fit.get("measurement") or {}).get("provenance") or {}).get("model"),
-        "paper": PAPER_RELATIVE_ERRORS.get(paper_key),
+        "paper": PAPER_RELATIVE_ERRORS.get(paper_key) if paper_figures_apply(fit) else None,
         "paper_fabric": paper_key,
         "link": f"../{record.name}/index.html" if report.exists() and dest.parent == reports_dir else None,
     }

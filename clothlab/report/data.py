@@ -329,21 +329,74 @@ def free_parameters(fit: dict) -> dict[str, dict]:
             for name, entry in (fit.get("parameters") or {}).items() if entry.get("free", True)}
 
 
-def paper_fabric(fit: dict) -> str | None:
-    """The key of :data:`PAPER_RELATIVE_ERRORS` whose fabric this fit is about, or None.
+#: The model whose fits the published figures of :data:`PAPER_RELATIVE_ERRORS` are (Irawan & Marschner 2012,
+#: sec. 8): a row of another model does not show them as its reference.
+PAPER_MODEL_KIND = "irawan"
+#: Provenance key naming the paper fabric a measurement is (or simulates), e.g. ``paper_fabric: cotton-twill``.
+PAPER_FABRIC_KEY = "paper_fabric"
 
-    Matches the normalised (lower case, '-' for spaces and '_') config name, fit name or weave preset.
+
+def _paper_key(value) -> str | None:
+    """The :data:`PAPER_RELATIVE_ERRORS` key a provenance value names exactly (case, '_' and spaces ignored)."""
+    if not isinstance(value, str):
+        return None
+    normal = "-".join(value.lower().replace("_", " ").replace("-", " ").split())
+    return normal if normal in PAPER_RELATIVE_ERRORS else None
+
+
+def paper_fabric(fit: dict) -> str | None:
+    """The key of :data:`PAPER_RELATIVE_ERRORS` when the measured data are the paper's fabric, else None.
+
+    Read from the measurement's provenance (fit.json ``measurement.provenance``, the table header's
+    ``provenance``): ``paper_fabric: <name>`` says so explicitly (``paper_fabric: none`` / ``false`` says
+    not).  Without the key, clothlab's own simulated example tables (``generator: clothlab simulate ...``
+    with ``fabric`` and ``variant`` written by ``clothlab simulate --paper-examples``) count as the paper
+    fabric they name.  The fit's name, config name or weave preset never decide it: starting from a preset
+    does not make a measurement the paper's fabric.
     """
-    weave = str((fit.get("model") or {}).get("weave") or "").removeprefix("preset:")
-    candidates = ((fit.get("config") or {}).get("name"), fit.get("name"), weave)
-    for candidate in candidates:
-        if not isinstance(candidate, str):
-            continue
-        normal = "-".join(candidate.lower().replace("_", " ").replace("-", " ").split())
-        for key in PAPER_RELATIVE_ERRORS:
-            if key in normal:
-                return key
+    provenance = (fit.get("measurement") or {}).get("provenance")
+    if not isinstance(provenance, dict):
+        return None
+    if PAPER_FABRIC_KEY in provenance:
+        return _paper_key(provenance[PAPER_FABRIC_KEY])
+    generator = provenance.get("generator")
+    if (isinstance(generator, str) and generator.startswith("clothlab simulate")
+            and provenance.get("variant") in ("clean", "noisy")):
+        return _paper_key(provenance.get("fabric"))
     return None
+
+
+def paper_figures_apply(fit: dict) -> bool:
+    """True when the paper's published figures are this fit's reference: the data are the paper's fabric
+    (:func:`paper_fabric`) and the model is the one the paper fitted (:data:`PAPER_MODEL_KIND`)."""
+    return paper_fabric(fit) is not None and (fit.get("model") or {}).get("kind", PAPER_MODEL_KIND) == PAPER_MODEL_KIND
+
+
+def shown_channel(channels) -> tuple[str, str]:
+    """(key for :func:`channel_values`, label) of the single value the maps show: the channel itself, by its
+    own name, for one channel; the channel mean ('luminance' key) for several, labelled with their names."""
+    channels = tuple(channels)
+    if len(channels) == 1:
+        return channels[0], channels[0]
+    return "luminance", f"mean of {', '.join(channels)}"
+
+
+def selection_rows(fit: dict) -> list[dict]:
+    """The model-selection result of a fit.json as a list of dicts (empty when there is none).
+
+    Accepted shapes of ``fit["selection"]``: a list of dicts, or a dict whose ``candidates`` (or
+    ``ranking`` / ``runners_up`` / ``rows``) entry is one.  Each dict describes one candidate; the report
+    shows ``candidate``, ``cv_error`` and ``aic`` first when present, then the other scalar entries.
+    """
+    selection = fit.get("selection")
+    if isinstance(selection, dict):
+        for key in ("candidates", "ranking", "runners_up", "rows"):
+            if isinstance(selection.get(key), list):
+                selection = selection[key]
+                break
+    if not isinstance(selection, list):
+        return []
+    return [row for row in selection if isinstance(row, dict)]
 
 
 def is_simulated(provenance) -> bool:

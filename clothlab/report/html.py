@@ -19,6 +19,7 @@ from clothlab.report.data import (
     model_setting,
     paper_fabric,
     percentile_key,
+    selection_rows,
 )
 
 CSS = """
@@ -28,7 +29,7 @@ h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.15em; margin-to
      border-bottom: 1px solid #ccc; padding-bottom: 0.15em; }
 table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.9em; }
 th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; vertical-align: top; }
-th { background: #f2f2f2; } td.num { text-align: right; font-variant-numeric: tabular-nums; }
+th { background: #f2f2f2; } td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
 tr.atbound td { background: #fdecea; } .warn { color: #b00020; font-weight: bold; }
 .banner { background: #b00020; color: white; padding: 0.5em 1em; font-weight: bold; font-size: 1.1em;
           border-radius: 4px; margin: 0.6em 0; }
@@ -41,8 +42,8 @@ font-size: 0.85em; } ul.warnings li { color: #8a4b00; }
 FIGURE_CAPTIONS = {
     "hemispheres": "Measured and model BRDF and their relative error. Each incident hemisphere is projected "
                    "onto the tangent plane with the warp direction vertical (Irawan & Marschner 2012, "
-                   "sec. 4.1); one row per exitant direction (\u00d7), \u25cb marks the mirror direction. "
-                   "RGB data are shown as the channel mean.",
+                   "sec. 4.1); one row per exitant direction (\u00d7), \u25cb marks the mirror direction; "
+                   "dotted rings at \u03b8i = 30 and 60\u00b0. Several channels are shown as their mean.",
     "slices": "Model BRDF in the incidence plane of each exitant direction, with the measured points that "
               "lie within a few degrees of that plane.",
     "error_histogram": "Distribution of the relative error |model \u2212 measured| / measured, all channels "
@@ -52,6 +53,23 @@ FIGURE_CAPTIONS = {
     "trace": "Optimiser trace: objective of each evaluation and best so far, by stage.",
     "comparison": "Median and 80th-percentile relative error per fit; hatched bars: the paper's published "
                   "figures on its real measurements.",
+    "corner": "Posterior samples: marginal histograms with the 16 / 50 / 84 % quantiles (dashed) on the "
+              "diagonal, joint histograms with the contours holding 39 % and 87 % of the samples below it; "
+              "axes in the parameters' declared units; blue lines mark the generating values of simulated data.",
+}
+
+#: Captions of the figures of a scattered sampling (:mod:`clothlab.report.sampling`), where they differ.
+SCATTERED_CAPTIONS = {
+    "hemispheres": "The fitted model over the exitant hemisphere (tangent-plane projection, warp vertical) for a "
+                   "few representative incident directions (+; \u25cb its mirror direction), chosen to cover the "
+                   "most samples; the measured samples whose incident direction lies within the window are "
+                   "overlaid, coloured by their relative error. Several channels are shown as their mean.",
+    "slices": "The fitted model in the incidence plane of the incident directions shown above, with the "
+              "samples of their window that lie near that plane (only planes with such samples are drawn).",
+    "residuals": "Relative error (model \u2212 measured) / measured against \u03b8i, \u03b8o and the phase "
+                 "angle between the incident and exitant directions, with binned medians.",
+    "parity": "Measured against model BRDF on log-log axes: points on the diagonal are fitted exactly; dashed "
+              "lines at \u00b120 %.",
 }
 
 
@@ -77,8 +95,9 @@ def fmt_percent(fraction) -> str:
 
 
 def _table(header, rows, *, row_classes=None) -> str:
-    """rows hold already-escaped cell HTML; a cell given as ('num', html) is right-aligned."""
-    out = ["<table>", "<tr>" + "".join(f"<th>{h}</th>" for h in header) + "</tr>"]
+    """rows hold already-escaped cell HTML; a cell given as ('num', html) is right-aligned; ``header`` None
+    writes no header row (key / value tables)."""
+    out = ["<table>"] + (["<tr>" + "".join(f"<th>{h}</th>" for h in header) + "</tr>"] if header else [])
     for index, row in enumerate(rows):
         css = f' class="{row_classes[index]}"' if row_classes and row_classes[index] else ""
         cells = []
@@ -90,6 +109,22 @@ def _table(header, rows, *, row_classes=None) -> str:
         out.append(f"<tr{css}>" + "".join(cells) + "</tr>")
     out.append("</table>")
     return "\n".join(out)
+
+
+def fmt_seconds(value) -> str:
+    """A duration in seconds: three significant digits below 100 s, whole seconds above ('14.6 s')."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return "\u2014"
+    return f"{value:.3g} s" if abs(value) < 100 else f"{value:.0f} s"
+
+
+def stage_times(timings) -> str:
+    """fit.json ``timings`` ({'optimisation_s': 14.63, ...}) as 'optimisation 14.6 s; posterior 204 s'."""
+    if not isinstance(timings, dict) or not timings:
+        return "\u2014"
+    parts = [f"{esc(k.removesuffix('_s').replace('_', ' '))} {fmt_seconds(v)}" for k, v in timings.items()
+             if str(k).endswith("_s") and k != "total_s"]
+    return "; ".join(parts) or "\u2014"
 
 
 def _key_values(mapping) -> str:
@@ -107,7 +142,7 @@ def _page(title: str, body: list[str]) -> str:
     ])
 
 
-def _header_section(fit: dict) -> list[str]:
+def _header_section(fit: dict, sampling=None) -> list[str]:
     model = fit.get("model") or {}
     measurement = fit.get("measurement") or {}
     provenance = measurement.get("provenance") or {}
@@ -128,7 +163,9 @@ def _header_section(fit: dict) -> list[str]:
         ("metric", esc(fit.get("metric"))),
         ("fit created", esc(fit.get("created"))),
     ]
-    out.append(_table(["", ""], [(f"<b>{k}</b>", v) for k, v in rows]))
+    if sampling is not None:
+        rows.insert(7, ("sampling", esc(sampling.reason)))
+    out.append(_table(None, [(f"<b>{k}</b>", v) for k, v in rows]))
     return out
 
 
@@ -158,16 +195,18 @@ def _error_section(fit: dict, errors: dict, percentiles) -> list[str]:
     key = paper_fabric(fit)
     if key:
         median, p80 = PAPER_RELATIVE_ERRORS[key]
-        out.append(f'<p class="note">For comparison, the paper\'s figures for {esc(key)} on its real '
-                   f"measurements: median {median:g} %, 80th percentile {p80:g} % ({esc(PAPER_SOURCE)}).</p>")
+        out.append(f'<p class="note">These data are the paper\'s {esc(key)} (measurement provenance). For '
+                   f"comparison, the paper's Irawan-Marschner fit of its real {esc(key)} measurement: median "
+                   f"{median:g} %, 80th percentile {p80:g} % ({esc(PAPER_SOURCE)}).</p>")
     return out
 
 
 def _parameter_section(fit: dict) -> list[str]:
     parameters = fit.get("parameters") or {}
     with_truth = any(isinstance(e, dict) and e.get("truth") is not None for e in parameters.values())
+    with_status = any(isinstance(e, dict) and e.get("at_bound") for e in parameters.values())
     header = ["parameter", "value", "unit", "free", "lower", "upper", "start"] + (["truth"] if with_truth else [])
-    header.append("status")
+    header += ["status"] if with_status else []
     rows, classes = [], []
     for name, entry in parameters.items():
         at_bound = entry.get("at_bound")
@@ -177,7 +216,8 @@ def _parameter_section(fit: dict) -> list[str]:
                ("num", fmt_number(entry.get("upper"))), ("num", fmt_number(entry.get("start")))]
         if with_truth:
             row.append(("num", fmt_number(entry.get("truth"))))
-        row.append(status)
+        if with_status:
+            row.append(status)
         rows.append(row)
         classes.append("atbound" if at_bound else "")
     out = ["<h2>Parameters</h2>", _table(header, rows, row_classes=classes)]
@@ -215,15 +255,44 @@ def _warning_section(fit: dict, notes) -> list[str]:
     return out
 
 
-def _figure_section(figures: dict) -> list[str]:
+def _figure_section(figures: dict, captions: dict | None = None) -> list[str]:
     if not figures:
         return []
     out = ["<h2>Figures</h2>"]
     for name, filename in figures.items():
-        caption = FIGURE_CAPTIONS.get(name, name)
+        caption = (captions or {}).get(name) or FIGURE_CAPTIONS.get(name, name.replace("_", " "))
         out.append(f'<figure id="fig-{esc(name)}"><img src="{esc(filename)}" alt="{esc(name)}">'
                    f"<figcaption>{esc(caption)}</figcaption></figure>")
     return out
+
+
+SELECTION_FIRST = ("candidate", "cv_error", "aic")
+"""Columns of the runners-up table shown first (docs/report.md: the shape of fit.json ``selection``)."""
+
+
+def _selection_section(fit: dict) -> list[str]:
+    """The model-selection candidates (fit.json ``selection``, :func:`clothlab.report.data.selection_rows`):
+    one row per candidate, ``candidate``, ``cv_error``, ``aic`` first, then the other scalar entries; nothing
+    when the fit has no selection."""
+    rows = selection_rows(fit)
+    if not rows:
+        return []
+    columns = [c for c in SELECTION_FIRST if any(c in r for r in rows)]
+    columns += [c for c in dict.fromkeys(k for r in rows for k in r) if c not in columns
+                and all(not isinstance(r.get(c), dict | list) for r in rows)]
+    cells = []
+    for row in rows:
+        line = []
+        for c in columns:
+            value = row.get(c)
+            line.append(("num", fmt_number(value)) if isinstance(value, int | float) and not isinstance(value, bool)
+                        else esc(value))
+        cells.append(line)
+    selection = fit.get("selection")
+    how = selection.get("criterion") if isinstance(selection, dict) else None
+    note = f'<p class="note">Ranked by {esc(how)}.</p>' if how else ""
+    return ["<h2>Model selection: candidates and runners-up</h2>", note,
+            _table([esc(c) for c in columns], cells)]
 
 
 def _posterior_section(posterior) -> list[str]:
@@ -252,8 +321,10 @@ def _posterior_section(posterior) -> list[str]:
     out.append(_table(["parameter", "unit", "2.5 %", "16 %", "median", "84 %", "97.5 %", "optimum", "truth",
                        "tau", "ESS", "determined"], rows))
     acc = conv.get("acceptance_fraction") or {}
-    out.append(f'<p class="note">Convergence: {"converged" if conv.get("converged") else "NOT converged"} '
-               f'({esc(conv.get("stop_reason") or "")}); {esc(conv.get("rule", ""))}; steps {conv.get("steps")}, '
+    state = "converged" if conv.get("converged") else "NOT converged"
+    reason = str(conv.get("stop_reason") or "")
+    state += f" ({esc(reason)})" if reason and reason.lower() != state.lower() else ""
+    out.append(f'<p class="note">Convergence: {state}; {esc(conv.get("rule", ""))}; steps {conv.get("steps")}, '
                f'walkers {conv.get("walkers")}, burn-in {conv.get("burn_in")}, thin {conv.get("thin")}, '
                f'mean acceptance {fmt_number(acc.get("mean"))}.</p>')
     corr = posterior.get("correlation") or {}
@@ -271,9 +342,8 @@ def _facts_section(fit: dict) -> list[str]:
     wall = fit.get("wall_time_s")
     rows = [
         ("evaluations", fmt_number(fit.get("evaluations"))),
-        ("wall time", f"{fmt_number(wall)} s" if wall is not None else "\u2014"),
-        ("of which", _key_values({k: v for k, v in (fit.get("timings") or {}).items()
-                                  if k.endswith("_s") and k != "total_s"}) if fit.get("timings") else "\u2014"),
+        ("wall time", fmt_seconds(wall)),
+        ("of which", stage_times(fit.get("timings"))),
         ("objective start \u2192 final",
          f"{fmt_number(objective.get('start'))} \u2192 {fmt_number(objective.get('final'))}"),
         ("seed", fmt_number(fit.get("seed"))),
@@ -282,7 +352,7 @@ def _facts_section(fit: dict) -> list[str]:
         ("package versions", _key_values(fit.get("versions"))),
         ("config hash", f"<code>{esc(fit.get('config_hash'))}</code>"),
     ]
-    out = ["<h2>Fit facts</h2>", _table(["", ""], [(f"<b>{k}</b>", v) for k, v in rows])]
+    out = ["<h2>Fit facts</h2>", _table(None, [(f"<b>{k}</b>", v) for k, v in rows])]
     if fit.get("config"):
         config = json.dumps(fit["config"], indent=2, sort_keys=True, default=str)
         out.append(f"<details><summary>configuration (fabric.yaml as validated)</summary><pre>{esc(config)}"
@@ -296,15 +366,18 @@ def render_report_html(fit: dict, figures: dict, tables: dict) -> str:
     fit : the parsed fit.json.   figures : {figure name: PNG file name next to the page}, in page order
     (known names get captions from :data:`FIGURE_CAPTIONS`).
     tables : ``errors`` (fit.json 'errors' format, fractions; required), ``percentiles`` (default
-    (50, 80, 95)), ``notes`` (list of report notes), ``posterior`` (parsed posterior.json or None).
+    (50, 80, 95)), ``notes`` (list of report notes), ``posterior`` (parsed posterior.json or None),
+    ``sampling`` (:class:`clothlab.report.sampling.SamplingLayout` or None).
     """
     percentiles = tuple(tables.get("percentiles", (50, 80, 95)))
-    body = _header_section(fit)
+    sampling = tables.get("sampling")
+    body = _header_section(fit, sampling)
     body += _error_section(fit, tables["errors"], percentiles)
+    body += _selection_section(fit)
     body += _parameter_section(fit)
     body += _coefficient_section(fit)
     body += _warning_section(fit, tables.get("notes") or [])
-    body += _figure_section(figures)
+    body += _figure_section(figures, SCATTERED_CAPTIONS if sampling is not None and sampling.scattered else None)
     body += _posterior_section(tables.get("posterior"))
     body += _facts_section(fit)
     return _page(f"clothlab report: {fit.get('name')}", body)
@@ -330,7 +403,7 @@ def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "com
     evaluations, wall_time_s, simulated (bool), link (relative URL of the fit's report or None) and
     paper = (median %, 80th %) or None.
     """
-    header = ["fit", "fabric", "model", "setting", "fitted parameters", "median", "80th pct.", "95th pct.",
+    header = ["fit", "fabric", "model", "model setting\u2020", "fitted parameters", "median", "80th pct.", "95th pct.",
               "free params", "evaluations", "optimisation time (s)", "model speed (pairs/s)", "paper median*",
               "paper 80th*"]
     table_rows = []
@@ -350,17 +423,20 @@ def render_comparison_html(rows: list[dict], figures: dict, *, title: str = "com
             ("num", "\u2014" if row.get("pairs_per_second") is None else f"{row['pairs_per_second']:,.0f}"),
             ("num", f"{paper[0]:g} %" if paper else "\u2014"), ("num", f"{paper[1]:g} %" if paper else "\u2014"),
         ])
-    body = [f"<h1>clothlab comparison: {esc(title)}</h1>",
+    heading = f"clothlab comparison of {len(rows)} fits" + ("" if title == "comparison" else f": {title}")
+    body = [f"<h1>{esc(heading)}</h1>",
             '<p class="note">Relative error |model \u2212 measured| / measured, recomputed from each fit\'s '
             "predictions.csv.</p>",
             _table(header, table_rows),
-            f'<p class="note">* The paper\'s published figures on its real measurements ({esc(PAPER_SOURCE)}), '
-            "shown where the fabric name matches; the paper chose parameters partly by hand and did not "
-            "minimise these metrics.</p>"]
+            f'<p class="note">* The paper\'s published figures of its Irawan-Marschner fits to its real '
+            f"measurements ({esc(PAPER_SOURCE)}), shown in the rows of that model whose data are the paper's "
+            "fabric (the measurement's provenance); the paper chose parameters partly by hand and did not "
+            "minimise these metrics.<br>\u2020 The quadrature (rule and nodes) of an integrating model, the "
+            "constructor options of the others.</p>"]
     generators = sorted({row["generated_by"] for row in rows if row.get("simulated") and row.get("generated_by")})
     if generators:
         body.append(f'<p class="warn">The simulated measurements were generated by the {esc(", ".join(generators))} '
                     "model: a fit of that model can reach the noise level, another model cannot, so these rows "
                     "compare the models with each other, not with real cloth.</p>")
     body += _figure_section(figures)
-    return _page(f"clothlab comparison: {title}", body)
+    return _page(heading, body)
