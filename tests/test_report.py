@@ -45,8 +45,9 @@ def _write_csv(path: Path, columns: dict) -> None:
 
 
 def write_synthetic_fit_dir(root, name="synthetic-denim", *, seed=0, n_theta=15, n_phi=15, noise=0.2,
-                            fabric="cotton-denim", with_optional=True) -> Path:
-    """Write fits/<name>/ (fit.json, predictions.csv, slices.csv, trace.csv) from numpy values only."""
+                            fabric="cotton-denim", with_optional=True, paper=True) -> Path:
+    """Write fits/<name>/ (fit.json, predictions.csv, slices.csv, trace.csv) from numpy values only; with
+    ``paper`` the measurement's provenance names ``fabric`` as the paper fabric the data are."""
     rng = np.random.default_rng(seed)
     fit_dir = Path(root) / name
     fit_dir.mkdir(parents=True)
@@ -96,7 +97,8 @@ def write_synthetic_fit_dir(root, name="synthetic-denim", *, seed=0, n_theta=15,
         "config": {"name": fabric, "model": {"kind": "irawan"}},
         "model": {"kind": "irawan", "weave": f"preset:{fabric}", "quadrature": {"rule": "trapezoid", "nodes": 11}},
         "measurement": {"path": "measurements/sim.csv", "n": int(table["theta_i"].size), "channels": list(CHANNELS),
-                        "provenance": {"simulated": True, "instrument": "virtual gonioreflectometer"}},
+                        "provenance": {"simulated": True, "instrument": "virtual gonioreflectometer",
+                                       **({"paper_fabric": fabric} if paper else {})}},
         "parameters": {
             "warp.umax": {"value": 12.3, "unit": "deg", "free": True, "lower": 1, "upper": 85, "start": 30.0,
                           "at_bound": None, "truth": 12.0},
@@ -302,11 +304,14 @@ def test_hemisphere_discs_mark_the_exitant_direction_in_tangent_plane_coordinate
     record = load_fit_dir(built[0])
     fig = plots.plot_hemisphere_comparison(record.predictions, channel="R")
     assert isinstance(fig, Figure)
-    row = EXITANT.index((30.0, 90.0))
-    ax = fig.axes[3 * row]
-    assert "\u03c6o=90\u00b0" in ax.get_title()
-    markers = [line.get_xydata()[0] for line in ax.get_lines() if line.get_marker() == "x"]
-    assert markers and np.allclose(markers[0], [0.0, 0.5])
+    images = {im.get_gid(): im for ax in fig.axes for im in ax.get_images()}
+    assert len([g for g in images if g and g.startswith("disc:")]) == 3 * len(EXITANT)
+    left, right, bottom, top = images["disc:measured:30:90"].get_extent()
+    cx, cy, r = 0.5 * (left + right), 0.5 * (bottom + top), 0.5 * (right - left)
+    crosses = np.concatenate([line.get_xydata() for ax in fig.axes for line in ax.get_lines()
+                              if line.get_marker() == "x"])
+    # theta_o = 30, phi_o = 90: on the warp axis, sin(30 deg) = 0.5 of the radius above the disc centre
+    assert np.min(np.hypot(crosses[:, 0] - cx, crosses[:, 1] - (cy + 0.5 * r))) < 1e-9
 
 
 def test_hemisphere_plot_survives_data_that_cannot_be_triangulated():
