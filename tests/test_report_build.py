@@ -83,3 +83,74 @@ def test_missing_or_corrupt_fit_json_is_named(tmp_path):
     (fit_dir / "fit.json").unlink()
     with pytest.raises(InputError, match="fit.json"):
         build_report(fit_dir, tmp_path / "reports")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# figures drawn in two processes
+
+
+def _figure_job(name, seed, log=None, fail=False):
+    def build():
+        import matplotlib.figure
+
+        if log is not None:
+            with open(log, "a") as f:
+                f.write(f"{name} {__import__('os').getpid()}\n")
+        if fail:
+            raise ValueError(f"figure {name} cannot be drawn")
+        fig = matplotlib.figure.Figure(figsize=(3, 2))
+        ax = fig.add_subplot()
+        ax.plot(np.random.default_rng(seed).random(50))
+        ax.set_title(name)
+        return fig
+    return name, build
+
+
+def _jobs(log=None, fail=()):
+    names = ["hemispheres", "corner", "slices", "parameters", "trace", "error_histogram"]
+    return [_figure_job(n, i, log, n in fail) for i, n in enumerate(names)]
+
+
+def test_two_process_figures_are_the_one_process_figures(tmp_path):
+    import os
+
+    one, two = tmp_path / "one", tmp_path / "two"
+    one.mkdir()
+    two.mkdir()
+    log = tmp_path / "pids.txt"
+    assert report_build.render_figures(_jobs(), one, processes=1) == {n: f"{n}.png" for n, _ in _jobs()}
+    seen = []
+    figures = report_build.render_figures(_jobs(log), two, processes=2, meanwhile=seen.append)
+    assert seen == [figures] and list(figures) == [n for n, _ in _jobs()]
+    for name in figures:
+        assert (one / f"{name}.png").read_bytes() == (two / f"{name}.png").read_bytes(), name
+    pids = {line.split()[1] for line in log.read_text().splitlines()}
+    assert len(pids) == 2 and str(os.getpid()) in pids  # half of them drawn by a child
+    with pytest.raises(ChildProcessError):
+        os.waitpid(-1, os.WNOHANG)  # and no child is left behind
+
+
+@pytest.mark.parametrize("fail", ["hemispheres", "corner"])
+def test_a_figure_that_fails_raises_here_whichever_process_drew_it(tmp_path, fail):
+    import os
+
+    with pytest.raises(ValueError, match=f"figure {fail} cannot be drawn"):
+        report_build.render_figures(_jobs(fail=(fail,)), tmp_path, processes=2)
+    with pytest.raises(ChildProcessError):
+        os.waitpid(-1, os.WNOHANG)
+
+
+def test_with_another_python_thread_every_figure_is_drawn_here(tmp_path):
+    import os
+    import threading
+
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    try:
+        log = tmp_path / "pids.txt"
+        report_build.render_figures(_jobs(log), tmp_path, processes=2)
+    finally:
+        stop.set()
+        thread.join()
+    assert {line.split()[1] for line in log.read_text().splitlines()} == {str(os.getpid())}
