@@ -357,25 +357,33 @@ def table_columns(selection: Selection) -> dict:
     return {c: [_cell(r.row[c]) for r in selection.ranked] for c in TABLE_COLUMNS}
 
 
-def table_markdown(selection: Selection) -> str:
-    """The comparison table as markdown (errors in %), with the ranking rule and the likelihood note."""
-    head = ("rank", "candidate", "orientation (deg)", "CV mean %", "CV p50 %", "CV p80 %", "p50 %", "p80 %",
-            "k", "AIC", "BIC", "note")
-    lines = [f"# Model selection: {selection.winner.config.name}", "",
-             f"Ranked by {RANKING}.  {LIKELIHOOD}.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+DISPLAY_HEAD = ("rank", "candidate", "orientation (deg)", "CV mean %", "CV p50 %", "CV p80 %", "p50 %", "p80 %",
+                "k", "AIC", "BIC", "note")
 
+
+def display_rows(rows) -> list[tuple[str, ...]]:
+    """The comparison table's cells under :data:`DISPLAY_HEAD` (errors in %), one tuple of strings per row dict
+    of :data:`TABLE_COLUMNS` (a :class:`Selection`'s rows or fit.json ``selection.candidates``; missing
+    entries are blank)."""
     def pct(v):
         return "" if v is None else f"{100.0 * v:.2f}"
 
-    for r in selection.ranked:
-        row = r.row
-        cells = (row["rank"], row["candidate"], "" if row["orientation"] is None else f"{row['orientation']:.2f}",
-                 pct(row["cv_mean"]), pct(row["cv_p50"]), pct(row["cv_p80"]), pct(row["in_sample_p50"]),
-                 pct(row["in_sample_p80"]), row["k"] if row["k"] is not None else "",
-                 "" if row["aic"] is None else f"{row['aic']:.1f}", "" if row["bic"] is None else f"{row['bic']:.1f}",
-                 (row["note"] or "").replace("|", "/"))
-        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+    def num(v, digits):
+        return "" if v is None else f"{v:.{digits}f}"
+
+    return [(str(row.get("rank", "")), str(row.get("candidate", "")), num(row.get("orientation"), 2),
+             pct(row.get("cv_mean")), pct(row.get("cv_p50")), pct(row.get("cv_p80")), pct(row.get("in_sample_p50")),
+             pct(row.get("in_sample_p80")), "" if row.get("k") is None else str(row["k"]), num(row.get("aic"), 1),
+             num(row.get("bic"), 1), str(row.get("note") or "")) for row in rows]
+
+
+def table_markdown(selection: Selection) -> str:
+    """The comparison table as markdown (errors in %), with the ranking rule and the likelihood note."""
+    lines = [f"# Model selection: {selection.winner.config.name}", "",
+             f"Ranked by {RANKING}.  {LIKELIHOOD}.", "",
+             "| " + " | ".join(DISPLAY_HEAD) + " |", "|" + "---|" * len(DISPLAY_HEAD)]
+    for cells in display_rows(r.row for r in selection.ranked):
+        lines.append("| " + " | ".join(c.replace("|", "/") for c in cells) + " |")
     return "\n".join(lines) + "\n"
 
 

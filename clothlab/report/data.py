@@ -385,8 +385,8 @@ def selection_rows(fit: dict) -> list[dict]:
     """The model-selection result of a fit.json as a list of dicts (empty when there is none).
 
     Accepted shapes of ``fit["selection"]``: a list of dicts, or a dict whose ``candidates`` (or
-    ``ranking`` / ``runners_up`` / ``rows``) entry is one.  Each dict describes one candidate; the report
-    shows ``candidate``, ``cv_error`` and ``aic`` first when present, then the other scalar entries.
+    ``ranking`` / ``runners_up`` / ``rows``) entry is one.  Each dict describes one candidate (the columns of
+    :data:`clothlab.fit.select.TABLE_COLUMNS`).
     """
     selection = fit.get("selection")
     if isinstance(selection, dict):
