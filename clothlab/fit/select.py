@@ -135,12 +135,14 @@ def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=
                           cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds))
 
 
-def candidates(settings: SelectSettings) -> list[Candidate]:
-    """The candidate list (module docstring), in weave, kind, orientation-start order."""
+def candidates(settings: SelectSettings, isotropic: bool = False) -> list[Candidate]:
+    """The candidate list (module docstring), in weave, kind, orientation-start order; for an ``isotropic``
+    measurement one candidate per weave and kind, the orientation not freed (the fit averages the model over
+    it: :mod:`clothlab.fit.problem`)."""
     out = []
     for weave in settings.weaves:
         for kind in settings.kinds:
-            if model_class(kind).orientation_period == 0.0:
+            if isotropic or model_class(kind).orientation_period == 0.0:
                 out.append(Candidate(weave, kind, None))
                 continue
             out += [Candidate(weave, kind, j) for j in range(1, max(1, int(settings.orientation_starts)) + 1)]
@@ -304,7 +306,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
                                        else config.measurement.format, **config.measurement.options)
     run_task = run_task or fit_candidate
     tasks = [CandidateTask(config, c, settings.max_evals, settings.cv_folds, measurement)
-             for c in candidates(settings)]
+             for c in candidates(settings, measurement.isotropic)]
     if not tasks:
         raise ConfigError("no candidates: select.weaves and select.kinds must each name at least one",
                           field="select")
