@@ -221,6 +221,17 @@ def test_chunked_sweep_equals_the_sequential_sweep_and_reuses_its_files(tmp_path
     assert check.sweep_chunked([("t", rule, "all", sets)], wi, wo, Refusing(), tmp_path) == merged
 
 
+def test_check_findings_do_not_depend_on_the_runner():
+    """`clothlab check --workers N` path (chunks and continuity sweeps as tasks): the same findings as the
+    in-process run (fast subset; the full sweep on a cluster is in tests/test_parallel_cluster.py, slow)."""
+    from clothlab.studies.stability import run_check
+
+    here = run_check(full=False, seed=1)
+    tasks = run_check(full=False, seed=1, runner=InProcessRunner())
+    here.pop("wall_time_s"), tasks.pop("wall_time_s")
+    assert tasks == here and here["totals"]["configurations"] > 0
+
+
 def test_merge_keeps_the_first_examples_in_order():
     from clothlab.studies.stability import merge_sweeps
 
