@@ -34,6 +34,10 @@ reason.  No held-out row is used to fit anything: for each fold
 Every row is held out exactly once; the pooled held-out predictions give the cross-validated relative-error
 percentiles (paper sec. 8 figures: median, 80th), reported with the in-sample ones of the full fit and the
 pooled training-row errors of the fold fits.
+
+The folds are independent: with a :class:`clothlab.parallel.Runner` each is one task (:func:`fold_task` on the
+shared :class:`FoldJob`), collected in fold order, so the figures are the in-process loop's bit for bit
+(docs/parallel.md).
 """
 
 from __future__ import annotations

@@ -196,7 +196,7 @@ def lines(result: dict) -> list[str]:
            f"once, not in the ratio; this process warmed the same way first, "
            f"{b.get('in_process_warm_up_s', float('nan')):.1f} s)",
            f"  cross-validation folds of one fit ({f['fabric']}, {f['folds']} neutral fold refits of "
-           f"{f['evaluations_each']} evaluations, one task each): sequential {f['sequential_s']:.1f} s, "
+           f"{f['evaluations_each']} evaluations + polish, one task each): sequential {f['sequential_s']:.1f} s, "
            f"{result['workers']} workers {f['workers_s']:.1f} s -> ratio {f['ratio']:.2f}; every figure identical: "
            f"{f['identical']}",
            f"  per-task overhead: {o['cluster_ms_per_task']:.1f} ms on the cluster, "
