@@ -338,7 +338,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
                                   cv_folds=config.fit.cv_folds, start=best.params, optimizer=config.fit.optimizer,
                                   posterior=posterior or config.fit.posterior,
                                   orientation=best.params.get(ORIENTATION, 0.0))  # its box centred there
-    winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir)
+    winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir, runner=runner)
     return Selection(ranked, winner, settings, time.perf_counter() - started)
 
 

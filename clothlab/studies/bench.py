@@ -61,7 +61,8 @@ SECTIONS = (
     Section("footprint", "clothlab.studies.footprint", "footprint averages: SAT vs MC queries/s and error by size"),
     Section("neural", "clothlab.studies.neural", "neural surrogate decoder queries/s at three widths"),
     Section("scaleout", "clothlab.studies.scaleout",
-            "sequential / 2 Dask workers: example fit batch, per-task overhead, check sweep, posterior pool"),
+            "sequential / 2 Dask workers: example fit batch, CV folds of one fit, per-task overhead, check sweep, "
+            "posterior pool"),
 )
 SECTION_NAMES: tuple[str, ...] = tuple(s.name for s in SECTIONS)
 
