@@ -103,7 +103,7 @@ class PosteriorConfig:
 
 
 #: Orientations the model is averaged over for an isotropic measurement (``fit.orientation_average``).
-DEFAULT_ORIENTATION_AVERAGE = 64
+DEFAULT_ORIENTATION_AVERAGE = 128
 
 
 @dataclass(frozen=True)
