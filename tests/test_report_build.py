@@ -154,3 +154,38 @@ def test_with_another_python_thread_every_figure_is_drawn_here(tmp_path):
         stop.set()
         thread.join()
     assert {line.split()[1] for line in log.read_text().splitlines()} == {str(os.getpid())}
+
+
+# ---------------------------------------------------------------------------------------------------------
+# large fit directories: the vectorised CSV read and the exitant grouping
+
+
+@pytest.mark.parametrize("bad", ["1_0", "1e", "+-1", "nan", "inf", "", "0x10", "1" * 5000, "\u0661", "1e400"])
+def test_one_bad_cell_in_a_large_table_is_named_by_line_and_column(tmp_path, bad):
+    from clothlab.report.data import read_csv_table
+
+    rng = np.random.default_rng(4)
+    values = rng.uniform(-1e3, 1e3, (5000, 3))
+    lines = ["a,b,c"] + [",".join(repr(float(v)) for v in row) for row in values]
+    good = tmp_path / "good.csv"
+    good.write_text("\n".join(lines) + "\n")
+    table = read_csv_table(good)
+    for i, name in enumerate("abc"):
+        np.testing.assert_array_equal(table[name], values[:, i])  # repr round-trips exactly
+    lines[3001] = lines[3001].split(",")[0] + f",{bad}," + lines[3001].split(",")[2]
+    broken = tmp_path / "broken.csv"
+    broken.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError) as info:
+        read_csv_table(broken)
+    assert info.value.line == 3002 and info.value.field == "b" and str(broken) in str(info.value)
+
+
+def test_exitant_groups_are_the_rows_of_each_direction():
+    from clothlab.report.data import exitant_groups
+
+    rng = np.random.default_rng(5)
+    theta, phi = rng.choice([10.0, 30.0, 50.5], 400), rng.choice([0.0, 90.0, 180.0, 270.0], 400)
+    groups = exitant_groups({"theta_o": theta, "phi_o": phi})
+    assert [(t, p) for t, p, _ in groups] == sorted({(t, p) for t, p in zip(theta, phi, strict=True)})
+    for t, p, rows in groups:
+        np.testing.assert_array_equal(rows, np.flatnonzero((theta == t) & (phi == p)))
