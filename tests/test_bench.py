@@ -426,3 +426,17 @@ def test_report_section_times_both_ways_on_the_same_figures(tmp_path):
     assert result["meets_target"] == (result["cli_seconds_median"] <= report_speed.REPORT_TARGET_S)
     text = "\n".join(report_speed.lines(result))
     assert "one process" in text and "two processes" in text and str(fit_dir) in text
+
+
+def test_posterior_benchmark_runs_each_proposal_on_the_same_target(no_cv_no_checkpoint, repo_data):
+    from clothlab.studies import posterior
+
+    out = posterior.posterior_benchmark("polyester-lining", max_minutes=0.02, data=repo_data, walkers=12,
+                                        progress=False, optimizer={"max_evals": 150, "starts": 1},
+                                        moves=("de-snooker", "stretch"))
+    assert len(no_cv_no_checkpoint) == 2 and all(no_cv_no_checkpoint)  # two posteriors, temporary checkpoints
+    runs = out["by_moves"]
+    assert list(runs) == ["de-snooker", "stretch"] and out["steps"] == runs["de-snooker"]["steps"]
+    assert all(r["steps"] >= 1 and r["max_tau"] > 0 and r["cpu_s"] > 0 for r in runs.values())
+    text = "\n".join(posterior.lines(out))
+    assert "moves de-snooker vs stretch" in text

@@ -252,7 +252,7 @@ def test_posterior_through_the_pool_is_the_in_process_chain():
     from clothlab.fit.posterior import run_posterior
 
     problem, truth = _problem()
-    reference = run_posterior(problem, truth, seed=5, **FAST)
+    reference = run_posterior(problem, truth, seed=5, moves="stretch", **FAST)  # 2 ensemble halves per step
 
     class Counting(InProcessRunner):
         workers = 3
@@ -264,7 +264,13 @@ def test_posterior_through_the_pool_is_the_in_process_chain():
             assert len(items) == 3  # one chunk per worker slot
             return super().map(fn, items, **kwargs)
 
-    pooled = run_posterior(problem, truth, seed=5, runner=Counting(), pool=True, **FAST)
+    pooled = run_posterior(problem, truth, seed=5, runner=Counting(), pool=True, moves="stretch", **FAST)
     assert Counting.calls == 2 * 60  # two ensemble halves per step, all through the pool
     np.testing.assert_array_equal(pooled.chain, reference.chain)
     np.testing.assert_array_equal(pooled.log_prob, reference.log_prob)
+
+    # the default proposal (differential evolution + snooker: three splits per step) too
+    default = run_posterior(problem, truth, seed=5, **FAST)
+    pooled_default = run_posterior(problem, truth, seed=5, runner=InProcessRunner(), pool=True, **FAST)
+    np.testing.assert_array_equal(pooled_default.chain, default.chain)
+    assert not np.array_equal(default.chain, reference.chain)  # the moves are really different

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -112,22 +113,37 @@ def _jobs(log=None, fail=()):
 
 
 def test_two_process_figures_are_the_one_process_figures(tmp_path):
-    import os
+    """Run in a fresh interpreter: the fork needs a caller without other Python threads, and earlier tests of
+    this session may have left one (a progress monitor, a Dask client)."""
+    import subprocess
+    import sys
 
-    one, two = tmp_path / "one", tmp_path / "two"
-    one.mkdir()
-    two.mkdir()
-    log = tmp_path / "pids.txt"
-    assert report_build.render_figures(_jobs(), one, processes=1) == {n: f"{n}.png" for n, _ in _jobs()}
-    seen = []
-    figures = report_build.render_figures(_jobs(log), two, processes=2, meanwhile=seen.append)
-    assert seen == [figures] and list(figures) == [n for n, _ in _jobs()]
-    for name in figures:
-        assert (one / f"{name}.png").read_bytes() == (two / f"{name}.png").read_bytes(), name
-    pids = {line.split()[1] for line in log.read_text().splitlines()}
-    assert len(pids) == 2 and str(os.getpid()) in pids  # half of them drawn by a child
-    with pytest.raises(ChildProcessError):
-        os.waitpid(-1, os.WNOHANG)  # and no child is left behind
+    code = f"""
+import json, os, sys
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from pathlib import Path
+from test_report_build import _jobs
+from clothlab.report import build
+root = Path({str(tmp_path)!r})
+(root / "one").mkdir(); (root / "two").mkdir()
+one = build.render_figures(_jobs(), root / "one", processes=1)
+seen = []
+two = build.render_figures(_jobs(root / "pids.txt"), root / "two", processes=2, meanwhile=seen.append)
+try:
+    os.waitpid(-1, os.WNOHANG)
+    left = True
+except ChildProcessError:
+    left = False
+print(json.dumps({{"one": one, "two": two, "seen": seen, "pid": os.getpid(), "left": left}}))
+"""
+    out = json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                    check=True).stdout)
+    assert out["one"] == out["two"] == {n: f"{n}.png" for n, _ in _jobs()} and out["seen"] == [out["two"]]
+    for name in out["two"]:
+        assert (tmp_path / "one" / f"{name}.png").read_bytes() == (tmp_path / "two" / f"{name}.png").read_bytes()
+    pids = {line.split()[1] for line in (tmp_path / "pids.txt").read_text().splitlines()}
+    assert len(pids) == 2 and str(out["pid"]) in pids  # half of them drawn by a child
+    assert not out["left"]  # and no child is left behind
 
 
 @pytest.mark.parametrize("fail", ["hemispheres", "corner"])

@@ -40,8 +40,11 @@ def _study_posterior(fit, **kwargs) -> PosteriorResult:
 
 
 def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 10.0, *, data: StudyData | None = None,
-                        walkers: int = 32, seed: int = 1, progress: bool = True, optimizer: dict | None = None) -> dict:
-    """A full posterior (the fabric's six free parameters, noisy data) run to the tau criterion.
+                        walkers: int = 32, seed: int = 1, progress: bool = True, optimizer: dict | None = None,
+                        moves: tuple[str, ...] = ("de-snooker",)) -> dict:
+    """A full posterior (the fabric's six free parameters, noisy data) run to the tau criterion, with each of
+    ``moves`` (:data:`clothlab.fit.posterior.sampler.MOVES`; the first one's figures at the top level, every
+    one's under ``by_moves``: steps, max tau, wall and CPU seconds).
 
     The optimum comes from the fabric's fabric.yaml optimiser settings (``optimizer`` replaces some;
     cross-validation and the configured posterior off; its wall time is reported apart); the posterior then
@@ -54,15 +57,23 @@ def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 1
 
     with study_data(data) as d:
         fit = run_fit(optimisation_only(d.load_config(fabric), **(optimizer or {})))
-    post = _study_posterior(fit, walkers=walkers, steps=1000, max_steps=50_000, seed=seed, progress=progress,
-                            max_seconds=60.0 * max_minutes)
+    by_moves = {}
+    for name in moves:
+        c = time.process_time()
+        run = _study_posterior(fit, walkers=walkers, steps=1000, max_steps=50_000, seed=seed, progress=progress,
+                               max_seconds=60.0 * max_minutes, moves=name)
+        by_moves[name] = {"steps": run.steps, "converged": run.converged, "wall_s": run.wall_time,
+                          "cpu_s": time.process_time() - c,
+                          "max_tau": float(max(run.to_json()["convergence"]["tau"].values()))}
+        if name == moves[0]:
+            post = run
     summary = post.to_json()
     return {"fabric": fabric, "free": list(fit.problem.free), "fit_wall_time_s": fit.timings["optimisation_s"],
             "posterior_wall_time_s": post.wall_time, "converged": post.converged, "stop_reason": post.stop_reason,
             "within_limit": post.converged and post.wall_time <= 60.0 * max_minutes, "limit_minutes": max_minutes,
             "steps": post.steps, "walkers": post.walkers, "tau": summary["convergence"]["tau"],
             "ess": summary["convergence"]["ess"], "acceptance_mean": float(np.mean(post.acceptance)),
-            "not_determined": summary["not_determined"], "cpu_count": os.cpu_count(),
+            "not_determined": summary["not_determined"], "cpu_count": os.cpu_count(), "by_moves": by_moves,
             "parameters": {n: {k: e[k] for k in ("median", "p2.5", "p97.5", "truth", "truth_in_95") if k in e}
                            for n, e in summary["parameters"].items()}}
 
@@ -147,7 +158,7 @@ def run(context) -> dict:
     paths = likelihood_paths(fit.problem, points, repeats=1 if context.quick else 3)
     t, c = time.perf_counter(), time.process_time()
     result = posterior_benchmark("polyester-lining", max_minutes=1.0 if context.quick else 10.0, data=context.data,
-                                 progress=False)
+                                 progress=False, moves=("de-snooker", "stretch"))
     result["posterior_cpu_s"] = time.process_time() - c
     result["load_average_1min"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     result["paths"] = paths
@@ -165,6 +176,14 @@ def lines(p: dict) -> list[str]:
            + f"; converged by the tau rule: {p['converged']} (within {p['limit_minutes']:g} min: "
            f"{p['within_limit']}); max tau {max(p['tau'].values()):.0f}; not determined: "
            f"{p['not_determined'] or 'none'}"]
+    runs = p.get("by_moves") or {}
+    if len(runs) > 1:
+        first, *others = runs.items()
+        for name, r in others:
+            out.append(f"  moves {first[0]} vs {name}: {first[1]['steps']} vs {r['steps']} steps, max tau "
+                       f"{first[1]['max_tau']:.0f} vs {r['max_tau']:.0f}, {first[1]['cpu_s']:.0f} vs "
+                       f"{r['cpu_s']:.0f} s CPU (ratio {r['cpu_s'] / max(first[1]['cpu_s'], 1e-9):.2f}); converged "
+                       f"{first[1]['converged']} / {r['converged']}")
     if paths:
         out.append(f"  log-probability per walker (CPU): scalar path {1e3 * paths['scalar_s_per_walker']:.3f} ms, "
                    f"batched {1e3 * paths['batched_s_per_walker']:.3f} ms, ratio {paths['ratio']:.1f}x "

@@ -46,11 +46,12 @@ def _model_settings(model) -> dict:
     return out
 
 
-def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray) -> str:
+def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray, moves: str = "de-snooker") -> str:
     """What fixes the target distribution and the chain: a resumed run must match it exactly.
 
     Keys of the target (:data:`TARGET_KEYS`: data, model and its quadrature, free / fixed parameters, bounds,
-    noise model, the optimum the walkers start from) and of the sampler (walkers, seed, version).  The optimum
+    noise model, the optimum the walkers start from) and of the sampler (walkers, seed, moves, version; a
+    checkpoint without ``moves`` was made with the stretch move).  The optimum
     is recorded in unit coordinates rounded to 10 significant digits (a rerun of the same seeded fit reproduces
     it; a changed fit budget or start does not)."""
     m = problem.measurement
@@ -61,7 +62,8 @@ def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray) -> s
     fixed = {k: v for k, v in sorted(problem.start.items()) if k not in problem.free}
     return json.dumps({"version": CHECKPOINT_VERSION, "model": _model_settings(problem.model), "free": like.names,
                        "lower": problem.lower.tolist(), "upper": problem.upper.tolist(), "fixed": fixed,
-                       "noise": like.noise, "walkers": walkers, "seed": seed, "data": digest.hexdigest(),
+                       "noise": like.noise, "walkers": walkers, "seed": seed, "moves": moves,
+                       "data": digest.hexdigest(),
                        "optimum": [f"{float(v):.10g}" for v in np.asarray(x_opt, dtype=np.float64)]},
                       sort_keys=True)
 
@@ -69,7 +71,7 @@ def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray) -> s
 TARGET_KEYS = frozenset({"model", "free", "lower", "upper", "fixed", "noise", "data", "optimum"})
 """Fingerprint keys that define the target distribution (or its starting point): a checkpoint differing in any
 of them (or in the checkpoint version) belongs to another fit and is replaced by a fresh run, with a message; a
-checkpoint of the same target differing only in the sampler settings (walkers, seed) is refused, so a mistyped
+checkpoint of the same target differing only in the sampler settings (walkers, seed, moves) is refused, so a mistyped
 option loses no chain."""
 
 
