@@ -36,6 +36,7 @@ from clothlab.io.table import (
     RawRows,
     check_azimuth_offset,
     check_choice,
+    check_row_count,
     conventions_provenance,
     parse_rows,
     read_text_lines,
@@ -149,12 +150,13 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     mapping = parse_columns(columns)
     path = Path(path)
     rows = []
-    for lineno, line in enumerate(read_text_lines(path), 1):
+    lines = read_text_lines(path)
+    for lineno, line in enumerate(lines, 1):
         text = line.split(comment, 1)[0] if comment else line
         if text.strip():
             rows.append((lineno, text.strip()))
     if not rows:
-        raise InputError("no data rows (only blank or comment lines)", path=path)
+        raise InputError("no data rows (only blank or comment lines)", path=path, line=max(len(lines), 1))
     split, separator = _splitter(delimiter, rows[0][1] if len(rows) == 1 else rows[1][1])
     has_header = header == "yes" or (header == "auto" and _is_header(split(rows[0][1])))
     file_names = None
@@ -233,4 +235,5 @@ def import_table(source, output, *, overwrite: bool = False, **options) -> tuple
     """Read ``source`` with :func:`read_generic` (``options``) and write it as a clothlab table at ``output``
     (atomic; ResultExistsError unless ``overwrite``).  Returns the path written and the measurement."""
     measurement = read_generic(source, **options)
+    check_row_count(measurement.n, source)
     return write_table(measurement, output, overwrite=overwrite), measurement

@@ -91,7 +91,7 @@ def detect_format(path) -> str:
     if not text.strip():
         if find_sidecar(path) is not None:
             return "clothlab"
-        raise InputError("file is empty; expected a measurement table", path=path)
+        raise InputError("file is empty; expected a measurement table", path=path, line=1)
     lines = text.splitlines()
     if any(_CLOTHLAB.match(line) for line in lines) or find_sidecar(path) is not None:
         return "clothlab"
@@ -103,7 +103,8 @@ def detect_format(path) -> str:
         "unknown measurement format: expected a clothlab table ('# clothlab-table: 1' header or a sidecar "
         f"{path.name}.yaml), an ASTM E1392 file (NUM_POINTS / VARS keywords), pab-opto files ('#format:', "
         "'#intheta' or '#incident_angle' lines) or a MERL / UTIA / RGL-EPFL binary; or pass format= one of "
-        + ", ".join(FORMATS) + " (text: a lab's own table with its column mapping)", path=path)
+        + ", ".join(FORMATS) + " (text: a lab's own table with its column mapping)", path=path, line=1,
+        field="format")
 
 
 def _looks_binary(head: bytes) -> bool:
@@ -130,7 +131,9 @@ def _binary_format(path: Path, first: bytes, head: bytes) -> str | None:
         return "bsdf"
     if suffix == ".bin" and (path.stat().st_size == UTIA_BYTES or _looks_binary(head)):
         return "utia"
-    if suffix == ".binary" and len(first) >= MERL_HEADER_BYTES:
+    if suffix == ".binary":
+        if len(first) < MERL_HEADER_BYTES:  # too short for any table: the MERL reader names the truncation
+            return "merl"
         dims = [int.from_bytes(first[k:k + 4], "little", signed=True) for k in (0, 4, 8)]
         if all(0 < n <= MAX_MERL_DIM for n in dims) or _looks_binary(head):
             return "merl"

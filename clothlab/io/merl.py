@@ -79,8 +79,8 @@ def read_merl_table(path) -> MerlTable:
     """The MERL table of ``path`` (values scaled to 1/sr), or InputError naming the byte offset."""
     data = read_binary(path, what=_WHAT)
     if len(data) < HEADER_BYTES:
-        raise InputError(f"truncated {_WHAT}: {len(data)} bytes, the int32 dims header alone needs "
-                         f"{HEADER_BYTES}", path=path)
+        raise InputError(f"truncated {_WHAT}: the file ends at byte offset {len(data)}, the int32 dims header "
+                         f"alone needs {HEADER_BYTES} bytes", path=path, field="dims")
     dims = tuple(int(n) for n in array_at(data, 0, "<i4", 3, path=path, what=_WHAT))
     if any(n < 1 or n > MAX_DIM for n in dims):
         raise InputError(f"dims header {dims} at byte offset 0 is not a MERL header: expected three int32 "

@@ -278,9 +278,26 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
         _check_magnitude(raw.sigma, raw, sigma_names)
 
 
+def last_data_line(path) -> int | None:
+    """The 1-based number of the last non-blank line of a text file that is not a '#' comment (where a table's
+    last data row is), or None for a directory or a file that cannot be read as text."""
+    try:
+        lines = read_text_lines(path)
+    except (InputError, OSError):
+        return None
+    for number in range(len(lines), 0, -1):
+        text = lines[number - 1].strip()
+        if text and not text.startswith("#"):
+            return number
+    return max(len(lines), 1)
+
+
 def check_row_count(n: int, path, line=None) -> None:
-    """InputError unless a measurement has at least :data:`MIN_ROWS` rows."""
+    """InputError unless a measurement has at least :data:`MIN_ROWS` rows (naming ``line``, else the last data
+    line of a text file)."""
     if n < MIN_ROWS:
+        if line is None:
+            line = last_data_line(path)
         raise InputError(f"{n} data row{'s' if n != 1 else ''}; a measurement needs at least {MIN_ROWS} "
                          "(error percentiles and a fit of one direction pair mean nothing)", path=path, line=line)
 
@@ -297,7 +314,9 @@ def convert_rows(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: 
     offset = azimuth_offset if angle_unit == "deg" else math.degrees(azimuth_offset)
 
     def azimuth(phi):
-        return azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
+        out = azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
+        # np.mod of a tiny negative angle rounds to the full turn itself: keep azimuths in [0, 360)
+        return np.where(out >= 360.0, out - 360.0, out)
 
     values, sigma = raw.values, raw.sigma
     if quantity == "reflectance_factor":

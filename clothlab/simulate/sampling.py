@@ -107,4 +107,12 @@ def parse_sampling(spec: str | None, seed: int = 0, field: str = "--sampling"):
                               f"{MAX_RANDOM}, got {spec!r}", field=field)
         return random_sampling(n, seed, distribution), (f"{n} random pairs, each direction {distribution} over "
                                                         f"the hemisphere (seed {seed})")
-    return file_sampling(spec), f"direction pairs of {Path(spec).name}"
+    try:
+        pairs = file_sampling(spec)
+    except InputError as exc:
+        if exc.line is not None or exc.field is not None:
+            raise
+        # the file itself cannot be read (missing, a directory, too large): the option is what to fix
+        raise ConfigError(f"expected paper, random:N[:{'|'.join(DISTRIBUTIONS)}] or a CSV file of direction "
+                          f"pairs; {spec!r}: {exc.detail}", field=field) from None
+    return pairs, f"direction pairs of {Path(spec).name}"
