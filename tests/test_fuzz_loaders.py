@@ -24,6 +24,7 @@ from __future__ import annotations
 import collections
 import math
 import os
+import re
 import struct
 import tracemalloc
 from pathlib import Path
@@ -54,6 +55,8 @@ SPECIAL_FLOATS = [math.nan, -math.nan, math.inf, -math.inf, 1e-320, -1e-320, 5e-
                   1e308, -1e308, 1e31, 1e30, 0.0, -0.0, 1.0]
 SPECIAL_INTS = [0, 1, -1, 2, 3, 90, 180, 4096, 4097, 2**16, 2**31 - 1, -2**31, 2**30, 2**63 - 1, 2**64 - 1, 2**32,
                 12, 255]
+DECIMAL = r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?"  # the documented notation, written here again
+DIGITS = r"[0-9]+"
 BYTES_LIMIT = 96 << 20
 """Allocation peak allowed while reading one fuzzed binary file (the valid files are at most 2 MB)."""
 
@@ -249,12 +252,26 @@ OPTION_VALUES = {
     "channels": [None, "R,G,B", "grey,g2,g3", "a,a,b", "R,G", "R,G,B,A", ",,", "", "x y,z,w", ["r", "g", "b"],
                  "R,,B", "theta_i,G,B", "r#,g,b"],
 }
+VALID_OPTIONS = {
+    "columns": (LAB_COLUMNS, "theta_i,phi_i,theta_o,phi_o,R,G,B", "theta_i,phi_i,theta_o,phi_o,R,-,-"),
+    "delimiter": ("auto",), "comment": ("#", "%", ""), "header": ("auto", "yes", "no"),
+    "angle_unit": ("deg", "rad"), "azimuth_zero": ("weft", "warp", "x", "y"), "azimuth_sense": ("ccw", "cw"),
+    "azimuth_offset": (0.0, 0, 90, -90.5, 359.9, 360, -360), "quantity": ("brdf", "reflectance_factor",
+                                                                        "cosine_weighted"),
+    "channels": (None, "R,G,B", "grey,g2,g3"),
+}
 LAB_TABLES = {
     "semicolon header": "\n".join(lab_lines(";")),
     "tabs no header": "\n".join(lab_lines("\t")[2:]),
     "percent comments": LAB_COMMENT + "\n" + "\n".join(lab_lines(",")[1:]),
     "grazing rows": "\n".join(lab_lines(",")[:2] + ["89.99999999999,0,90,10,0.1,0.2,0.3", "90,5,10,0,0.1,0.2,0.3"]
                               + lab_lines(",")[2:]),
+}
+
+
+TABLE_OPTIONS = {
+    "semicolon header": {"columns": LAB_COLUMNS}, "tabs no header": {"columns": "theta_i,phi_i,theta_o,phi_o,R,G,B"},
+    "percent comments": {"columns": LAB_COLUMNS, "comment": "%"}, "grazing rows": {"columns": LAB_COLUMNS},
 }
 
 
@@ -270,11 +287,13 @@ def test_fuzz_generic_options(tmp_path):
     def run(data):
         table = data.draw(st.sampled_from(sorted(LAB_TABLES)))
         path.write_text(LAB_TABLES[table] + "\n")
-        options = {}
+        options = dict(TABLE_OPTIONS[table])  # what the table needs, unless drawn below
         for name, pool in OPTION_VALUES.items():
-            if data.draw(st.booleans()):
-                options[name] = data.draw(st.one_of(st.sampled_from(pool), TOKENS) if name != "columns"
-                                          else st.sampled_from(pool))
+            if data.draw(st.integers(0, 2)) != 0:
+                continue
+            choice = data.draw(st.integers(0, 9))  # mostly valid values, so that accepted results are checked
+            pool = list(VALID_OPTIONS[name]) if choice < 6 else pool
+            options[name] = data.draw(TOKENS) if choice == 9 else data.draw(st.sampled_from(pool))
         kind, result = outcome(counts, import_table, path, out, overwrite=True, **options, paths=(path,),
                                options=tuple(OPTION_VALUES))
         if kind == "accepted":
@@ -288,7 +307,8 @@ def test_fuzz_generic_options(tmp_path):
 def check_conventions(m, table: str, options: dict) -> None:
     """The accepted measurement holds the table's rows converted as the options declare (recomputed here)."""
     rows = np.array(ROWS)
-    if table == "grazing rows" or options.get("columns", LAB_COLUMNS) != LAB_COLUMNS or m.n != len(rows):
+    if table == "grazing rows" or options.get("columns") not in (LAB_COLUMNS, TABLE_OPTIONS["tabs no header"][
+            "columns"]) or m.n != len(rows) or options.get("channels") is not None:
         return
     unit = options.get("angle_unit", "deg")
     angles = rows[:, :4] if unit == "deg" else np.degrees(rows[:, :4])
@@ -316,7 +336,8 @@ def _f8(data: bytearray, offset: int, value: float) -> None:
 
 
 OTHER_FILES = {
-    "empty": b"", "text table": b"theta_i,phi_i,theta_o,phi_o,R\n10,0,10,180,0.1\n", "png": b"\x89PNG\r\n\x1a\n" + b"\0" * 64,
+    "empty": b"", "text table": b"theta_i,phi_i,theta_o,phi_o,R\n10,0,10,180,0.1\n",
+    "png": b"\x89PNG\r\n\x1a\n" + b"\0" * 64,
     "zip": b"PK\x03\x04" + b"\0" * 100, "one byte": b"\x01", "utf16": "hello".encode("utf-16"),
     "tensor magic only": b"tensor_file\x00", "nul": b"\0" * 4096, "ff": b"\xff" * 4096,
 }
@@ -333,16 +354,16 @@ def byte_mutation(data: bytes, draw, fields: list[tuple[int, str]], payload: tup
         at = draw(st.one_of(st.integers(0, min(len(out) - 1, 256)), st.integers(0, len(out) - 1)))
         out[at] = draw(st.one_of(st.integers(0, 255), st.just(out[at] ^ 0x80)))
         return bytes(out)
-    if op == 2 and fields:
-        offset, fmt = draw(st.sampled_from(fields))
-        size = struct.calcsize(fmt)
-        if fmt[-1] in "dfe":
-            value = draw(st.sampled_from(SPECIAL_FLOATS))
-        else:
-            value = draw(st.sampled_from(SPECIAL_INTS)) % (1 << (8 * size))
-            if fmt[-1].islower():
-                value = value - (1 << (8 * size)) if value >= 1 << (8 * size - 1) else value
-        struct.pack_into(fmt, out, offset, value)
+    if op == 2 and fields:  # one to three header fields overwritten
+        for offset, fmt in draw(st.lists(st.sampled_from(fields), min_size=1, max_size=3)):
+            size = struct.calcsize(fmt)
+            if fmt[-1] in "dfe":
+                value = draw(st.sampled_from(SPECIAL_FLOATS))
+            else:
+                value = draw(st.sampled_from(SPECIAL_INTS)) % (1 << (8 * size))
+                if fmt[-1].islower():
+                    value = value - (1 << (8 * size)) if value >= 1 << (8 * size - 1) else value
+            struct.pack_into(fmt, out, offset, value)
         return bytes(out)
     if op in (2, 3):
         start, itemsize, count = payload
@@ -502,7 +523,7 @@ def test_fuzz_tensor_file(tmp_path):
                 if f.name in NON_NEGATIVE_FIELDS:
                     assert (f.data >= 0).all()
             ends.sort()
-            assert all(a[1] <= b[0] for a, b in zip(ends, ends[1:])), ends  # no two fields overlap
+            assert all(a[1] <= b[0] for a, b in zip(ends, ends[1:], strict=False)), ends  # no two fields overlap
 
     run()
     report("bsdf tensor file", counts)
@@ -696,6 +717,10 @@ def test_fuzz_simulate_sampling(tmp_path):
                                options=("--sampling", "--sampling-seed"))
         if kind == "accepted":
             valid_sampling(result)
+            assert isinstance(seed, int) and 0 <= seed < 2**64
+            if spec.startswith("random:"):  # N in plain digits, and exactly N pairs drawn
+                count = spec.split(":")[1]
+                assert re.fullmatch(DIGITS, count) and len(result[0][0]) == int(count), spec
 
     run()
     report("simulate --sampling", counts)
@@ -729,6 +754,12 @@ def test_fuzz_simulate_command_options(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "Traceback" not in err
         if rc == 0:
+            for item in argv[8:]:  # every number given was in plain decimal notation (no 1_0, no nan)
+                flag, value = item.split("=", 1)
+                if flag in ("--orientation", "--noise-mult", "--noise-add", "--kd", "--ks-warp"):
+                    assert all(re.fullmatch(DECIMAL, v.strip()) for v in value.split(",")), item
+                elif flag in ("--seed", "--sampling-seed"):
+                    assert re.fullmatch(DIGITS, value.strip()), item
             counts["accepted (valid)"] += 1
             m = read_table(out)
             valid_measurement(m)

@@ -31,6 +31,7 @@ import numpy as np
 from clothlab.errors import ConfigError, InputError
 from clothlab.io.measurement import Measurement
 from clothlab.io.table import (
+    _CHANNEL_NAME,
     ANGLE_COLUMNS,
     SIGMA_PREFIX,
     RawRows,
@@ -74,8 +75,8 @@ def parse_columns(spec) -> ColumnMap | None:
     for None.  ConfigError (field ``columns``) for a malformed mapping."""
     if spec is None:
         return None
-    entries = [e.strip() for e in (spec.split(",") if isinstance(spec, str) else list(spec))]
-    if not entries or any(not isinstance(e, str) or not e for e in entries):
+    entries = _name_list(spec, "columns")
+    if not entries or not all(entries):
         raise ConfigError(f"columns must be comma-separated names, got {spec!r}", field="columns")
     by_name = [e for e in entries if "=" in e]
     if by_name and len(by_name) != len(entries):
@@ -93,6 +94,16 @@ def parse_columns(spec) -> ColumnMap | None:
     return ColumnMap(order, positions={name: k for k, name in enumerate(entries) if name != SKIP})
 
 
+def _name_list(value, field: str) -> list[str]:
+    """The stripped entries of a comma-separated string or a list of strings; ConfigError (``field``) for any
+    other value (a number, a mapping, a list holding a non-string)."""
+    if isinstance(value, str):
+        return [e.strip() for e in value.split(",")]
+    if not isinstance(value, list | tuple) or not all(isinstance(e, str) for e in value):
+        raise ConfigError(f"{field} must be comma-separated names or a list of names, got {value!r}", field=field)
+    return [e.strip() for e in value]
+
+
 def _check_names(order) -> None:
     seen = set()
     for name in order:
@@ -105,8 +116,15 @@ def _check_names(order) -> None:
     if missing:
         raise ConfigError(f"columns must map {', '.join(missing)} (the four angles theta_i, phi_i, theta_o, "
                           "phi_o and at least one channel)", field="columns")
-    if not [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]:
+    value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
+    if not value_names:
         raise ConfigError("columns map no value channel after the four angles", field="columns")
+    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]
+    for name in sigma_names:
+        if name[len(SIGMA_PREFIX):] not in value_names:
+            raise ConfigError(f"column {name!r} names no channel ({', '.join(value_names)})", field="columns")
+    if sigma_names and len(sigma_names) != len(value_names):
+        raise ConfigError("sigma columns must be given for every channel or none", field="columns")
 
 
 def _splitter(delimiter: str, sample: str):
@@ -138,10 +156,10 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     for name, value in conventions.items():
         check_choice(name, value)
     azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
-    if delimiter not in DELIMITERS:
+    if not isinstance(delimiter, str) or delimiter not in DELIMITERS:
         raise ConfigError(f"unknown delimiter {delimiter!r}; expected one of {' | '.join(DELIMITERS)}",
                           field="delimiter")
-    if header not in HEADER_CHOICES:
+    if not isinstance(header, str) or header not in HEADER_CHOICES:
         raise ConfigError(f"unknown header {header!r}; expected one of {' | '.join(HEADER_CHOICES)}",
                           field="header")
     if not isinstance(comment, str) or len(comment) > 1 or comment.isalnum() or comment in "+-.":
@@ -172,12 +190,7 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     table = parse_rows(rows, field_names, path=path, split=split, separator=" " if separator == "whitespace"
                        else DELIMITERS[separator])
     value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
-    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]
-    for name in sigma_names:
-        if name[len(SIGMA_PREFIX):] not in value_names:
-            raise ConfigError(f"column {name!r} names no channel ({', '.join(value_names)})", field="columns")
-    if sigma_names and len(sigma_names) != len(value_names):
-        raise ConfigError("sigma columns must be given for every channel or none", field="columns")
+    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]  # all or none, checked by _check_names
     new_names = _channel_names(channels, value_names)
     raw = RawRows(
         path=str(path), lines=np.array([lineno for lineno, _ in rows]),
@@ -224,10 +237,14 @@ def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
 def _channel_names(channels, value_names):
     if channels is None:
         return value_names
-    names = [c.strip() for c in (channels.split(",") if isinstance(channels, str) else list(channels))]
+    names = _name_list(channels, "channels")
     if len(names) != len(value_names) or len(set(names)) != len(names) or not all(names):
         raise ConfigError(f"channels must give {len(value_names)} distinct names (for {', '.join(value_names)}), "
                           f"got {channels!r}", field="channels")
+    for name in names:
+        if not _CHANNEL_NAME.match(name) or name in ANGLE_COLUMNS or name.startswith(SIGMA_PREFIX):
+            raise ConfigError(f"bad channel name {name!r}: expected a name without spaces, commas or quotes that "
+                              f"is not an angle column and does not start with '{SIGMA_PREFIX}'", field="channels")
     return names
 
 

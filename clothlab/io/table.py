@@ -360,7 +360,10 @@ def check_azimuth_offset(value, *, error=InputError, **where) -> float:
     """``value`` as a float if it is a finite number (not a bool) with |value| <= 360 deg, else ``error``."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise error(f"azimuth_offset must be a number of degrees, got {value!r}", field="azimuth_offset", **where)
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an integer beyond the float range
+        value = math.inf
     if not math.isfinite(value) or abs(value) > MAX_AZIMUTH_OFFSET:
         raise error(f"azimuth_offset {value!r} is not a finite angle within [-{MAX_AZIMUTH_OFFSET:g}, "
                     f"{MAX_AZIMUTH_OFFSET:g}] deg", field="azimuth_offset", **where)

@@ -18,6 +18,7 @@ Each returns (theta_i, phi_i, theta_o, phi_o) in degrees, the form :func:`.gonio
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
 DISTRIBUTIONS = ("uniform", "cosine")
 COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
 MAX_RANDOM = 10_000_000
+MAX_SEED = 2**64 - 1
 
 
 def hemisphere_directions(n: int, rng, distribution: str = "uniform") -> np.ndarray:
@@ -93,15 +95,16 @@ def file_sampling(path):
 def parse_sampling(spec: str | None, seed: int = 0, field: str = "--sampling"):
     """The sampling named by ``spec`` (module docstring) and a description for the provenance:
     (sampling or None for the paper's grid, description)."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"the sampling seed must be an integer in [0, {MAX_SEED}], got {seed!r}",
+                          field=field + "-seed")
     if spec is None or spec == "paper":
         return None, "paper 225 x 7 grid (Irawan & Marschner 2012, sec. 4.1)"
     if spec.startswith("random:"):
         parts = spec.split(":")
         distribution = parts[2] if len(parts) == 3 else "uniform"
-        try:
-            n = int(parts[1])
-        except ValueError:
-            n = 0
+        count = parts[1]
+        n = int(count) if re.fullmatch(r"[0-9]{1,12}", count) else 0  # plain digits: no '1_0', ' 5', '+5'
         if len(parts) > 3 or not 1 <= n <= MAX_RANDOM or distribution not in DISTRIBUTIONS:
             raise ConfigError(f"expected random:N or random:N:{'|'.join(DISTRIBUTIONS)} with 1 <= N <= "
                               f"{MAX_RANDOM}, got {spec!r}", field=field)
