@@ -57,6 +57,10 @@ def _settings(cfg, args):
                 weaves.append(PRESET_PREFIX + canonical_preset_name(item.removeprefix(PRESET_PREFIX)))
     if args.kinds:
         kinds = [as_choice(k.strip(), Location(None, "--kinds"), MODEL_KINDS) for k in args.kinds.split(",")]
+    for flag, items in (("--weaves", weaves), ("--kinds", kinds)):
+        if items is not None and len(set(items)) != len(items):
+            twice = next(item for i, item in enumerate(items) if item in items[:i])
+            raise ConfigError(f"{twice!r} is listed twice", field=flag)
     for flag, value, low in (("--orientation-starts", args.orientation_starts, 1),
                              ("--candidate-evals", args.candidate_evals, 1), ("--candidate-cv", args.candidate_cv, 0)):
         if value is not None and (value < low or (flag == "--candidate-cv" and value == 1)):

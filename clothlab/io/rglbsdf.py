@@ -21,6 +21,7 @@ saying so.  See docs/formats.md for what is missing.
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -109,8 +110,13 @@ def read_tensor_file(path) -> dict[str, TensorField]:
         offset = cur.take("<Q", f"the data offset of field {name!r}")
         if ndim > MAX_NDIM:
             raise InputError(f"field {name!r} has {ndim} dimensions (at most {MAX_NDIM})", path=path, field=name)
-        shape = tuple(int(n) for n in np.atleast_1d(cur.take(f"<{ndim}Q", f"the shape of field {name!r}"))) \
-            if ndim else ()
+        shape_at = cur.pos
+        raw_shape = cur.take(f"<{ndim}Q", f"the shape of field {name!r}") if ndim else ()
+        shape = (raw_shape,) if ndim == 1 else tuple(raw_shape)  # Python integers: exact
+        for k, n in enumerate(shape):  # no axis longer than the file has bytes (even of an empty field)
+            if n > len(data):
+                raise InputError(f"field {name!r} shape[{k}] = {n} at byte offset {shape_at + 8 * k} exceeds the "
+                                 f"file's {len(data)} bytes", path=path, field=name)
         fields[name] = TensorField(name, np.empty(0), int(offset), code)
         spans.append((name, int(offset), shape, code))
     header_end = cur.pos
@@ -118,7 +124,7 @@ def read_tensor_file(path) -> dict[str, TensorField]:
     previous_end, previous_name = header_end, "the header"
     for name, offset, shape, code in ordered:
         itemsize = np.dtype(DTYPES[code]).itemsize
-        count_items = int(np.prod(shape, dtype=np.float64)) if shape else 1
+        count_items = math.prod(shape)  # exact (Python integers); 1 for a scalar field
         if offset < previous_end:
             raise InputError(f"field {name!r} starts at byte offset {offset}, inside {previous_name} (which ends "
                              f"at byte offset {previous_end})", path=path, field=name)
