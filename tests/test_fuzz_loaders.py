@@ -299,6 +299,10 @@ def test_fuzz_generic_options(tmp_path):
         if kind == "accepted":
             valid_written(*result)
             check_conventions(result[1], table, options)
+        elif table == "tabs no header" and options.get("header", "auto") != "yes" and all(
+                any(v == g and type(v) is type(g) for g in VALID_OPTIONS[n]) for n, v in options.items()) \
+                and options.get("angle_unit", "deg") == "deg" and options["columns"] != LAB_COLUMNS:
+            raise AssertionError(f"valid options refused: {options}: {result}")  # nothing good is lost
 
     run()
     report("import/options", counts)
@@ -326,6 +330,62 @@ def check_conventions(m, table: str, options: dict) -> None:
     scale = {"brdf": 1.0, "reflectance_factor": 1.0 / math.pi}.get(options.get("quantity", "brdf"))
     if scale is not None:
         np.testing.assert_allclose(m.values[:, 0], rows[:, 4] * scale, rtol=1e-12)
+
+
+MEASUREMENT_YAML = {
+    "text": ("lab.csv", "{columns: 'theta_i=ti,phi_i=pi,theta_o=tv,phi_o=pv,R=red,G=green,B=blue', delimiter: "
+                        "semicolon, comment: '#', header: auto, angle_unit: deg, azimuth_zero: weft, "
+                        "azimuth_sense: ccw, azimuth_offset: 12.5, quantity: brdf, channels: [r, g, b]}"),
+    "merl": ("m.binary", "{theta_step: 15, phi_step: 30, theta_max: 80}"),
+    "utia": ("u.bin", "{azimuth_zero: warp, azimuth_sense: cw, azimuth_offset: -20, quantity: brdf, "
+                      "negative: error}"),
+}
+MEASUREMENT_VALUES = ["'theta_i=ti,phi_i=pi,theta_o=tv,phi_o=pv,R=red,G=green,B=blue'", "semicolon", "'#'", "auto",
+                      "deg", "weft", "ccw", "12.5", "brdf", "[r, g, b]", "r", "15", "30", "80", "warp", "cw", "-20",
+                      "error", "text", "merl", "utia"]
+
+
+def test_fuzz_measurement_options_in_fabric_yaml(tmp_path):
+    """``measurement.format: text | merl | utia`` with ``measurement.options`` mutated: refused at the option's
+    line in fabric.yaml (or naming the measurement file and place), or a valid measurement."""
+    from clothlab.config import load_config
+    from clothlab.io.loader import load_measurement
+
+    (tmp_path / "lab.csv").write_text("\n".join(lab_lines(";")) + "\n")
+    merl_file(tmp_path / "m.binary")
+    utia_file(tmp_path / "u.bin")
+    counts = collections.Counter()
+    path = tmp_path / "f.yaml"
+
+    def load(path):
+        cfg = load_config(path)
+        return load_measurement(cfg.measurement.path, cfg.measurement.format, **cfg.measurement.options)
+
+    for fmt, (name, options) in MEASUREMENT_YAML.items():  # the unmutated files are valid
+        path.write_text(f"name: x\nmeasurement:\n  path: {name}\n  format: {fmt}\n  options: {options}\n"
+                        "model: {kind: irawan, weave: preset:cotton-denim}\n")
+        valid_measurement(load(path))
+
+    @SETTINGS
+    @given(fmt=st.sampled_from(sorted(MEASUREMENT_YAML)), old=st.sampled_from(MEASUREMENT_VALUES),
+           token=st.one_of(TOKENS, st.sampled_from(["[]", "{}", "[1, 2]", "0.5", "45", "89.9", "-360", "x,y,z",
+                                                    "'theta_i,phi_i,theta_o,phi_o,R'", "tab", "'%'", "zero"])),
+           nth=st.integers(0, 3))
+    def run(fmt, old, token, nth):
+        name, options = MEASUREMENT_YAML[fmt]
+        text = (f"name: x\nmeasurement:\n  path: {name}\n  format: {fmt}\n  options: {options}\n"
+                "model: {kind: irawan, weave: preset:cotton-denim}\n")
+        if old in text:
+            pieces = text.split(old)
+            k = 1 + nth % (len(pieces) - 1)
+            text = old.join(pieces[:k]) + token + old.join(pieces[k:])
+        path.write_bytes(encode(text))
+        kind, m = outcome(counts, load, path, paths=(path, tmp_path / name))
+        if kind == "accepted":
+            valid_measurement(m)
+
+    run()
+    report("measurement.options (text/merl/utia)", counts)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -746,7 +806,8 @@ def test_fuzz_simulate_command_options(tmp_path, capsys):
     numbers = st.one_of(st.sampled_from(["0", "10", "-30.5", "360", "-360", "361", "1_0", "nan", "inf", "-inf",
                                          "1e308", "1e-320", "\u0661", "0x1", "", " 7", "1,2"]), TOKENS)
     flags = {"--orientation": numbers, "--sampling-seed": numbers, "--seed": numbers, "--noise-mult": numbers,
-             "--noise-add": numbers, "--kd": numbers, "--ks-warp": numbers, "--channels": st.sampled_from(
+             "--noise-add": numbers, "--kd": numbers, "--ks-warp": numbers, "--ks-weft": numbers,
+             "--channels": st.sampled_from(
                  ["grey", "R,G,B", "a,a", ",", "", "x y", "R,G,B,A,B"])}
 
     @SETTINGS
@@ -765,7 +826,7 @@ def test_fuzz_simulate_command_options(tmp_path, capsys):
         if rc == 0:
             for item in argv[8:]:  # every number given was in plain decimal notation (no 1_0, no nan)
                 flag, value = item.split("=", 1)
-                if flag in ("--orientation", "--noise-mult", "--noise-add", "--kd", "--ks-warp"):
+                if flag in ("--orientation", "--noise-mult", "--noise-add", "--kd", "--ks-warp", "--ks-weft"):
                     assert all(re.fullmatch(DECIMAL, v.strip()) for v in value.split(",")), item
                 elif flag in ("--seed", "--sampling-seed"):
                     assert re.fullmatch(DIGITS, value.strip()), item

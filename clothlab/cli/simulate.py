@@ -94,7 +94,7 @@ def add_parser(sub):
 
 
 def channel_values(text: str, field: str, n: int):
-    """(n,) values in [0, 1000] from ``"0.2,0.1,0.1"`` (one value: the same in every channel), each in plain
+    """(n,) values of 0 or in [1e-30, 1000] from ``"0.2,0.1,0.1"`` (one value: the same in every channel), each in plain
     decimal notation."""
     import numpy as np
 
@@ -104,8 +104,9 @@ def channel_values(text: str, field: str, n: int):
     values = np.array([parse_number(x, error=ConfigError, field=field) for x in text.split(",")])
     if values.size == 1:
         values = np.repeat(values, n)
-    if values.size != n or np.any(values < 0) or np.any(values > 1e3):
-        raise ConfigError(f"expected {n} values in [0, 1000] (one per channel), got {text!r}", field=field)
+    if values.size != n or np.any(values < 0) or np.any(values > 1e3) or np.any((values > 0) & (values < 1e-30)):
+        raise ConfigError(f"expected {n} values of 0 or in [1e-30, 1000] (one per channel), got {text!r}",
+                          field=field)
     return values
 
 
@@ -155,9 +156,13 @@ def run(args) -> int:
         weave = resolve_weave(source, Path.cwd())
     channels = channel_names(args.channels)
     n = len(channels)
-    coefficients = {"kd": channel_values(args.kd or "0.1", "--kd", n),
-                    "ks_warp": channel_values(args.ks_warp or "0.1", "--ks-warp", n),
-                    "ks_weft": channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
+    coefficients = {"kd": channel_values("0.1" if args.kd is None else args.kd, "--kd", n),
+                    "ks_warp": channel_values("0.1" if args.ks_warp is None else args.ks_warp, "--ks-warp", n),
+                    "ks_weft": channel_values("0.1" if args.ks_weft is None else args.ks_weft, "--ks-weft", n)}
+    dark = [c for j, c in enumerate(channels) if not any(v[j] for v in coefficients.values())]
+    if dark:
+        raise ConfigError(f"channel {dark[0]} has --kd, --ks-warp and --ks-weft all 0: it would reflect no light",
+                          field="--kd")
     model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes), **options)
     for name in model.component_names:  # per-yarn diffuse components (kind surface) take --kd
         if name.startswith("diffuse_"):

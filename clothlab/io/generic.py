@@ -68,6 +68,8 @@ class ColumnMap:
     order: tuple[str, ...]
     positions: dict | None = None
     names: dict | None = None
+    width: int | None = None
+    """Positional form: how many columns the mapping names, skipped ('-') ones included."""
 
 
 def parse_columns(spec) -> ColumnMap | None:
@@ -91,7 +93,8 @@ def parse_columns(spec) -> ColumnMap | None:
         return ColumnMap(order, names=dict(pairs))
     order = tuple(e for e in entries if e != SKIP)
     _check_names(order)
-    return ColumnMap(order, positions={name: k for k, name in enumerate(entries) if name != SKIP})
+    return ColumnMap(order, positions={name: k for k, name in enumerate(entries) if name != SKIP},
+                     width=len(entries))
 
 
 def _name_list(value, field: str) -> list[str]:
@@ -138,6 +141,35 @@ def _splitter(delimiter: str, sample: str):
     return (lambda text: [f.strip() for f in text.split(separator)]), delimiter
 
 
+def check_options(*, columns=None, delimiter: str = "auto", comment: str = "#", header: str = "auto",
+                  angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw",
+                  azimuth_offset: float = 0.0, quantity: str = "brdf", channels=None):
+    """The options of :func:`read_generic` checked without reading a file: (column map, azimuth offset), or a
+    ConfigError whose ``field`` is the option at fault (so fabric.yaml's ``measurement.options`` and the
+    command line name it before anything is read)."""
+    for name, value in (("angle_unit", angle_unit), ("quantity", quantity), ("azimuth_zero", azimuth_zero),
+                        ("azimuth_sense", azimuth_sense)):
+        check_choice(name, value)
+    azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
+    if not isinstance(delimiter, str) or delimiter not in DELIMITERS:
+        raise ConfigError(f"unknown delimiter {delimiter!r}; expected one of {' | '.join(DELIMITERS)}",
+                          field="delimiter")
+    if not isinstance(header, str) or header not in HEADER_CHOICES:
+        raise ConfigError(f"unknown header {header!r}; expected one of {' | '.join(HEADER_CHOICES)}",
+                          field="header")
+    if not isinstance(comment, str) or len(comment) > 1 or (comment and (
+            comment.isalnum() or comment in "+-.,;" or comment.isspace() or not comment.isprintable())):
+        raise ConfigError(f"comment must be one printable character that cannot start a number and is not a "
+                          f"separator, or empty; got {comment!r}", field="comment")
+    mapping = parse_columns(columns)
+    if channels is not None:
+        _name_list(channels, "channels")
+        if mapping is not None:  # the channel count is known from the mapping
+            _channel_names(channels, [n for n in mapping.order if n not in ANGLE_COLUMNS
+                                      and not n.startswith(SIGMA_PREFIX)])
+    return mapping, azimuth_offset
+
+
 def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = "#", header: str = "auto",
                  angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw",
                  azimuth_offset: float = 0.0, quantity: str = "brdf", channels=None) -> Measurement:
@@ -153,19 +185,8 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     """
     conventions = {"angle_unit": angle_unit, "quantity": quantity, "azimuth_zero": azimuth_zero,
                    "azimuth_sense": azimuth_sense}
-    for name, value in conventions.items():
-        check_choice(name, value)
-    azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
-    if not isinstance(delimiter, str) or delimiter not in DELIMITERS:
-        raise ConfigError(f"unknown delimiter {delimiter!r}; expected one of {' | '.join(DELIMITERS)}",
-                          field="delimiter")
-    if not isinstance(header, str) or header not in HEADER_CHOICES:
-        raise ConfigError(f"unknown header {header!r}; expected one of {' | '.join(HEADER_CHOICES)}",
-                          field="header")
-    if not isinstance(comment, str) or len(comment) > 1 or comment.isalnum() or comment in "+-.":
-        raise ConfigError(f"comment must be one character that cannot start a number, or empty; got {comment!r}",
-                          field="comment")
-    mapping = parse_columns(columns)
+    mapping, azimuth_offset = check_options(columns=columns, delimiter=delimiter, comment=comment, header=header,
+                                            azimuth_offset=azimuth_offset, channels=channels, **conventions)
     path = Path(path)
     rows = []
     lines = read_text_lines(path)
@@ -177,21 +198,25 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
         raise InputError("no data rows (only blank or comment lines)", path=path, line=max(len(lines), 1))
     split, separator = _splitter(delimiter, rows[0][1] if len(rows) == 1 else rows[1][1])
     has_header = header == "yes" or (header == "auto" and _is_header(split(rows[0][1])))
-    file_names = None
+    file_names = header_line = None
     if has_header:
         header_line, header_text = rows.pop(0)
         file_names = [n.strip().strip('"').strip("'") for n in split(header_text)]
         if not rows:
             raise InputError("no data rows after the header row", path=path, line=header_line)
     order, index, names_for_messages = _resolve(mapping, file_names, path, rows[0][0] - (1 if has_header else 0))
-    width = len(file_names) if file_names is not None else max(index.values()) + 1
+    width = len(file_names) if file_names is not None else (mapping.width or max(index.values()) + 1)
     field_names = list(file_names) if file_names is not None else [
         next((n for n, k in index.items() if k == j), f"column {j + 1}") for j in range(width)]
     table = parse_rows(rows, field_names, path=path, split=split, separator=" " if separator == "whitespace"
                        else DELIMITERS[separator])
     value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
     sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]  # all or none, checked by _check_names
-    new_names = _channel_names(channels, value_names)
+    try:
+        new_names = _channel_names(channels, value_names)
+    except ConfigError as exc:  # e.g. three names for the two channels the file's header row holds
+        raise InputError(exc.detail, path=path, line=header_line if has_header else rows[0][0],
+                         field="channels") from None
     raw = RawRows(
         path=str(path), lines=np.array([lineno for lineno, _ in rows]),
         angles=table[:, [index[a] for a in ANGLE_COLUMNS]],

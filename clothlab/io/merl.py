@@ -188,6 +188,12 @@ def sample_merl(table: MerlTable, theta_i, phi_i, theta_o, phi_o, *, provenance=
                        None, info, table.path)
 
 
+def check_options(*, theta_step: float = DEFAULT_THETA_STEP, phi_step: float = DEFAULT_PHI_STEP,
+                  theta_max: float = DEFAULT_THETA_MAX) -> None:
+    """ConfigError (``field`` = the option) unless :func:`read_merl`'s sampling options are valid."""
+    merl_directions(theta_step, phi_step, theta_max)
+
+
 def read_merl(path, *, theta_step: float = DEFAULT_THETA_STEP, phi_step: float = DEFAULT_PHI_STEP,
               theta_max: float = DEFAULT_THETA_MAX) -> Measurement:
     """Load a MERL ``.binary`` file as a measurement at :func:`merl_directions` (degrees, BRDF in 1/sr).
