@@ -852,3 +852,110 @@ def test_random_sampling_is_bounded_before_drawing():
     with pytest.raises(ConfigError) as info:
         parse_sampling(f"random:{MAX_RANDOM + 1}")
     assert info.value.field == "--sampling"
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The corpus of what these families found (tests/fuzz_corpus/): each is refused through the CLI with exit 2
+# and one line naming the place, or (``ok--``) accepted as valid.
+
+CORPUS = Path(__file__).parent / "fuzz_corpus"
+IMPORT_ARGS = {  # the options each import reproducer is read with, and the place its refusal must name
+    "import--one-row.txt": (["--columns=theta_i,phi_i,theta_o,phi_o,R,G,B"], ":3"),
+    "import--only-comments.txt": ([], ":3"),
+    "import--channels-with-space.txt": (["--columns=" + LAB_COLUMNS, "--channels=x y,g,b"], "--channels"),
+    "import--channel-count.txt": (["--columns=" + LAB_COLUMNS, "--channels=a,b"], "--channels"),
+    "ok--import-trailing-skipped-columns.txt": (["--columns=theta_i,phi_i,theta_o,phi_o,R,-,-",
+                                                 "--delimiter=tab"], None),
+    "ok--import-no-comment-char.txt": (["--comment="], None),
+}
+
+
+def corpus(prefix: str) -> list[str]:
+    return sorted(p.name for p in CORPUS.glob(f"{prefix}*"))
+
+
+def refused_once(rc: int, err: str, *named) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert rc == 2 and "Traceback" not in err, err
+    assert lines[-1].startswith(("clothlab: error: ", "clothlab ")) and "error: " in lines[-1], err
+    assert all(str(n) in lines[-1] for n in named), (named, err)
+    return lines[-1]
+
+
+@pytest.mark.parametrize("name", corpus("import--") + corpus("ok--import-"))
+def test_corpus_import(tmp_path, capsys, name):
+    from clothlab.cli.main import main
+    from clothlab.io.table import read_table
+
+    args, place = IMPORT_ARGS[name]
+    source = tmp_path / name
+    source.write_bytes((CORPUS / name).read_bytes())
+    rc = main(["import", str(source), "-o", str(tmp_path / "out.csv"), *args])
+    err = capsys.readouterr().err
+    if name.startswith("ok--"):
+        assert rc == 0, err
+        valid_measurement(read_table(tmp_path / "out.csv"))
+    else:
+        refused_once(rc, err, place if place.startswith("--") else f"{source}{place}")
+        assert not (tmp_path / "out.csv").exists()
+
+
+@pytest.mark.parametrize("name", corpus("merl--") + corpus("bsdf--"))
+def test_corpus_binary(tmp_path, name):
+    from clothlab.errors import InputError
+    from clothlab.io.loader import load_measurement
+
+    path = tmp_path / name
+    path.write_bytes((CORPUS / name).read_bytes())
+    with pytest.raises(InputError) as info:
+        bounded(load_measurement, path)
+    assert named(info.value, (path,)) and "byte offset" in info.value.detail, str(info.value)
+
+
+def test_corpus_azimuth_just_above_zero_stays_below_a_turn(tmp_path):
+    from clothlab.io.loader import load_measurement
+
+    name = "ok--table-cw-azimuth-just-above-zero.csv"
+    (tmp_path / name).write_bytes((CORPUS / name).read_bytes())
+    m = load_measurement(tmp_path / name)
+    valid_measurement(m, ("R",))
+    assert m.phi_i[0] == 0.0 and m.phi_o[1] == 0.0  # -1e-15 deg wraps to 0, not to 360
+
+
+@pytest.mark.parametrize("name", corpus("measurement--") + corpus("select--"))
+def test_corpus_fabric_yaml(tmp_path, capsys, monkeypatch, name):
+    """Refused by ``clothlab fit`` / ``clothlab select`` at the value's line in fabric.yaml, before any fit."""
+    import clothlab.fit.runner as runner
+    from clothlab.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(runner, "run_fit", lambda *a, **k: pytest.fail("a bad fabric.yaml was accepted"))
+    (tmp_path / "lab.csv").write_text("\n".join(lab_lines(";")) + "\n")
+    utia_file(tmp_path / "u.bin")
+    path = tmp_path / name
+    path.write_bytes((CORPUS / name).read_bytes())
+    rc = main(["select" if name.startswith("select--") else "fit", str(path)])
+    line = refused_once(rc, capsys.readouterr().err, f"{path}:")
+    assert "field '" in line and ("measurement.options." in line or "select." in line), line
+
+
+@pytest.mark.parametrize("name", corpus("cli--"))
+def test_corpus_command_lines(tmp_path, capsys, monkeypatch, name):
+    """Each ``cli--*.args`` file: one argument per line after a ``# expect: <option> | ok`` line."""
+    from clothlab.cli.main import main
+    from clothlab.io.table import read_table
+
+    monkeypatch.chdir(tmp_path)
+    lines = (CORPUS / name).read_text(encoding="utf-8").splitlines()
+    expect = lines[0].removeprefix("# expect: ").split()[0]
+    try:
+        rc = main(lines[1:])
+    except SystemExit as exc:  # argparse's own usage error
+        rc = exc.code
+    err = capsys.readouterr().err
+    if expect == "ok":
+        assert rc == 0, err
+        valid_measurement(read_table(tmp_path / "out.csv"))
+    else:
+        refused_once(rc, err, expect)
+        assert not (tmp_path / "out.csv").exists()
