@@ -81,8 +81,9 @@ class NoiseModel:
         noisy = clean * np.exp(s_m * e1 - 0.5 * s_m * s_m) + self.additive * e2
         floored = int(np.count_nonzero(noisy < self.floor))
         noisy = np.maximum(noisy, self.floor)
-        # hypot: no underflow of tiny sigmas to 0; a sigma is at least MIN_SIGMA (a valid table's sigma is > 0)
-        sigma = np.maximum(np.hypot(s_m * clean, self.additive), MIN_SIGMA)
+        sigma = np.sqrt((s_m * clean) ** 2 + self.additive**2)
+        # a tiny sigma squares to 0 (underflow): at least MIN_SIGMA, as a valid table's sigma is > 0
+        sigma = np.where(sigma < MIN_SIGMA, MIN_SIGMA, sigma)
         return noisy, sigma, floored
 
 
