@@ -36,6 +36,7 @@ from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.frames import spherical_to_vector
 from clothlab.io.binary import array_at, check_size, check_values, read_binary
 from clothlab.io.measurement import Measurement
+from clothlab.io.table import MIN_ROWS
 
 MERL_DIMS = (90, 90, 180)
 """(n_theta_h, n_theta_d, n_phi_d) of the MERL database's files."""
@@ -91,8 +92,13 @@ def read_merl_table(path) -> MerlTable:
     # negative = not measured (allowed); NaN, infinities and absurd magnitudes are refused
     check_values(raw, path=path, offset=HEADER_BYTES, itemsize=8, name=_bin_name(dims), allow_negative=True)
     brdf = raw.reshape(3, *dims) * np.asarray(MERL_SCALE)[:, None, None, None]
-    if not (brdf >= 0.0).any():
-        raise InputError("no measured bin: every value is negative (not measured)", path=path)
+    plane = 8 * dims[0] * dims[1] * dims[2]
+    for c, channel in enumerate(MERL_CHANNELS):  # a channel that reflects nothing is not a measurement
+        if not (brdf[c] > 0.0).any():
+            start = HEADER_BYTES + c * plane
+            raise InputError(f"every value of channel {channel} (byte offsets {start} to {start + plane}) is 0 or "
+                             "negative (not measured): a measurement holds reflected light", path=path,
+                             field=channel)
     return MerlTable(brdf, str(path))
 
 
@@ -180,8 +186,15 @@ def sample_merl(table: MerlTable, theta_i, phi_i, theta_o, phi_o, *, provenance=
     theta_i, phi_i, theta_o, phi_o = (np.asarray(a, dtype=np.float64) for a in (theta_i, phi_i, theta_o, phi_o))
     values = lookup_merl(table, spherical_to_vector(theta_i, phi_i), spherical_to_vector(theta_o, phi_o))
     keep = np.isfinite(values).all(axis=1)
-    if not keep.any():
-        raise InputError("no requested direction pair falls in a measured bin", path=table.path)
+    if keep.sum() < MIN_ROWS:
+        raise InputError(f"{int(keep.sum())} of the {len(keep)} sampled direction pairs fall in bins measured in "
+                         f"every channel; a measurement needs at least {MIN_ROWS} (a negative value in the file "
+                         "marks a bin not measured): sample more densely", path=table.path, field="theta_step")
+    for c, channel in enumerate(MERL_CHANNELS):
+        if not (values[keep, c] > 0.0).any():
+            raise InputError(f"channel {channel} is 0 at every sampled direction pair: the file's positive "
+                             f"values of {channel} lie in bins no sampled pair reaches; sample more densely",
+                             path=table.path, field="theta_step")
     info = {"source_format": "merl", "isotropic": True, "merl_dims": list(table.dims),
             "merl_unmeasured_pairs": int((~keep).sum()), **(provenance or {})}
     return Measurement(theta_i[keep], phi_i[keep], theta_o[keep], phi_o[keep], values[keep], MERL_CHANNELS,

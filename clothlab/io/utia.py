@@ -70,7 +70,14 @@ def read_utia_table(path, *, negative: str = "error") -> UtiaTable:
     check_size(data, UTIA_BYTES, path=path, what=_WHAT)
     flat = np.frombuffer(data, dtype="<f8").astype(np.float64)
     check_values(flat, path=path, offset=0, itemsize=8, name=_name, allow_negative=negative == "zero")
-    return UtiaTable(np.maximum(flat, 0.0).reshape(UTIA_SHAPE), str(path))
+    brdf = np.maximum(flat, 0.0).reshape(UTIA_SHAPE)
+    plane = UTIA_BYTES // 3
+    for c, channel in enumerate(UTIA_CHANNELS):  # a channel that reflects nothing is not a measurement
+        if not brdf[c].any():
+            raise InputError(f"every value of channel {channel} (byte offsets {c * plane} to {(c + 1) * plane}) is 0"
+                             f"{' or negative' if negative == 'zero' else ''}: a measurement holds reflected light",
+                             path=path, field=channel)
+    return UtiaTable(brdf, str(path))
 
 
 def write_utia(brdf: np.ndarray, path, *, overwrite: bool = False) -> Path:
