@@ -96,8 +96,8 @@ def read_merl_table(path) -> MerlTable:
     for c, channel in enumerate(MERL_CHANNELS):  # a channel that reflects nothing is not a measurement
         if not (brdf[c] > 0.0).any():
             start = HEADER_BYTES + c * plane
-            raise InputError(f"every value of channel {channel} (byte offsets {start} to {start + plane}) is 0 or "
-                             "negative (not measured): a measurement holds reflected light", path=path,
+            raise InputError(f"no measured bin of channel {channel} holds light: every value from byte offset "
+                             f"{start} to {start + plane} is 0 or negative (negative: not measured)", path=path,
                              field=channel)
     return MerlTable(brdf, str(path))
 
