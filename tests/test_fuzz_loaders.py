@@ -968,3 +968,58 @@ def test_corpus_command_lines(tmp_path, capsys, monkeypatch, name):
     else:
         refused_once(rc, err, expect)
         assert not (tmp_path / "out.csv").exists()
+
+
+def test_fuzz_select_command_options(tmp_path, capsys):
+    """``clothlab select``'s --weaves / --kinds / --orientation-starts / --candidate-evals / --candidate-cv drawn
+    from valid and bad values: the settings a selection would run, or a refusal naming the option."""
+    from clothlab.cli.main import build_parser
+    from clothlab.cli.select import _settings
+    from clothlab.config import load_config
+    from clothlab.fit.select import candidates
+    from clothlab.models.registry import MODEL_KINDS
+
+    (tmp_path / "m.csv").write_text(header_table("0"))
+    (tmp_path / "w.wv").write_text((Path(__file__).parent.parent / "clothlab/weave/data/cotton-twill.wv").read_text())
+    (tmp_path / "fabric.yaml").write_text(FABRIC)
+    cfg = load_config(tmp_path / "fabric.yaml")
+    parser = build_parser()
+    counts = collections.Counter()
+    values = {
+        "--weaves": ["cotton-denim", "preset:silk-charmeuse", f"{tmp_path / 'w.wv'}", "nope", "missing.wv",
+                     "cotton-denim,cotton-denim", "", ",", "pattern:plain", "pattern:nope", "Cotton Denim,w"],
+        "--kinds": ["irawan", "irawan,irawan+oren-nayar", "kang", "irawan,irawan", "", "nope", ",", "lambert"],
+        "--orientation-starts": ["1", "8", "9", "0", "-1", "1_0", "\u0662", " 2", "2.0", "99999999999999999999"],
+        "--candidate-evals": ["1", "600", "0", "2147483648", "1_0", "1e3", "+5"],
+        "--candidate-cv": ["0", "1", "2", "5", "-2", "1_0", "\u0665"],
+    }
+
+    @SETTINGS
+    @given(data=st.data())
+    def run(data):
+        argv = ["select", str(tmp_path / "fabric.yaml")]
+        chosen = [f for f in values if data.draw(st.booleans())]
+        for flag in chosen:
+            argv.append(f"{flag}={data.draw(st.one_of(st.sampled_from(values[flag]), TOKENS))}")
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # argparse: one usage error naming the option
+            err = capsys.readouterr().err
+            assert exc.code == 2 and any(f"argument {flag}" in err for flag in chosen), err
+            counts["refused (named)"] += 1
+            return
+        kind, settings = outcome(counts, _settings, cfg, args, options=tuple(values))
+        if kind == "accepted":
+            assert settings.kinds and all(k in MODEL_KINDS for k in settings.kinds)
+            assert len(set(settings.kinds)) == len(settings.kinds) and len(set(settings.weaves)) == len(settings.weaves)
+            assert all(w.startswith(("preset:", "pattern:")) or Path(w).is_file() for w in settings.weaves)
+            assert 1 <= settings.orientation_starts <= 8 and 1 <= settings.max_evals <= 2**31 - 1
+            assert settings.cv_folds == 0 or settings.cv_folds >= 2
+            assert len(candidates(settings)) >= 1
+            for item in argv[2:]:  # every count given was in plain digits
+                flag, value = item.split("=", 1)
+                if flag.startswith(("--orientation", "--candidate")):
+                    assert re.fullmatch(DIGITS, value.strip()), item
+
+    run()
+    report("select options", counts)

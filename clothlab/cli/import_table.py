@@ -90,7 +90,10 @@ def _reader_options(items):
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--option expects KEY=VALUE, got {item!r}", field="--option")
-        options[key.strip()] = load_yaml_text(value, error=ConfigError) if value.strip() else ""
+        try:
+            options[key.strip()] = load_yaml_text(value, error=ConfigError) if value.strip() else ""
+        except ConfigError as exc:
+            raise ConfigError(f"{key.strip()}: {exc.detail}", field="--option") from None
     return options
 
 

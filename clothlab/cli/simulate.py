@@ -34,7 +34,7 @@ def _number(low: float | None = None, high: float | None = None):
     return parse
 
 
-def _count(low: int, high: int):
+def count_type(low: int, high: int):
     """An argparse type: an integer in plain decimal digits (no ``1_0``, ``+``, non-ASCII digits) in [low, high]."""
     def parse(text: str) -> int:
         import argparse
@@ -63,9 +63,9 @@ def add_parser(sub):
     p.add_argument("--btf", type=Path, metavar="DIR",
                    help="write a simulated BTF stack (texture model, EXR + manifest) of the source into DIR "
                         "(source: preset:<name>, a fabric.yaml or a fit directory)")
-    p.add_argument("--btf-directions", type=_count(1, 4096), default=16,
+    p.add_argument("--btf-directions", type=count_type(1, 4096), default=16,
                    help="(light, view) pairs of the BTF stack (default 16)")
-    p.add_argument("--btf-size", type=_count(1, 16384), default=64,
+    p.add_argument("--btf-size", type=count_type(1, 16384), default=64,
                    help="BTF image size in pixels (default 64)")
     p.add_argument("--btf-tiles", type=_number(1e-3, 1e4), default=4.0,
                    help="weave tiles across a BTF image (default 4)")
@@ -78,13 +78,13 @@ def add_parser(sub):
     p.add_argument("--noise-mult", type=_number(0.0, MAX_NOISE_MULT), default=0.0,
                    help="multiplicative log-normal sigma (0.05 = 5 %%; at most 10)")
     p.add_argument("--noise-add", type=_number(0.0, MAX_NOISE_ADD), default=0.0, help="additive Gaussian sigma in 1/sr")
-    p.add_argument("--seed", type=_count(0, MAX_SEED), default=0, help="noise seed (default 0)")
+    p.add_argument("--seed", type=count_type(0, MAX_SEED), default=0, help="noise seed (default 0)")
     p.add_argument("--sampling", metavar="SPEC", default=None,
                    help="direction pairs of the table: paper (default: the paper's 225 x 7 grid), random:N "
                         "(N pairs, each direction uniform over the hemisphere in solid angle), random:N:cosine "
                         "(cosine-weighted), or a CSV file with columns theta_i,phi_i,theta_o,phi_o in degrees "
                         "(clothlab's azimuths)")
-    p.add_argument("--sampling-seed", type=_count(0, MAX_SEED), default=0, help="seed of random:N (default 0)")
+    p.add_argument("--sampling-seed", type=count_type(0, MAX_SEED), default=0, help="seed of random:N (default 0)")
     p.add_argument("--orientation", type=_number(), metavar="DEG", default=None,
                    help="rotate the generating weave by DEG about the normal (counter-clockwise from above; the "
                         "model parameter orientation)")
