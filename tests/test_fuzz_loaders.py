@@ -1023,3 +1023,34 @@ def test_fuzz_select_command_options(tmp_path, capsys):
 
     run()
     report("select options", counts)
+
+
+@pytest.mark.parametrize("case", ["merl dims", "tensor shape", "tensor count"])
+def test_huge_headers_are_refused_before_allocating(tmp_path, case):
+    """A header claiming the largest dimensions it can spell is refused from the header alone: the allocation
+    peak of the read stays within a few times the (tiny) file."""
+    from clothlab.errors import InputError
+    from clothlab.io.loader import load_measurement
+    from clothlab.io.rglbsdf import write_tensor_file
+
+    if case == "merl dims":
+        path = tmp_path / "h.binary"
+        path.write_bytes(struct.pack("<3i", 4096, 4096, 4096) + b"\0" * 64)
+    else:
+        path = tmp_path / "h.bsdf"
+        write_tensor_file({"ndf": np.ones((2, 3), np.float32)}, path)
+        data = bytearray(path.read_bytes())
+        if case == "tensor count":
+            struct.pack_into("<I", data, 14, 2**32 - 1)
+        else:
+            struct.pack_into("<2Q", data, 18 + 2 + 3 + 2 + 1 + 8, 2**40, 2**40)
+        path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputError) as info:
+            load_measurement(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert named(info.value, (path,)) and "byte offset" in info.value.detail, str(info.value)
+    assert peak < 4 << 20, peak
