@@ -204,7 +204,8 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
         file_names = [n.strip().strip('"').strip("'") for n in split(header_text)]
         if not rows:
             raise InputError("no data rows after the header row", path=path, line=header_line)
-    order, index, names_for_messages = _resolve(mapping, file_names, path, rows[0][0] - (1 if has_header else 0))
+    order, index, names_for_messages = _resolve(mapping, file_names, path,
+                                                header_line if has_header else rows[0][0])
     width = len(file_names) if file_names is not None else (mapping.width or max(index.values()) + 1)
     field_names = list(file_names) if file_names is not None else [
         next((n for n, k in index.items() if k == j), f"column {j + 1}") for j in range(width)]
@@ -233,8 +234,9 @@ def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
     """(clothlab names in order, file column index per name, file column name per name for messages)."""
     if mapping is None:
         if file_names is None:
-            raise ConfigError("the file has no header row naming its columns; give columns "
-                              "(e.g. theta_i,phi_i,theta_o,phi_o,R,G,B)", field="columns")
+            raise InputError("the file has no header row naming its columns; give columns "
+                             "(e.g. theta_i,phi_i,theta_o,phi_o,R,G,B)", path=path, line=header_line,
+                             field="columns")
         mapping = ColumnMap(tuple(file_names), names={n: n for n in file_names})
         try:
             _check_names(mapping.order)
@@ -242,8 +244,8 @@ def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
             raise InputError(f"header row: {exc.detail}; or give columns", path=path, line=header_line) from None
     if mapping.names is not None:
         if file_names is None:
-            raise ConfigError("columns map header names (name=header) but the file has no header row "
-                              "(header: no)", field="columns")
+            raise InputError("columns map header names (name=header) but the file has no header row (its first "
+                             "row is data, or header: no)", path=path, line=header_line, field="columns")
         index = {}
         for name, wanted in mapping.names.items():
             hits = [k for k, n in enumerate(file_names) if n == wanted]

@@ -42,6 +42,8 @@ NON_NEGATIVE_FIELDS = ("ndf", "sigma", "vndf", "luminance", "rgb", "spectra", "j
 """Fields holding densities or reflectance samples, which must be >= 0."""
 MAX_FIELDS = 1024
 MAX_NDIM = 16
+MAX_NAME_CHARS = 128
+"""Longest field name read (the format's own names are a few characters)."""
 _WHAT = "tensor file"
 
 
@@ -98,6 +100,9 @@ def read_tensor_file(path) -> dict[str, TensorField]:
             name = raw_name.decode("utf-8")
         except UnicodeDecodeError:
             raise InputError(f"field name at byte offset {start + 2} is not UTF-8", path=path) from None
+        if len(name) > MAX_NAME_CHARS or not name.isprintable():  # a damaged length swallows header bytes
+            raise InputError(f"field name at byte offset {start + 2} ({length} bytes, length at byte offset "
+                             f"{start}) is not a printable name of at most {MAX_NAME_CHARS} characters", path=path)
         if not name or name in fields:
             raise InputError(f"field name {name!r} at byte offset {start + 2} is empty or repeated", path=path,
                              field=name or None)
