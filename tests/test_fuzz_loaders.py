@@ -873,6 +873,7 @@ IMPORT_ARGS = {  # the options each import reproducer is read with, and the plac
     "import--only-comments.txt": ([], ":3"),
     "import--channels-with-space.txt": (["--columns=" + LAB_COLUMNS, "--channels=x y,g,b"], "--channels"),
     "import--channel-count.txt": (["--columns=" + LAB_COLUMNS, "--channels=a,b"], "--channels"),
+    "import--percent-comments-hide-no-header.txt": (["--columns=" + LAB_COLUMNS, "--comment=%"], ":1"),
     "ok--import-trailing-skipped-columns.txt": (["--columns=theta_i,phi_i,theta_o,phi_o,R,-,-",
                                                  "--delimiter=tab"], None),
     "ok--import-no-comment-char.txt": (["--comment="], None),
