@@ -755,6 +755,7 @@ def valid_sampling(result) -> None:
     assert isinstance(described, str) and described
     n = len(ti)
     assert n >= 1 and all(len(a) == n for a in (pi_, to, po))
+    assert len(set(zip(ti.tolist(), pi_.tolist(), to.tolist(), po.tolist(), strict=True))) == n  # no pair twice
     for t, p in ((ti, pi_), (to, po)):
         assert np.isfinite(t).all() and np.isfinite(p).all()
         assert (t >= 0).all() and (t < 90).all() and (p >= 0).all() and (p < 360).all()
@@ -1055,3 +1056,16 @@ def test_huge_headers_are_refused_before_allocating(tmp_path, case):
         tracemalloc.stop()
     assert named(info.value, (path,)) and "byte offset" in info.value.detail, str(info.value)
     assert peak < 4 << 20, peak
+
+
+@pytest.mark.parametrize("name", corpus("sampling--"))
+def test_corpus_sampling_files(tmp_path, capsys, monkeypatch, name):
+    """``simulate --sampling FILE`` refuses the file at its line, before the output table is written."""
+    from clothlab.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / name
+    path.write_bytes((CORPUS / name).read_bytes())
+    rc = main(["simulate", "preset:cotton-denim", "-o", "out.csv", f"--sampling={path}", "--nodes=3"])
+    refused_once(rc, capsys.readouterr().err, f"{path}:")
+    assert not (tmp_path / "out.csv").exists()

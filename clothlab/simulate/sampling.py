@@ -63,7 +63,7 @@ def file_sampling(path):
     the file, line and column of a bad value."""
     path = Path(path)
     text = read_text(path, limit=MAX_TABLE_BYTES, what="sampling file")
-    rows, header = [], None
+    rows, header, seen = [], None, {}
     for number, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
@@ -85,6 +85,11 @@ def file_sampling(path):
             if column.startswith("phi") and not -360.0 <= value <= 360.0:
                 raise InputError(f"{column} = {value:g} deg; expected an azimuth within one turn",
                                  path=path, line=number, field=column)
+        pair = (values[0], values[1] % 360.0, values[2], values[3] % 360.0)
+        if pair in seen:  # a table cannot hold one direction pair twice
+            raise InputError(f"the direction pair {tuple(values)} repeats line {seen[pair]}", path=path,
+                             line=number, field="theta_i,phi_i,theta_o,phi_o")
+        seen[pair] = number
         rows.append(values)
     if not rows:
         raise InputError(f"no direction pairs (expected the header {','.join(COLUMNS)} and rows)", path=path)
