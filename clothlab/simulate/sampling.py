@@ -11,7 +11,10 @@ sets such as a lab's sparse measurement (issue 14 item 9).
   draws come from numpy's PCG64 seeded by ``seed`` (``--sampling-seed``, default 0), xi1 in (0, 1] so no
   direction lies exactly on the horizon (a reflection model is 0 there);
 * a CSV file: a header ``theta_i,phi_i,theta_o,phi_o`` and one row per pair, in degrees, clothlab's azimuth
-  convention (counter-clockwise from the weft, docs/design.md principle 1); '#' lines are comments.
+  convention (counter-clockwise from the weft, docs/design.md principle 1); '#' lines are comments; no pair
+  twice.
+
+Either holds at most :data:`MAX_RANDOM` (1,000,000) pairs, so that the simulated table fits in memory.
 
 Each returns (theta_i, phi_i, theta_o, phi_o) in degrees, the form :func:`.gonio.simulate` takes.
 """
@@ -29,7 +32,9 @@ from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
 
 DISTRIBUTIONS = ("uniform", "cosine")
 COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
-MAX_RANDOM = 10_000_000
+MAX_RANDOM = 1_000_000
+"""Most direction pairs of a sampling (random:N or a file): a simulated table needs about 2 KB of memory per
+pair while it is evaluated, checked and written (1,000,000 pairs: about 2 GB; the paper's grid has 1,575)."""
 MAX_SEED = 2**64 - 1
 
 
@@ -91,6 +96,9 @@ def file_sampling(path):
                              line=number, field="theta_i,phi_i,theta_o,phi_o")
         seen[pair] = number
         rows.append(values)
+        if len(rows) > MAX_RANDOM:
+            raise InputError(f"more than {MAX_RANDOM} direction pairs; a simulated table is bounded to that many "
+                             "(about 2 KB of memory each)", path=path, line=number)
     if not rows:
         raise InputError(f"no direction pairs (expected the header {','.join(COLUMNS)} and rows)", path=path)
     a = np.array(rows, dtype=np.float64)
