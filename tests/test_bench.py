@@ -410,3 +410,19 @@ def test_clothlab_bench_command_runs_the_chosen_sections(tmp_path, capsys):
     assert json.loads(path.read_text())["sections"] == ["cli"]
     assert main(["bench", "--sections", "cli,bogus"]) == 2
     assert "--sections" in capsys.readouterr().err
+
+
+def test_report_section_times_both_ways_on_the_same_figures(tmp_path):
+    """The section's figures: the same report in one process and in two; the ratio is the two timings'."""
+    from test_report import write_synthetic_fit_dir
+
+    from clothlab.studies import report_speed
+
+    fit_dir = write_synthetic_fit_dir(tmp_path / "fits")
+    result = report_speed.report_speed(True, fit_dir=fit_dir, runs=1)  # no data: the examples are not needed
+    assert set(result["figures"]) >= {"hemispheres.png", "error_histogram.png", "parameters.png"}
+    assert result["ratio"] == pytest.approx(result["build_one_process_s"] / result["build_two_processes_s"])
+    assert 0 < result["cli_seconds_best"] <= result["cli_seconds_median"]
+    assert result["meets_target"] == (result["cli_seconds_median"] <= report_speed.REPORT_TARGET_S)
+    text = "\n".join(report_speed.lines(result))
+    assert "one process" in text and "two processes" in text and str(fit_dir) in text

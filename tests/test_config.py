@@ -634,3 +634,17 @@ def test_cv_scheme_defaults_to_auto_and_keeps_the_config_hash(tmp_path):
     err = fails(tmp_path, text)
     assert err.field == "fit.cv_scheme" and err.line == line_of(text, "cv_scheme:")
     assert "leave-one-out" in str(err) and "random" in str(err)
+
+
+@pytest.mark.parametrize("value", ["1", "0", "2000", "12.5", "true", "many"])
+def test_orientation_average_out_of_range_is_named_at_its_line(tmp_path, value):
+    text = edit(FULL, "  cv_folds: 4\n", f"  cv_folds: 4\n  orientation_average: {value}\n")
+    err = fails(tmp_path, text)
+    assert err.field == "fit.orientation_average" and err.line == line_of(text, "orientation_average")
+
+
+def test_orientation_average_is_read_and_hashed_only_when_not_the_default(tmp_path):
+    default = load_config(project(tmp_path, FULL))
+    given = load_config(project(tmp_path, edit(FULL, "  cv_folds: 4\n", "  cv_folds: 4\n  orientation_average: 32\n")))
+    assert default.fit.orientation_average == 128 and given.fit.orientation_average == 32
+    assert given.hash != default.hash

@@ -207,3 +207,77 @@ def test_neutral_refit_starts_from_the_start_values_not_the_optimum():
     assert out["held_out"]["p50"] < local["held_out"]["p50"]
     with pytest.raises(ValueError, match="unknown cross-validation refit"):
         cross_validate(problem, wrong, k=3, refit="warm")
+
+
+# ------------------------------------------------------------------------------------------- folds on a runner
+def _without_wall_time(cv: dict) -> dict:
+    return {key: value for key, value in cv.items() if key != "wall_time_s"}
+
+
+def test_folds_on_a_runner_give_the_in_process_figures_and_a_failed_attempt_is_retried(monkeypatch, caplog):
+    """One task per fold (in-process Runner): the same dict as the loop, bit for bit, for both refits; the
+    fold tasks' progress counts are shown; a fold raising once is retried by name and nothing changes."""
+    import io
+    import logging
+
+    from clothlab.config.schema import OptimizerConfig
+    from clothlab.fit import crossval
+    from clothlab.parallel import InProcessRunner
+    from clothlab.progress import configured
+
+    problem, truth = _problem(free=("warp.umax", "beta"), every=5)
+    opt = OptimizerConfig(max_evals=60, starts=2, seed=3)
+    for refit in ("local", "neutral"):
+        loop = cross_validate(problem, truth, k=4, seed=2, max_evals=40, refit=refit, optimizer=opt)
+        stream = io.StringIO()
+        with configured(0, stream=stream):
+            tasks = cross_validate(problem, truth, k=4, seed=2, max_evals=40, refit=refit, optimizer=opt,
+                                   runner=InProcessRunner())
+        assert _without_wall_time(tasks) == _without_wall_time(loop)
+        assert "cross-validation folds: 4 done, 0 running, 0 failed" in stream.getvalue()
+    real, attempts = crossval.fold_task, []
+
+    def flaky(job, fold):
+        attempts.append(fold)
+        if fold == 1 and attempts.count(1) == 1:
+            raise RuntimeError("worker lost")
+        return real(job, fold)
+
+    monkeypatch.setattr(crossval, "fold_task", flaky)
+    with caplog.at_level(logging.WARNING, logger="clothlab"):
+        retried = cross_validate(problem, truth, k=4, seed=2, max_evals=40, refit="neutral", optimizer=opt,
+                                 runner=InProcessRunner())
+    assert sorted(attempts) == [0, 1, 1, 2, 3]
+    assert "task fold 2/4 failed (RuntimeError: worker lost); retrying it (attempt 2 of 2)" in caplog.text
+    assert _without_wall_time(retried) == _without_wall_time(loop)
+
+
+def test_a_fold_failing_twice_is_a_note_and_the_fit_is_saved(tmp_path, monkeypatch):
+    """A fold task failing on both attempts: the fit's CV is ``failed`` with the finished folds kept, the
+    warning names the fold, and the fit is saved whole."""
+    import json
+
+    from clothlab.fit import crossval
+    from clothlab.fit.runner import run_fit, save_fit
+    from clothlab.parallel import InProcessRunner
+
+    cfg = load_config(ROOT / "measurements" / "polyester-lining" / "fabric.yaml")
+    cfg = replace(cfg, fit=replace(cfg.fit, free=("beta",), cv_folds=3, cv_refit="local", posterior=None,
+                                   optimizer=replace(cfg.fit.optimizer, max_evals=30, starts=1)))
+    real = crossval.fold_task
+
+    def broken(job, fold):
+        if fold == 2:
+            raise RuntimeError("out of memory")
+        return real(job, fold)
+
+    monkeypatch.setattr(crossval, "fold_task", broken)
+    result = run_fit(cfg, runner=InProcessRunner())
+    cv = result.cross_validation
+    assert cv["failed"] == "1 of 3 fold refits failed twice; first: cross-validation fold 3/3 failed 2 times: " \
+                           "RuntimeError: out of memory"
+    assert [f["fold"] for f in cv["folds"]] == [0, 1] and "held_out" not in cv
+    assert any(w.startswith("cross-validation (3-fold) incomplete") for w in result.warnings)
+    out = save_fit(result, fits_dir=tmp_path)
+    saved = json.loads((out / "fit.json").read_text())
+    assert saved["cross_validation"]["failed"] == cv["failed"] and saved["parameters"]["beta"]["value"] > 0

@@ -121,3 +121,14 @@ def test_valid_geometry_caps_the_default_bounds_at_the_segment_constraint():
     assert set(capped.geometry_caps) == {"weft.umax"}
     given = FitProblem(model, m, ("weft.umax",), start, {"weft.umax": (1.0, 60.0)}, "relative", valid_geometry=True)
     assert given.upper.tolist() == [60.0]  # bounds given explicitly are kept
+
+
+def test_box_check_budget_follows_the_fit_budget():
+    from clothlab.fit.optimize import BOX_CHECK_EVALS, BOX_CHECK_POINTS, box_check_budget
+
+    assert box_check_budget(1500) == (BOX_CHECK_EVALS, BOX_CHECK_POINTS)  # the example fits' check unchanged
+    for max_evals in (4, 10, 100, 600, 1000, 5000):
+        evals, points = box_check_budget(max_evals)
+        assert 1 <= evals <= min(BOX_CHECK_EVALS, max(1, max_evals // 5))
+        assert 2 <= points <= BOX_CHECK_POINTS and points & (points - 1) == 0  # a power of 2 (Sobol)
+        assert 2 * evals + points <= max(max_evals, 8)

@@ -59,7 +59,8 @@ def test_without_the_extra_workers_exits_2_with_one_line(tmp_path):
     configs = make_project(tmp_path)
     code = ("import sys\nsys.modules['distributed'] = None\nsys.modules['dask'] = None\n"
             "from clothlab.cli import main\nsys.exit(main(sys.argv[1:]))")
-    for argv in (["check", "--workers", "2"], ["fit", *map(str, configs), "--workers", "2"]):
+    for argv in (["check", "--workers", "2"], ["fit", *map(str, configs), "--workers", "2"],
+                 ["fit", str(configs[0]), "--cv", "2", "--workers", "2"]):
         out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=120)
         assert out.returncode == 2, out.stderr
         lines = out.stderr.strip().splitlines()
@@ -173,6 +174,30 @@ def test_batch_reports_a_failed_fit_and_keeps_the_others(tmp_path, capsys, monke
     assert not list((tmp_path / "fits").glob(".*"))  # no temporary or lock left behind
 
 
+def test_one_fit_starts_a_runner_for_its_cv_folds_only_when_it_has_some(tmp_path, monkeypatch):
+    """`clothlab fit one.yaml --workers 2`: no cluster for a fit without CV folds or posterior; with `--cv 2`
+    one, and the folds run on it as tasks."""
+    pytest.importorskip("distributed")
+    import clothlab.cli.options as options
+
+    [config] = make_project(tmp_path, ("polyester-lining",))
+    config.write_text(config.read_text().replace("  metric: relative\n", "  metric: relative\n  cv_refit: local\n"))
+    made = []
+
+    class Recording(InProcessRunner):
+        def map(self, fn, items, **kwargs):
+            made.append(kwargs.get("desc"))
+            return super().map(fn, items, **kwargs)
+
+    monkeypatch.setattr(options, "runner_of", lambda args: made.append("runner") or Recording())
+    assert main(["fit", str(config), "--workers", "2", "-q"]) == 0
+    assert made == []
+    assert main(["fit", str(config), "--workers", "2", "--cv", "2", "--force", "-q"]) == 0
+    assert made == ["runner", "cross-validation folds"]
+    cv = json.loads((tmp_path / "fits" / "polyester-lining" / "fit.json").read_text())["cross_validation"]
+    assert cv["k"] == 2 and cv["held_out"]["n"] > 0 and [f["fold"] for f in cv["folds"]] == [0, 1]
+
+
 # ------------------------------------------------------------------------------------------------- sweeps
 def test_chunked_sweep_equals_the_sequential_sweep_and_reuses_its_files(tmp_path, monkeypatch):
     from clothlab.studies import stability as check
@@ -194,6 +219,17 @@ def test_chunked_sweep_equals_the_sequential_sweep_and_reuses_its_files(tmp_path
             return []
 
     assert check.sweep_chunked([("t", rule, "all", sets)], wi, wo, Refusing(), tmp_path) == merged
+
+
+def test_check_findings_do_not_depend_on_the_runner():
+    """`clothlab check --workers N` path (chunks and continuity sweeps as tasks): the same findings as the
+    in-process run (fast subset; the full sweep on a cluster is in tests/test_parallel_cluster.py, slow)."""
+    from clothlab.studies.stability import run_check
+
+    here = run_check(full=False, seed=1)
+    tasks = run_check(full=False, seed=1, runner=InProcessRunner())
+    here.pop("wall_time_s"), tasks.pop("wall_time_s")
+    assert tasks == here and here["totals"]["configurations"] > 0
 
 
 def test_merge_keeps_the_first_examples_in_order():

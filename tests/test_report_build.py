@@ -83,3 +83,109 @@ def test_missing_or_corrupt_fit_json_is_named(tmp_path):
     (fit_dir / "fit.json").unlink()
     with pytest.raises(InputError, match="fit.json"):
         build_report(fit_dir, tmp_path / "reports")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# figures drawn in two processes
+
+
+def _figure_job(name, seed, log=None, fail=False):
+    def build():
+        import matplotlib.figure
+
+        if log is not None:
+            with open(log, "a") as f:
+                f.write(f"{name} {__import__('os').getpid()}\n")
+        if fail:
+            raise ValueError(f"figure {name} cannot be drawn")
+        fig = matplotlib.figure.Figure(figsize=(3, 2))
+        ax = fig.add_subplot()
+        ax.plot(np.random.default_rng(seed).random(50))
+        ax.set_title(name)
+        return fig
+    return name, build
+
+
+def _jobs(log=None, fail=()):
+    names = ["hemispheres", "corner", "slices", "parameters", "trace", "error_histogram"]
+    return [_figure_job(n, i, log, n in fail) for i, n in enumerate(names)]
+
+
+def test_two_process_figures_are_the_one_process_figures(tmp_path):
+    import os
+
+    one, two = tmp_path / "one", tmp_path / "two"
+    one.mkdir()
+    two.mkdir()
+    log = tmp_path / "pids.txt"
+    assert report_build.render_figures(_jobs(), one, processes=1) == {n: f"{n}.png" for n, _ in _jobs()}
+    seen = []
+    figures = report_build.render_figures(_jobs(log), two, processes=2, meanwhile=seen.append)
+    assert seen == [figures] and list(figures) == [n for n, _ in _jobs()]
+    for name in figures:
+        assert (one / f"{name}.png").read_bytes() == (two / f"{name}.png").read_bytes(), name
+    pids = {line.split()[1] for line in log.read_text().splitlines()}
+    assert len(pids) == 2 and str(os.getpid()) in pids  # half of them drawn by a child
+    with pytest.raises(ChildProcessError):
+        os.waitpid(-1, os.WNOHANG)  # and no child is left behind
+
+
+@pytest.mark.parametrize("fail", ["hemispheres", "corner"])
+def test_a_figure_that_fails_raises_here_whichever_process_drew_it(tmp_path, fail):
+    import os
+
+    with pytest.raises(ValueError, match=f"figure {fail} cannot be drawn"):
+        report_build.render_figures(_jobs(fail=(fail,)), tmp_path, processes=2)
+    with pytest.raises(ChildProcessError):
+        os.waitpid(-1, os.WNOHANG)
+
+
+def test_with_another_python_thread_every_figure_is_drawn_here(tmp_path):
+    import os
+    import threading
+
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    try:
+        log = tmp_path / "pids.txt"
+        report_build.render_figures(_jobs(log), tmp_path, processes=2)
+    finally:
+        stop.set()
+        thread.join()
+    assert {line.split()[1] for line in log.read_text().splitlines()} == {str(os.getpid())}
+
+
+# ---------------------------------------------------------------------------------------------------------
+# large fit directories: the vectorised CSV read and the exitant grouping
+
+
+@pytest.mark.parametrize("bad", ["1_0", "1e", "+-1", "nan", "inf", "", "0x10", "1" * 5000, "\u0661", "1e400"])
+def test_one_bad_cell_in_a_large_table_is_named_by_line_and_column(tmp_path, bad):
+    from clothlab.report.data import read_csv_table
+
+    rng = np.random.default_rng(4)
+    values = rng.uniform(-1e3, 1e3, (5000, 3))
+    lines = ["a,b,c"] + [",".join(repr(float(v)) for v in row) for row in values]
+    good = tmp_path / "good.csv"
+    good.write_text("\n".join(lines) + "\n")
+    table = read_csv_table(good)
+    for i, name in enumerate("abc"):
+        np.testing.assert_array_equal(table[name], values[:, i])  # repr round-trips exactly
+    lines[3001] = lines[3001].split(",")[0] + f",{bad}," + lines[3001].split(",")[2]
+    broken = tmp_path / "broken.csv"
+    broken.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError) as info:
+        read_csv_table(broken)
+    assert info.value.line == 3002 and info.value.field == "b" and str(broken) in str(info.value)
+
+
+def test_exitant_groups_are_the_rows_of_each_direction():
+    from clothlab.report.data import exitant_groups
+
+    rng = np.random.default_rng(5)
+    theta, phi = rng.choice([10.0, 30.0, 50.5], 400), rng.choice([0.0, 90.0, 180.0, 270.0], 400)
+    groups = exitant_groups({"theta_o": theta, "phi_o": phi})
+    assert [(t, p) for t, p, _ in groups] == sorted({(t, p) for t, p in zip(theta, phi, strict=True)})
+    for t, p, rows in groups:
+        np.testing.assert_array_equal(rows, np.flatnonzero((theta == t) & (phi == p)))

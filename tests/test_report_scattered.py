@@ -239,13 +239,18 @@ def test_kang_rows_do_not_show_the_papers_im_figures(tmp_path):
 
 
 def test_selection_section_renders_when_present_and_not_otherwise():
-    fit = {"selection": {"criterion": "5-fold CV error", "candidates": [
-        {"candidate": "cotton-twill, 37 deg", "cv_error": 0.051, "aic": -812.5, "winner": True},
-        {"candidate": "cotton-denim, 0 deg", "cv_error": 0.094, "aic": -640.1, "winner": False}]}}
-    assert len(selection_rows(fit)) == 2
+    fit = json.loads((ROOT / "fits" / "scattered-twill" / "fit.json").read_text())
+    candidates = fit["selection"]["candidates"]
+    assert len(selection_rows(fit)) == len(candidates) >= 2
     text = "".join(html._selection_section(fit))
-    assert "runners-up" in text and "cotton-denim, 0 deg" in text and "0.094" in text and "-812.5" in text
-    assert text.index("candidate") < text.index("cv_error") < text.index("aic")
+    assert "runners-up" in text and fit["selection"]["ranking"] in text
+    first, second = candidates[0], candidates[1]
+    assert f"{first['candidate']} (winner, this fit)" in text and f"{second['candidate']} (winner" not in text
+    assert text.index(first["candidate"]) < text.index(second["candidate"])  # ranked order kept
+    for row in (first, second):  # errors in %, as selection.md shows them
+        assert f"{100 * row['cv_mean']:.2f}" in text and f"{row['aic']:.1f}" in text
+    table = text[text.index("<table>"):]
+    assert table.index("CV mean %") < table.index("<th>AIC") < table.index("<th>BIC")
     assert html._selection_section({}) == [] and html._selection_section({"selection": "x"}) == []
 
 

@@ -38,7 +38,8 @@ def add_parser(sub):
 
     add_selection_options(p)
     add_quadrature_overrides(p)
-    add_parallel(p, "the fits (one task per fit; one fabric.yaml: chunks of its posterior's walkers)")
+    add_parallel(p, "the fits (one task per fit; one fabric.yaml: one task per cross-validation fold and chunks "
+                    "of its posterior's walkers)")
     return p
 
 
@@ -86,8 +87,9 @@ def _run(args, held) -> int:
         configs.append(cfg)
     if batch:
         return _run_batch(args, configs)
-    posterior = any(cfg.fit.posterior is not None for cfg in configs)
-    runner = held.enter_context(runner_of(args)) if parallel and posterior else None  # the posterior's pool
+    # the pool of the CV folds (one task each) and the posterior's walkers; no cluster when there is neither
+    pooled = any(cfg.fit.posterior is not None or cfg.fit.cv_folds >= 2 for cfg in configs)
+    runner = held.enter_context(runner_of(args)) if parallel and pooled else None
     for cfg in configs:
         result = run_fit(cfg, fits_dir=args.output, runner=runner)
         out = save_fit(result, force=args.force, fits_dir=args.output)

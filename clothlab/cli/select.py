@@ -91,6 +91,7 @@ def run(args) -> int:
     from clothlab.config import apply_overrides, load_config
     from clothlab.fit.select import save_selection, select
 
+    parallel = parallel_requested(args)  # Dask missing: the one-line error before anything is made
     with contextlib.ExitStack() as held:
         jobs = []
         for path in args.configs:  # every yaml checked, no result overwritten, before the first selection runs
@@ -104,7 +105,7 @@ def run(args) -> int:
             settings = _settings(cfg, args)
             held.enter_context(prepare_result((args.output or cfg.output.fits) / cfg.name, force=args.force))
             jobs.append((cfg, settings))
-        runner = held.enter_context(runner_of(args)) if parallel_requested(args) else None
+        runner = held.enter_context(runner_of(args)) if parallel else None
         for cfg, settings in jobs:
             selection = select(cfg, settings, fits_dir=args.output, runner=runner)
             out = save_selection(selection, force=args.force, fits_dir=args.output)

@@ -102,6 +102,10 @@ class PosteriorConfig:
     max_steps: int = DEFAULT_MAX_STEPS
 
 
+#: Orientations the model is averaged over for an isotropic measurement (``fit.orientation_average``).
+DEFAULT_ORIENTATION_AVERAGE = 128
+
+
 @dataclass(frozen=True)
 class FitConfig:
     """``fit``: free parameters, their fit bounds (declared units), metric, optimiser, posterior, CV folds and
@@ -118,6 +122,7 @@ class FitConfig:
     loss: str = "squared"  # rho applied to the metric residuals (clothlab.fit.loss)
     loss_scale: float = DEFAULT_LOSS_SCALE
     valid_geometry: bool = False  # default bounds shrunk to the geometry the model accepts (clothlab.fit.problem)
+    orientation_average: int = DEFAULT_ORIENTATION_AVERAGE  # for an isotropic measurement (clothlab.fit.problem)
 
 
 @dataclass(frozen=True)
@@ -218,6 +223,8 @@ class Config:
                 **({} if fit.cv_refit == "neutral" else {"cv_refit": fit.cv_refit}),
                 **({} if fit.loss == "squared" else {"loss": fit.loss, "loss_scale": fit.loss_scale}),
                 **({"valid_geometry": True} if fit.valid_geometry else {}),
+                **({} if fit.orientation_average == DEFAULT_ORIENTATION_AVERAGE
+                   else {"orientation_average": fit.orientation_average}),
             },
             "report": {"percentiles": list(self.report.percentiles)},
         }

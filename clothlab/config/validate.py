@@ -82,6 +82,7 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 NODES_RANGE = (2, 1000)
 MAX_NAME_CHARS = 200
 MAX_EVALS = 2**31 - 1  # nlopt's maxeval is a C int
+MAX_ORIENTATION_AVERAGE = 1024  # orientations of the isotropic average (each one model evaluation)
 SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
 
 
@@ -322,7 +323,8 @@ class _Validator:
     def fit(self, value: Any, model: ModelConfig) -> FitConfig:
         p = ("fit",)
         f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds",
-                                    "cv_scheme", "cv_refit", "loss", "loss_scale", "valid_geometry"))
+                                    "cv_scheme", "cv_refit", "loss", "loss_scale", "valid_geometry",
+                                    "orientation_average"))
         table = _param_table(model.kind)
         free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
@@ -353,9 +355,11 @@ class _Validator:
         valid_geometry = f.get("valid_geometry", FitConfig.valid_geometry)
         if not isinstance(valid_geometry, bool):
             raise self.at(p + ("valid_geometry",)).error(f"expected true or false, got {shown(valid_geometry)}")
+        orientation_average = f.get("orientation_average", FitConfig.orientation_average)
+        as_int(orientation_average, self.at(p + ("orientation_average",)), 2, MAX_ORIENTATION_AVERAGE)
         return FitConfig(free=free, bounds=bounds, metric=metric, optimizer=optimizer, posterior=posterior,
                          cv_folds=cv_folds, cv_scheme=cv_scheme, cv_refit=cv_refit, loss=loss, loss_scale=loss_scale,
-                         valid_geometry=valid_geometry)
+                         valid_geometry=valid_geometry, orientation_average=orientation_average)
 
     def free(self, value: Any, table) -> tuple:
         p = ("fit", "free")

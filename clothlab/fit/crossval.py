@@ -34,12 +34,16 @@ reason.  No held-out row is used to fit anything: for each fold
 Every row is held out exactly once; the pooled held-out predictions give the cross-validated relative-error
 percentiles (paper sec. 8 figures: median, 80th), reported with the in-sample ones of the full fit and the
 pooled training-row errors of the fold fits.
+
+The folds are independent: with a :class:`clothlab.parallel.Runner` each is one task (:func:`fold_task` on the
+shared :class:`FoldJob`), collected in fold order, so the figures are the in-process loop's bit for bit
+(docs/parallel.md).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -154,9 +158,85 @@ def _problem_of(source):
     return build_problem(source)
 
 
+@dataclass(frozen=True)
+class FoldJob:
+    """Everything a fold refit needs (the runner's shared object, placed on the workers once): the problem, the
+    fold labels and the refit settings.  A fold's result depends on this and its index only."""
+
+    problem: FitProblem
+    labels: np.ndarray
+    optimum_params: dict
+    refit: str
+    budget: int
+    seed: int
+    settings: OptimizerConfig
+    percentiles: tuple
+
+    @property
+    def n_folds(self) -> int:
+        return int(self.labels.max()) + 1
+
+
+def _local(prob, start, budget, seed, desc):
+    """The local refit: LN_BOBYQA from ``start``, ``budget`` evaluations."""
+    k_free = len(prob.free)
+    with Progress(budget if k_free else 1, desc, unit="eval") as bar:
+        result = minimize(prob, prob.to_unit(start), np.zeros(k_free), np.ones(k_free), global_algorithm=None,
+                          local_algorithm=DEFAULT_LOCAL, max_evals=budget, seed=seed,
+                          callback=lambda row: bar.update(1))
+    return prob.from_unit(result.x), result
+
+
+def fold_task(job: FoldJob, fold: int) -> dict:
+    """Refit fold ``fold`` of ``job`` on its training rows and predict its held-out rows (one runner task; a
+    module-level function).  Returns the fold's summary (``"summary"``) and the arrays the pooled figures
+    need."""
+    problem = job.problem
+    test = job.labels == fold
+    desc = f"cross-validation fold {fold + 1}/{job.n_folds}"
+    bounds = {name: (float(lo), float(hi)) for name, lo, hi in zip(problem.free, problem.lower, problem.upper,
+                                                                   strict=True)}
+    neutral = job.refit == "neutral" and bool(problem.free)
+    sub = FitProblem(problem.model, problem.measurement.subset(~test), problem.free,
+                     problem.start if neutral else job.optimum_params, bounds, problem.metric, loss=problem.loss,
+                     loss_scale=problem.loss_scale)
+    if neutral:
+        settings = job.settings
+        with Progress(settings.max_evals + settings.polish_evals, desc, unit="eval") as bar:
+            result = multistart_minimize(sub, sub.to_unit(sub.start), settings, lambda row: bar.update(1))
+        params = sub.from_unit(result.x)
+    else:
+        params, result = _local(sub, job.optimum_params, job.budget, job.seed, desc)
+    sol = sub.solve(params)
+    held_out = problem.design(params)[test] @ sol.coefficients
+    summary = {"fold": fold, "n_train": int((~test).sum()), "n_test": int(test.sum()),
+               "held_out": error_percentiles(problem.y[test], held_out, job.percentiles)["overall"],
+               "train": error_percentiles(sub.y, sol.prediction, job.percentiles)["overall"],
+               "evaluations": int(result.nevals), "objective": float(result.fun),
+               "params": {name: float(params[name]) for name in problem.free}}
+    return {"summary": summary, "held_out": held_out, "train_measured": sub.y, "train_model": sol.prediction}
+
+
+def _run_folds(job: FoldJob, runner) -> tuple[list, list[str]]:
+    """Every fold's :func:`fold_task` result in fold order (a failure: None) and a note per failed fold.
+
+    No runner: the in-process loop (an error propagates).  A runner: one task per fold, ``job`` shared; a fold
+    failing twice (the runner retries once) leaves None and a note."""
+    folds = range(job.n_folds)
+    if runner is None:
+        return [fold_task(job, fold) for fold in folds], []
+    from clothlab.parallel import TaskFailure
+
+    names = [f"fold {fold + 1}/{job.n_folds}" for fold in folds]
+    outcomes = runner.map(fold_task, folds, shared=job, names=names, desc="cross-validation folds")
+    notes = [f"cross-validation {o.name} failed {o.attempts} times: {o.error}" for o in outcomes
+             if isinstance(o, TaskFailure)]
+    return [None if isinstance(o, TaskFailure) else o for o in outcomes], notes
+
+
 def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, seed: int = 0,
                    max_evals: int | None = None, percentiles=(50, 80), scheme: str = "auto",
-                   refit: str = "local", optimizer: OptimizerConfig | None = None) -> dict:
+                   refit: str = "local", optimizer: OptimizerConfig | None = None, runner=None) -> dict:
     """k-fold cross-validated relative-error percentiles (fractions) of a fit.
 
     Parameters
@@ -171,14 +251,18 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
     max_evals : evaluations per fold refit (default 300 for local, :data:`NEUTRAL_EVALS` for neutral).
     optimizer : the fit's optimizer settings for a neutral refit (algorithms, starts, design, seed; its budget
         replaced by ``max_evals``); default :class:`clothlab.config.schema.OptimizerConfig`.
+    runner : a :class:`clothlab.parallel.Runner`: each fold's refit as one task (:func:`fold_task`, the
+        problem placed on the workers once), collected in fold order, so every figure equals the in-process
+        loop's (None, the default: that loop).  A fold failing on both attempts makes the result ``failed``
+        (the finished folds kept in ``folds``, no pooled figures), never an exception.
 
     Returns ``{"k", "seed", "scheme", "scheme_reason", "split", "refit", "refit_mode", "budget", "held_out":
     {"p50", "p80", "mean", "n"}, "in_sample": {...}, "train_folds": {...}, "folds": [...], "wall_time_s",
     "notes"}``.
 
     With no free parameter only the coefficients are re-solved per fold.  Progress: "cross-validation fold
-    3/5" (:class:`clothlab.progress.Progress`).  Raises :class:`CrossValidationError` when the data are too
-    few for the folds (checked before any refit).
+    3/5" (:class:`clothlab.progress.Progress`), with a runner the fold tasks' done / running / failed counts.
+    Raises :class:`CrossValidationError` when the data are too few for the folds (checked before any refit).
     """
     if refit not in REFITS:
         raise ValueError(f"unknown cross-validation refit {refit!r}; expected one of {', '.join(REFITS)}")
@@ -189,57 +273,19 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
     labels = fold_labels(m, k, seed, scheme)
     n_folds = int(labels.max()) + 1
     budget = int(max_evals if max_evals is not None else NEUTRAL_EVALS if refit == "neutral" else LOCAL_EVALS)
-    bounds = {name: (float(lo), float(hi)) for name, lo, hi in zip(problem.free, problem.lower, problem.upper,
-                                                                   strict=True)}
-    k_free = len(problem.free)
     notes = []
     settings = replace(optimizer or OptimizerConfig(), max_evals=max(budget, 2), polish=budget // 3,
                        box_check=False)
     settings = replace(settings, starts=min(settings.starts, settings.max_evals))
-
-    def local(prob, start, desc):
-        with Progress(budget if k_free else 1, desc, unit="eval") as bar:
-            result = minimize(prob, prob.to_unit(start), np.zeros(k_free), np.ones(k_free), global_algorithm=None,
-                              local_algorithm=DEFAULT_LOCAL, max_evals=budget, seed=seed,
-                              callback=lambda row: bar.update(1))
-        return prob.from_unit(result.x), result
-
-    def neutral(prob, desc):
-        with Progress(settings.max_evals + settings.polish_evals, desc, unit="eval") as bar:
-            result = multistart_minimize(prob, prob.to_unit(prob.start), settings, lambda row: bar.update(1))
-        return prob.from_unit(result.x), result
-
     if optimum_params is None:
-        optimum_params, _ = local(problem, problem.start, "cross-validation, polish of the start")
+        optimum_params, _ = _local(problem, problem.start, budget, seed, "cross-validation, polish of the start")
         notes.append(f"no optimum given: the start values were polished on all rows ({DEFAULT_LOCAL}, "
                      f"{budget} evaluations) first")
     optimum_params = {name: optimum_params[name] for name in problem.start}
     full = problem.solve(optimum_params)
-    held_out = np.full_like(problem.y, np.nan)
-    train_measured, train_model, folds = [], [], []
-    for fold in range(n_folds):
-        test = labels == fold
-        desc = f"cross-validation fold {fold + 1}/{n_folds}"
-        if refit == "neutral" and k_free:
-            sub = FitProblem(problem.model, m.subset(~test), problem.free, problem.start, bounds, problem.metric,
-                             loss=problem.loss, loss_scale=problem.loss_scale)
-            params, result = neutral(sub, desc)
-        else:
-            sub = FitProblem(problem.model, m.subset(~test), problem.free, optimum_params, bounds, problem.metric,
-                             loss=problem.loss, loss_scale=problem.loss_scale)
-            params, result = local(sub, optimum_params, desc)
-        sol = sub.solve(params)
-        design = problem.design(params)[test]
-        held_out[test] = design @ sol.coefficients
-        train_measured.append(sub.y)
-        train_model.append(sol.prediction)
-        fold_errors = error_percentiles(problem.y[test], held_out[test], percentiles)["overall"]
-        train_errors = error_percentiles(sub.y, sol.prediction, percentiles)["overall"]
-        folds.append({"fold": fold, "n_train": int((~test).sum()), "n_test": int(test.sum()),
-                      "held_out": fold_errors, "train": train_errors, "evaluations": int(result.nevals),
-                      "objective": float(result.fun),
-                      "params": {name: float(params[name]) for name in problem.free}})
-    if not k_free:
+    job = FoldJob(problem, labels, optimum_params, refit, budget, seed, settings, tuple(percentiles))
+    results, failures = _run_folds(job, runner)
+    if not problem.free:
         how = "each fold: linear coefficients re-solved on the training rows (no free parameter)"
     elif refit == "neutral":
         how = (f"each fold: the fit's search from the start values, not from the full fit's optimum ({settings.design} "
@@ -249,14 +295,24 @@ def cross_validate(source, optimum_params: dict | None = None, *, k: int = 5, se
         how = (f"each fold: local optimiser only ({DEFAULT_LOCAL}, {budget} evaluations) from the full fit's "
                "optimum on the training rows (held-out errors may be optimistic); linear coefficients re-solved "
                "on the training rows")
+    out = {"k": n_folds, "seed": seed, "scheme": scheme, "scheme_reason": reason, "split": SPLITS[scheme],
+           "refit": how, "refit_mode": refit, "budget": budget}
+    if failures:
+        done = [r["summary"] for r in results if r is not None]
+        failed = f"{len(failures)} of {n_folds} fold refits failed twice; first: {failures[0]}"
+        return {**out, "failed": failed, "folds": done, "wall_time_s": time.perf_counter() - started,
+                "notes": [*notes, *failures]}
+    held_out = np.full_like(problem.y, np.nan)
+    for fold, r in enumerate(results):
+        held_out[labels == fold] = r["held_out"]
+    train_measured = np.concatenate([r["train_measured"] for r in results])
+    train_model = np.concatenate([r["train_model"] for r in results])
     return {
-        "k": n_folds, "seed": seed, "scheme": scheme, "scheme_reason": reason,
-        "split": SPLITS[scheme], "refit": how, "refit_mode": refit, "budget": budget,
+        **out,
         "held_out": error_percentiles(problem.y, held_out, percentiles)["overall"],
         "in_sample": error_percentiles(problem.y, full.prediction, percentiles)["overall"],
-        "train_folds": error_percentiles(np.concatenate(train_measured), np.concatenate(train_model),
-                                         percentiles)["overall"],
-        "folds": folds,
+        "train_folds": error_percentiles(train_measured, train_model, percentiles)["overall"],
+        "folds": [r["summary"] for r in results],
         "wall_time_s": time.perf_counter() - started,
         "notes": notes,
     }

@@ -228,7 +228,8 @@ def _error_section(fit: dict) -> Section:
     lines = []
     cv = fit.get("cross_validation")
     if cv and cv.get("failed"):
-        lines.append(f"cross-validation ({cv.get('k')}-fold) not run: {cv['failed']}")
+        state = "incomplete" if cv.get("folds") else "not run"  # some fold refits landed, or none
+        lines.append(f"cross-validation ({cv.get('k')}-fold) {state}: {cv['failed']}")
     elif cv:
         rows.append(row(f"cross-validated ({cv.get('k')}-fold, held out)", cv.get("held_out") or {}))
         rows.append(row("  fold fits on their training rows", cv.get("train_folds") or {}))

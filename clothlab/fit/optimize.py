@@ -516,13 +516,22 @@ def polish(problem, best: OptimizeResult, opt, callback=None) -> OptimizeResult:
 #: The enlarged-box check moves every bound out by this fraction of its range (in the optimiser's coordinates,
 #: i.e. in log for log-scaled parameters), clipped to the parameter's physical range.
 BOX_ENLARGE = 0.25
-#: Evaluations of each local search of the check; points of its design screen of the enlarged box.
+#: Evaluations of each local search of the check; points of its design screen of the enlarged box: at most
+#: these, and at most a fifth (local searches) and an eighth (screen, a power of 2) of the fit's own
+#: ``max_evals`` (:func:`box_check_budget`), so a small fit gets a small check.
 BOX_CHECK_EVALS = 300
 BOX_CHECK_POINTS = 128
 #: The optimum "moves" when the enlarged box holds a point lower by more than this fraction of the objective
 #: that lies more than BOX_MOVE_SHIFT (fraction of the original range) from it.
 BOX_MOVE_RTOL = 1e-4
 BOX_MOVE_SHIFT = 1e-2
+
+
+def box_check_budget(max_evals: int) -> tuple[int, int]:
+    """(evaluations of each local search, points of the screen) of the box check of a fit of ``max_evals``."""
+    evals = max(1, min(BOX_CHECK_EVALS, int(max_evals) // 5))
+    points = min(BOX_CHECK_POINTS, 2 ** max(1, int(np.log2(max(2, int(max_evals) // 8)))))
+    return evals, points
 
 
 def box_check(problem, best: OptimizeResult, opt, callback=None) -> OptimizeResult:
@@ -542,10 +551,11 @@ def box_check(problem, best: OptimizeResult, opt, callback=None) -> OptimizeResu
     trace, offset, time_offset = list(best.trace), best.nevals, best.wall_time
     local = opt.local_algorithm or MLSL_LOCAL
     found: list[tuple[float, np.ndarray]] = []
-    with Progress(2 * BOX_CHECK_EVALS + BOX_CHECK_POINTS, "box check", unit="eval") as bar:
+    evals, points = box_check_budget(opt.max_evals)
+    with Progress(2 * evals + points, "box check", unit="eval") as bar:
         step = _StageCallback(bar, "", callback)
         design = getattr(opt, "design", "none")
-        X = design_points("sobol" if design == "none" else design, k, BOX_CHECK_POINTS, opt.seed + 1)
+        X = design_points("sobol" if design == "none" else design, k, points, opt.seed + 1)
         values, rows = _screen(big, X, callback, bar)
         theta = np.array([[p[name] for name in problem.free] for p in big.from_unit_many(X)])
         outside = ((theta < problem.lower) | (theta > problem.upper)).any(axis=1)
@@ -560,7 +570,7 @@ def box_check(problem, best: OptimizeResult, opt, callback=None) -> OptimizeResu
         time_offset += rows[-1].time
         for x_start in starts:
             result = minimize(big, x_start, np.zeros(k), np.ones(k), global_algorithm=None, local_algorithm=local,
-                              max_evals=BOX_CHECK_EVALS, seed=opt.seed, callback=step)
+                              max_evals=evals, seed=opt.seed, callback=step)
             for row in result.trace:
                 trace.append(row._replace(index=row.index + offset, time=row.time + time_offset,
                                           stage="box-check", best=min(row.best, best.fun)))

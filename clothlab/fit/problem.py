@@ -13,6 +13,15 @@ seen by the optimiser in [0, 1]: x = (T(theta) - T(lo)) / (T(hi) - T(lo)) with T
 declared with a log transform, identity otherwise (the parameters' scales differ by orders of magnitude).
 With no free parameter (k = 0) the box is empty and the objective is a single NNLS solve of the coefficients.
 
+An isotropic measurement (``Measurement.isotropic``, e.g. a MERL table: only phi_o - phi_i was measured)
+constrains only the BRDF averaged over the fabric's orientation about the normal, so for it every component
+is that average (``orientation_nodes`` orientations, midpoint rule over one period of the model,
+:attr:`clothlab.models.base.Model.orientation_period`):
+
+    component_k(theta)[n] = (1/M) sum_{m=0}^{M-1} component_k(theta, orientation = (m + 1/2) P / M - P/2)[n]
+
+and ``orientation`` itself cannot be fitted (docs/formats.md, "MERL"; accuracy against M: docs/fitting.md).
+
 :func:`build_problem` makes the problem of a configuration (measurement, weave, model);
 :func:`collinearity_notes` and :func:`evaluation_speed` describe a problem's design at a parameter point.
 """
@@ -25,11 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clothlab.config.schema import DEFAULT_ORIENTATION_AVERAGE
 from clothlab.errors import ConfigError, GeometryWarning
 from clothlab.fit.loss import DEFAULT_SCALE, check_loss, effective_residuals, irls_coefficients, loss_value
 from clothlab.fit.metrics import check_measurement_for_metric, linear_weights, metric_residuals
 from clothlab.fit.nnls import nnls_sets, nnls_small
 from clothlab.io.loader import load_measurement
+from clothlab.models.base import ORIENTATION
 from clothlab.models.components import coefficient_name
 from clothlab.models.registry import build_model
 from clothlab.weave.presets import resolve_weave
@@ -50,7 +61,7 @@ class FitProblem:
 
     def __init__(self, model, measurement, free, start: dict | None = None, bounds: dict | None = None,
                  metric: str = "relative", *, loss: str = "squared", loss_scale: float = DEFAULT_SCALE,
-                 valid_geometry: bool = False):
+                 valid_geometry: bool = False, orientation_nodes: int = DEFAULT_ORIENTATION_AVERAGE):
         check_loss(loss)
         if not (np.isfinite(loss_scale) and loss_scale > 0):
             raise ConfigError(f"loss scale must be a positive number, got {loss_scale!r}", field="fit.loss_scale")
@@ -81,6 +92,23 @@ class FitProblem:
         self.weights = linear_weights(self.y, metric)
         self.component_names = tuple(model.component_names)
         self.evaluations = 0
+        self.orientations = self._averaged_orientations(orientation_nodes)
+
+    def _averaged_orientations(self, nodes: int) -> np.ndarray | None:
+        """The orientations (deg) an isotropic measurement averages the model over (module docstring), or
+        None (an anisotropic measurement, or a model that does not depend on the orientation)."""
+        period = float(getattr(self.model, "orientation_period", 0.0))
+        if not self.measurement.isotropic or period <= 0:
+            return None
+        if ORIENTATION in self.free:
+            raise ConfigError(f"{self.measurement.source or 'the measurement'} is an isotropic measurement (only "
+                              "phi_o - phi_i was measured): the model is averaged over the fabric's orientation, "
+                              "which therefore cannot be fitted; remove orientation from fit.free",
+                              field="fit.free")
+        if int(nodes) < 2:
+            raise ConfigError(f"orientation average needs at least 2 orientations, got {nodes}",
+                              field="fit.orientation_average")
+        return (np.arange(int(nodes)) + 0.5) * period / int(nodes) - 0.5 * period
 
     def _cap_invalid_geometry(self, given: dict, steps: int = 60) -> None:
         """Shrink the default bounds (not those given in ``given``) of each free parameter to the geometry the
@@ -163,10 +191,16 @@ class FitProblem:
         measured directions unless ``wi``, ``wo`` are given."""
         wi = self.wi if wi is None else np.ascontiguousarray(wi, dtype=np.float64)
         wo = self.wo if wo is None else np.ascontiguousarray(wo, dtype=np.float64)
+        angles = self.orientations
+        if angles is not None:  # every set at every orientation of the average, averaged below
+            params_list = [{**p, ORIENTATION: float(a)} for p in params_list for a in angles]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GeometryWarning)
             comps = self.model.components_many(wi, wo, params_list, normalised=normalised, warn=False)
-        return np.stack([comps[name] for name in self.component_names], axis=2)
+        out = np.stack([comps[name] for name in self.component_names], axis=2)
+        if angles is None:
+            return out
+        return out.reshape((-1, len(angles)) + out.shape[1:]).mean(axis=1)
 
     def solve(self, params: dict, *, normalised: bool = False) -> Solution:
         """Coefficients by weighted NNLS (IRLS for a robust loss), prediction and objective at ``params``."""
@@ -229,7 +263,8 @@ def build_problem(config, measurement=None) -> FitProblem:
     model = build_model(config.model.kind, weave, (q.rule, q.nodes), **config.model.options)
     fit = config.fit
     return FitProblem(model, measurement, fit.free, config.model.params, fit.bounds, fit.metric,
-                      loss=fit.loss, loss_scale=fit.loss_scale, valid_geometry=fit.valid_geometry)
+                      loss=fit.loss, loss_scale=fit.loss_scale, valid_geometry=fit.valid_geometry,
+                      orientation_nodes=fit.orientation_average)
 
 
 def collinearity_notes(design: np.ndarray, names, threshold: float = 0.999) -> list[str]:

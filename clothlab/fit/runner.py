@@ -105,14 +105,15 @@ def _notes_at_optimum(problem, params, optimum, coefficients) -> list[str]:
     return notes
 
 
-def _cross_validate(result, problem, params, config) -> None:
-    """Cross-validation into ``result``; a problem (data too few for the folds, or any error inside a fold refit)
-    becomes a note and a warning, never an exception: a CV problem never costs the fit."""
+def _cross_validate(result, problem, params, config, runner=None) -> None:
+    """Cross-validation into ``result`` (the folds as tasks on ``runner`` when given); a problem (data too few for
+    the folds, any error inside a fold refit, a fold task failing twice) becomes a note and a warning, never an
+    exception: a CV problem never costs the fit."""
     k = config.fit.cv_folds
     try:
         cv = crossval.cross_validate(problem, params, k=k, seed=config.fit.optimizer.seed,
                                      percentiles=config.report.percentiles, scheme=config.fit.cv_scheme,
-                                     refit=config.fit.cv_refit, optimizer=config.fit.optimizer)
+                                     refit=config.fit.cv_refit, optimizer=config.fit.optimizer, runner=runner)
     except Exception as exc:  # noqa: BLE001 - the fit is kept; the failure is reported as a note
         detail = str(exc) if isinstance(exc, crossval.CrossValidationError) else f"{type(exc).__name__}: {exc}"
         note = f"cross-validation ({k}-fold) not run: {detail}"
@@ -122,6 +123,11 @@ def _cross_validate(result, problem, params, config) -> None:
         return
     result.cross_validation = cv
     result.timings["cross_validation_s"] = cv["wall_time_s"]
+    if cv.get("failed"):
+        note = f"cross-validation ({k}-fold) incomplete: {cv['failed']}"
+        result.warnings.append(note)
+        log.warning("%s: %s", config.name, note)
+        return
     log.debug("%s: cross-validation (%s) %.1f s, held-out median %.4g", config.name, cv["scheme"],
               cv["wall_time_s"], cv["held_out"]["p50"])
 
@@ -135,8 +141,10 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     cross-validation (``fit.cv_folds`` >= 2) and the emcee posterior (``fit.posterior``, or ``posterior`` = a
     PosteriorConfig given here, e.g. by ``clothlab fit --posterior``), resumable from its checkpoint
     (:func:`clothlab.fit.store.checkpoint_path` under ``fits_dir``) if interrupted; ``posterior_progress``
-    False silences the sampler's progress; ``runner`` (a :class:`clothlab.parallel.Runner`) may evaluate the
-    posterior's walkers in chunks when that is faster (same chain; :func:`clothlab.fit.posterior.run_posterior`).
+    False silences the sampler's progress; ``runner`` (a :class:`clothlab.parallel.Runner`) runs the
+    cross-validation folds as one task each (same figures; :func:`clothlab.fit.crossval.cross_validate`) and may
+    evaluate the posterior's walkers in chunks when that is faster (same chain;
+    :func:`clothlab.fit.posterior.run_posterior`).
     With no free parameter only the coefficients are solved and the
     posterior is skipped (noted).
     """
@@ -164,7 +172,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     result.timings["standard_errors_s"] = time.perf_counter() - tic
     result.evaluation_speed = evaluation_speed(problem, params)
     if config.fit.cv_folds >= 2:
-        _cross_validate(result, problem, params, config)
+        _cross_validate(result, problem, params, config, runner)
     post = posterior or config.fit.posterior
     if post is not None and not problem.free:
         result.warnings.append(NOTHING_TO_SAMPLE)

@@ -135,12 +135,14 @@ def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=
                           cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds))
 
 
-def candidates(settings: SelectSettings) -> list[Candidate]:
-    """The candidate list (module docstring), in weave, kind, orientation-start order."""
+def candidates(settings: SelectSettings, isotropic: bool = False) -> list[Candidate]:
+    """The candidate list (module docstring), in weave, kind, orientation-start order; for an ``isotropic``
+    measurement one candidate per weave and kind, the orientation not freed (the fit averages the model over
+    it: :mod:`clothlab.fit.problem`)."""
     out = []
     for weave in settings.weaves:
         for kind in settings.kinds:
-            if model_class(kind).orientation_period == 0.0:
+            if isotropic or model_class(kind).orientation_period == 0.0:
                 out.append(Candidate(weave, kind, None))
                 continue
             out += [Candidate(weave, kind, j) for j in range(1, max(1, int(settings.orientation_starts)) + 1)]
@@ -304,7 +306,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
                                        else config.measurement.format, **config.measurement.options)
     run_task = run_task or fit_candidate
     tasks = [CandidateTask(config, c, settings.max_evals, settings.cv_folds, measurement)
-             for c in candidates(settings)]
+             for c in candidates(settings, measurement.isotropic)]
     if not tasks:
         raise ConfigError("no candidates: select.weaves and select.kinds must each name at least one",
                           field="select")
@@ -336,7 +338,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
                                   cv_folds=config.fit.cv_folds, start=best.params, optimizer=config.fit.optimizer,
                                   posterior=posterior or config.fit.posterior,
                                   orientation=best.params.get(ORIENTATION, 0.0))  # its box centred there
-    winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir)
+    winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir, runner=runner)
     return Selection(ranked, winner, settings, time.perf_counter() - started)
 
 
@@ -357,25 +359,33 @@ def table_columns(selection: Selection) -> dict:
     return {c: [_cell(r.row[c]) for r in selection.ranked] for c in TABLE_COLUMNS}
 
 
-def table_markdown(selection: Selection) -> str:
-    """The comparison table as markdown (errors in %), with the ranking rule and the likelihood note."""
-    head = ("rank", "candidate", "orientation (deg)", "CV mean %", "CV p50 %", "CV p80 %", "p50 %", "p80 %",
-            "k", "AIC", "BIC", "note")
-    lines = [f"# Model selection: {selection.winner.config.name}", "",
-             f"Ranked by {RANKING}.  {LIKELIHOOD}.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+DISPLAY_HEAD = ("rank", "candidate", "orientation (deg)", "CV mean %", "CV p50 %", "CV p80 %", "p50 %", "p80 %",
+                "k", "AIC", "BIC", "note")
 
+
+def display_rows(rows) -> list[tuple[str, ...]]:
+    """The comparison table's cells under :data:`DISPLAY_HEAD` (errors in %), one tuple of strings per row dict
+    of :data:`TABLE_COLUMNS` (a :class:`Selection`'s rows or fit.json ``selection.candidates``; missing
+    entries are blank)."""
     def pct(v):
         return "" if v is None else f"{100.0 * v:.2f}"
 
-    for r in selection.ranked:
-        row = r.row
-        cells = (row["rank"], row["candidate"], "" if row["orientation"] is None else f"{row['orientation']:.2f}",
-                 pct(row["cv_mean"]), pct(row["cv_p50"]), pct(row["cv_p80"]), pct(row["in_sample_p50"]),
-                 pct(row["in_sample_p80"]), row["k"] if row["k"] is not None else "",
-                 "" if row["aic"] is None else f"{row['aic']:.1f}", "" if row["bic"] is None else f"{row['bic']:.1f}",
-                 (row["note"] or "").replace("|", "/"))
-        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+    def num(v, digits):
+        return "" if v is None else f"{v:.{digits}f}"
+
+    return [(str(row.get("rank", "")), str(row.get("candidate", "")), num(row.get("orientation"), 2),
+             pct(row.get("cv_mean")), pct(row.get("cv_p50")), pct(row.get("cv_p80")), pct(row.get("in_sample_p50")),
+             pct(row.get("in_sample_p80")), "" if row.get("k") is None else str(row["k"]), num(row.get("aic"), 1),
+             num(row.get("bic"), 1), str(row.get("note") or "")) for row in rows]
+
+
+def table_markdown(selection: Selection) -> str:
+    """The comparison table as markdown (errors in %), with the ranking rule and the likelihood note."""
+    lines = [f"# Model selection: {selection.winner.config.name}", "",
+             f"Ranked by {RANKING}.  {LIKELIHOOD}.", "",
+             "| " + " | ".join(DISPLAY_HEAD) + " |", "|" + "---|" * len(DISPLAY_HEAD)]
+    for cells in display_rows(r.row for r in selection.ranked):
+        lines.append("| " + " | ".join(c.replace("|", "/") for c in cells) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -25,7 +25,6 @@ import io
 import json
 import math
 import platform
-import warnings
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -34,10 +33,9 @@ import numpy as np
 
 from clothlab import __version__
 from clothlab.atomic import atomic_directory
-from clothlab.errors import GeometryWarning, InputError, ResultError
+from clothlab.errors import InputError, ResultError
 from clothlab.fit.fitreport import Reportable
 from clothlab.frames import spherical_to_vector
-from clothlab.models.components import combine
 from clothlab.models.registry import build_model
 from clothlab.strict import load_json_file
 from clothlab.weave.wvformat import format_wv, parse_wv
@@ -254,10 +252,8 @@ def slice_table(result, step: float = 1.0) -> dict:
     phi_i = np.where(signed_all >= 0, phi_o + 180.0, phi_o) % 360.0
     wi = spherical_to_vector(np.abs(signed_all), phi_i)
     wo = spherical_to_vector(theta_o, phi_o)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", GeometryWarning)
-        comps = problem.model.components(wi, wo, result.params, normalised=True, warn=False)
-    values = combine(comps, result.coefficients)
+    # the fit's own design (the orientation average of an isotropic measurement included), its coefficients
+    values = problem.designs([result.params], normalised=True, wi=wi, wo=wo)[0] @ result.solution.coefficients
     table = {"theta_o": theta_o, "phi_o": phi_o, "signed_theta_i": signed_all}
     for c, ch in enumerate(m.channels):
         table[f"model_{ch}"] = values[:, c]

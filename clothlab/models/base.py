@@ -236,32 +236,6 @@ def texture_parameters(params, kind: str):
     return rest
 
 
-def _oriented_components_many(method):
-    """Wrap a ``components_many(wi, wo, params_list, **kw)``: sets of one orientation are evaluated together
-    at the directions rotated into that orientation's weave frame; the rows come back in the given order."""
-    @functools.wraps(method)
-    def components_many(self, wi, wo, params_list, **kw):
-        split = [split_orientation(p) for p in params_list]
-        angles = [a for _, a in split]
-        if all(a == 0.0 for a in angles):
-            return method(self, wi, wo, [p for p, _ in split], **kw)
-        wi, wo = as_directions(wi, wo)
-        out: dict = {}
-        for angle in dict.fromkeys(angles):
-            rows = [j for j, a in enumerate(angles) if a == angle]
-            if angle != 0.0:
-                self.params[ORIENTATION].check(angle)
-            part = method(self, to_weave_frame(wi, angle), to_weave_frame(wo, angle),
-                          [split[j][0] for j in rows], **kw)
-            for name, value in part.items():
-                if name not in out:
-                    out[name] = np.zeros((len(angles),) + value.shape[1:], dtype=value.dtype)
-                out[name][rows] = value
-        return out
-    components_many.oriented = True
-    return components_many
-
-
 def as_directions(wi, wo) -> tuple[np.ndarray, np.ndarray]:
     """wi, wo as (N, 3) float64 arrays (a single (3,) direction becomes (1, 3)); ValueError on other shapes."""
     wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))

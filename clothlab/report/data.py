@@ -28,7 +28,14 @@ import numpy as np
 from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
 from clothlab.io.table import ANGLE_COLUMNS as DIRECTION_COLUMNS
-from clothlab.strict import MAX_TABLE_BYTES, load_json_file, parse_number, read_text
+from clothlab.strict import (
+    MAX_NUMBER_CHARS,
+    MAX_TABLE_BYTES,
+    load_json_file,
+    parse_number,
+    plain_numeric_text,
+    read_text,
+)
 
 SLICE_COLUMNS = ("theta_o", "phi_o", "signed_theta_i")
 TRACE_COLUMNS = ("evaluation", "time_s", "value", "best", "stage")
@@ -81,23 +88,41 @@ def read_csv_table(path, *, required=(), text_columns=(), finite: bool = True) -
         raise InputError(f"missing column(s) {missing}; the header has {header}", path=path, line=header_line)
     if len(rows) == 1:
         raise InputError("the file has a header but no data rows", path=path)
-    columns: dict[str, list] = {name: [] for name in header}
     for number, row in rows[1:]:
         if len(row) != len(header):
             raise InputError(f"row has {len(row)} fields, the header has {len(header)}", path=path, line=number)
-        for name, cell in zip(header, row, strict=True):
-            cell = cell.strip()
-            if name in text_columns:
-                columns[name].append(cell)
-                continue
+    table = {}
+    for index, name in enumerate(header):
+        cells = [row[index].strip() for _, row in rows[1:]]
+        if name in text_columns:
+            table[name] = np.asarray(cells, dtype=str)
+            continue
+        fast = _plain_column(cells)
+        if fast is not None:
+            table[name] = fast
+            continue
+        values = []  # the strict cell-by-cell parse, which names the first bad cell
+        for (number, _), cell in zip(rows[1:], cells, strict=True):
             if not finite and (not cell or cell.lower().lstrip("+-") in ("nan", "inf", "infinity")):
-                columns[name].append(float(cell) if cell else math.nan)
+                values.append(float(cell) if cell else math.nan)
                 continue
-            columns[name].append(parse_number(cell, path=path, line=number, field=name))
-    return {
-        name: np.asarray(values, dtype=str if name in text_columns else np.float64)
-        for name, values in columns.items()
-    }
+            values.append(parse_number(cell, path=path, line=number, field=name))
+        table[name] = np.asarray(values, dtype=np.float64)
+    return table
+
+
+def _plain_column(cells: list[str]) -> np.ndarray | None:
+    """The column as float64 when every cell is a finite number in plain decimal notation (one vectorised
+    conversion: a 380,000-row predictions.csv in well under a second instead of a minute), else None (the
+    caller's strict parse then names the bad cell)."""
+    if not cells or not all(cells) or not plain_numeric_text("".join(cells)) or \
+            max(map(len, cells)) > MAX_NUMBER_CHARS:
+        return None
+    try:
+        values = np.asarray(cells, dtype=np.float64)
+    except ValueError:  # '1e', '+-1', '1,2' ...: characters of numbers that do not make one
+        return None
+    return values if np.isfinite(values).all() else None
 
 
 def read_json(path) -> dict:
@@ -268,7 +293,8 @@ def exitant_groups(table: dict) -> list[tuple[float, float, np.ndarray]]:
     phi = np.round(np.asarray(table["phi_o"], dtype=np.float64), EXITANT_DECIMALS)
     keys, inverse = np.unique(np.stack([theta, phi], axis=1), axis=0, return_inverse=True)
     inverse = inverse.ravel()
-    return [(float(t), float(p), np.flatnonzero(inverse == k)) for k, (t, p) in enumerate(keys)]
+    rows = np.split(np.argsort(inverse, kind="stable"), np.cumsum(np.bincount(inverse, minlength=len(keys)))[:-1])
+    return [(float(t), float(p), r) for (t, p), r in zip(keys, rows, strict=True)]  # rows ascending in each
 
 
 #: Published fit quality on the real measurements: (median, 80th percentile) relative error in percent,
@@ -385,8 +411,8 @@ def selection_rows(fit: dict) -> list[dict]:
     """The model-selection result of a fit.json as a list of dicts (empty when there is none).
 
     Accepted shapes of ``fit["selection"]``: a list of dicts, or a dict whose ``candidates`` (or
-    ``ranking`` / ``runners_up`` / ``rows``) entry is one.  Each dict describes one candidate; the report
-    shows ``candidate``, ``cv_error`` and ``aic`` first when present, then the other scalar entries.
+    ``ranking`` / ``runners_up`` / ``rows``) entry is one.  Each dict describes one candidate (the columns of
+    :data:`clothlab.fit.select.TABLE_COLUMNS`).
     """
     selection = fit.get("selection")
     if isinstance(selection, dict):

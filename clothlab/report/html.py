@@ -266,33 +266,35 @@ def _figure_section(figures: dict, captions: dict | None = None) -> list[str]:
     return out
 
 
-SELECTION_FIRST = ("candidate", "cv_error", "aic")
-"""Columns of the runners-up table shown first (docs/report.md: the shape of fit.json ``selection``)."""
-
-
 def _selection_section(fit: dict) -> list[str]:
-    """The model-selection candidates (fit.json ``selection``, :func:`clothlab.report.data.selection_rows`):
-    one row per candidate, ``candidate``, ``cv_error``, ``aic`` first, then the other scalar entries; nothing
-    when the fit has no selection."""
+    """The model-selection candidates (fit.json ``selection``, :func:`clothlab.report.data.selection_rows`) as
+    the table of ``selection.md`` (:func:`clothlab.fit.select.display_rows`), the winner marked, with the
+    ranking rule and what the candidates were; nothing when the fit has no selection."""
+    from clothlab.fit.select import DISPLAY_HEAD, display_rows
+
     rows = selection_rows(fit)
     if not rows:
         return []
-    columns = [c for c in SELECTION_FIRST if any(c in r for r in rows)]
-    columns += [c for c in dict.fromkeys(k for r in rows for k in r) if c not in columns
-                and all(not isinstance(r.get(c), dict | list) for r in rows)]
+    selection = fit.get("selection") if isinstance(fit.get("selection"), dict) else {}
+    winner = selection.get("winner")
+    numeric = set(DISPLAY_HEAD[2:11])
     cells = []
-    for row in rows:
-        line = []
-        for c in columns:
-            value = row.get(c)
-            line.append(("num", fmt_number(value)) if isinstance(value, int | float) and not isinstance(value, bool)
-                        else esc(value))
-        cells.append(line)
-    selection = fit.get("selection")
-    how = selection.get("criterion") if isinstance(selection, dict) else None
-    note = f'<p class="note">Ranked by {esc(how)}.</p>' if how else ""
-    return ["<h2>Model selection: candidates and runners-up</h2>", note,
-            _table([esc(c) for c in columns], cells)]
+    for row, shown in zip(rows, display_rows(rows), strict=True):
+        mark = " (winner, this fit)" if winner is not None and row.get("candidate") == winner else ""
+        cells.append([("num", esc(v)) if h in numeric else esc(v + mark if h == "candidate" else v)
+                      for h, v in zip(DISPLAY_HEAD, shown, strict=True)])
+    out = ["<h2>Model selection: candidates and runners-up</h2>"]
+    how = selection.get("ranking") or selection.get("criterion")
+    if how:
+        out.append(f'<p class="note">Ranked by {esc(how)}.  Errors are relative, in %; CV = held out by '
+                   f'cross-validation, p50 / p80 = in-sample.  {esc(selection.get("information_criteria") or "")}'
+                   "</p>")
+    tried, budget = selection.get("tried") or {}, selection.get("budget") or {}
+    if tried or budget:
+        parts = [f"{esc(k)}: {esc(', '.join(map(str, v)) if isinstance(v, list) else v)}" for k, v in tried.items()]
+        parts += [f"{esc(k)} {esc(v)}" for k, v in budget.items()]
+        out.append(f'<p class="note">Candidates tried - {"; ".join(parts)} (per candidate).</p>')
+    return out + [_table([esc(h) for h in DISPLAY_HEAD], cells)]
 
 
 def _posterior_section(posterior) -> list[str]:

@@ -568,11 +568,11 @@ def plot_parameters(fit: dict):
         x = _fraction(entry.get("value"), lower, upper)
         if x is not None:
             mark(x, y, "fitted" if free else "fixed", ls="none", marker="o", color=colour, ms=7)
-        unit = entry.get("unit") or ""
+        unit = "" if entry.get("unit") in (None, "1") else entry["unit"]  # "1": dimensionless, no unit to show
         text = f"{entry['value']:.4g} {unit}".strip() if isinstance(entry.get("value"), int | float) \
             else str(entry.get("value"))
         if lower is not None and upper is not None:
-            text += f"  [{lower:g}, {upper:g}]"
+            text += f"  [{lower:.4g}, {upper:.4g}]"
         if "truth" in entry and entry["truth"] is not None:
             text += f"  truth {entry['truth']:.4g}"
         if at_bound:

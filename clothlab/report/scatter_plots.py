@@ -15,6 +15,8 @@ Every function returns a :class:`matplotlib.figure.Figure` (no pyplot).
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 
 from clothlab.report.data import channel_values, channels_of, shown_channel, signed_relative_error
@@ -240,8 +242,12 @@ def plot_scattered_slices(predictions: dict, chosen, model=None, *, tolerance: f
     channels = channels_of(predictions)
     ncols = min(3, len(chosen))
     nrows = -(-len(chosen) // ncols)
-    fig = _figure(3.6 * ncols, 2.7 * nrows + 0.9,
-                  margins={"left": 0.8, "right": 0.15, "top": 0.7, "bottom": 0.9, "hspace": 0.55, "wspace": 0.08})
+    title = (f"Incidence-plane slices of the shown incident directions: samples of the {WINDOW_DEG:g}\u00b0 "
+             f"window within {tolerance:g}\u00b0 of the plane; dotted: mirror angle")
+    title = textwrap.fill(title, width=int(14 * 3.6 * ncols))  # ~14 characters per inch at 9 pt: never clipped
+    fig = _figure(3.6 * ncols, 2.7 * nrows + 0.9 + 0.15 * title.count("\n"),
+                  margins={"left": 0.8, "right": 0.15, "top": 0.7 + 0.15 * title.count("\n"), "bottom": 0.9,
+                           "hspace": 0.55, "wspace": 0.08})
     axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     values = []
     for ax, (panel, signed, rows) in zip(axes.flat, chosen, strict=False):
@@ -271,6 +277,5 @@ def plot_scattered_slices(predictions: dict, chosen, model=None, *, tolerance: f
     handles, labels = axes.flat[0].get_legend_handles_labels()
     if handles:
         fig.legend(handles, labels, loc="lower center", ncols=min(6, len(handles)), fontsize=8)
-    fig.suptitle(f"Incidence-plane slices of the shown incident directions: samples of the {WINDOW_DEG:g}\u00b0 "
-                 f"window within {tolerance:g}\u00b0 of the plane; dotted: mirror angle", fontsize=9)
+    fig.suptitle(title, fontsize=9)
     return fig

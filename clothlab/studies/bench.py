@@ -42,6 +42,8 @@ class Section(NamedTuple):
 
 SECTIONS = (
     Section("cli", "clothlab.studies.cli_startup", "clothlab --help time, heavy modules pulled in by import"),
+    Section("report", "clothlab.studies.report_speed",
+            "clothlab report of one fit vs 3 s; figures drawn in one vs two processes"),
     Section("speed", "clothlab.studies.model_speed",
             "IM model pairs/s vs a quad loop; IM kernels before/after when present"),
     Section("texture", "clothlab.studies.texture_speed", "512 x 512 texture-model evaluation time vs 1 s"),
@@ -59,7 +61,8 @@ SECTIONS = (
     Section("footprint", "clothlab.studies.footprint", "footprint averages: SAT vs MC queries/s and error by size"),
     Section("neural", "clothlab.studies.neural", "neural surrogate decoder queries/s at three widths"),
     Section("scaleout", "clothlab.studies.scaleout",
-            "sequential / 2 Dask workers: example fit batch, per-task overhead, check sweep, posterior pool"),
+            "sequential / 2 Dask workers: example fit batch, CV folds of one fit, per-task overhead, check sweep, "
+            "posterior pool"),
 )
 SECTION_NAMES: tuple[str, ...] = tuple(s.name for s in SECTIONS)
 

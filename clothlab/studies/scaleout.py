@@ -3,12 +3,15 @@
 
 1. batch: the six example IM fits (cross-validation as configured, no posterior; the quick run one start of
    :data:`QUICK_EVALS` evaluations) by :func:`clothlab.fit.batch.run_batch` in-process and on the cluster:
-   wall-time ratio sequential / 2 workers, with the workers warmed first (kernels loaded; the warm-up is timed
-   on its own, as is the cluster start), and whether every parameter is bit-identical;
-2. per-task overhead: :data:`OVERHEAD_TASKS` empty tasks through the cluster (submit, run, result) per task;
-3. check: the whole extremes sweep of ``check --full`` in chunks
+   wall-time ratio sequential / 2 workers, with the workers and this process warmed first (kernels loaded; the
+   warm-ups are timed on their own, as is the cluster start), and whether every parameter is bit-identical;
+2. cross-validation folds: one fit's :data:`CV_FOLDS` neutral fold refits
+   (:func:`clothlab.fit.crossval.cross_validate`) in the in-process loop and as one task each on the cluster:
+   ratio and whether every figure is identical (the quick run :data:`CV_QUICK_EVALS` evaluations per fold);
+3. per-task overhead: :data:`OVERHEAD_TASKS` empty tasks through the cluster (submit, run, result) per task;
+4. check: the whole extremes sweep of ``check --full`` in chunks
    (:func:`clothlab.studies.stability.sweep_chunked`; a few seconds), ratio and equal findings;
-4. posterior crossover: one log-probability call of W walkers in-process and through the pool for a few
+5. posterior crossover: one log-probability call of W walkers in-process and through the pool for a few
    walker counts and table sizes (the point where the pool starts to win; ``pool="auto"`` measures the same at
    run time).
 
@@ -27,6 +30,9 @@ from clothlab.studies.data import StudyData, study_data
 FABRICS = ("cotton-denim", "silk-shantung", "silk-charmeuse", "cotton-twill", "wool-gabardine", "polyester-lining")
 QUICK_EVALS = 1500
 OVERHEAD_TASKS = 60
+CV_FABRIC = "polyester-lining"
+CV_FOLDS = 5
+CV_QUICK_EVALS = 400
 WORKERS = 2
 
 
@@ -71,6 +77,22 @@ def _timed(fn):
     return out, time.perf_counter() - tic
 
 
+def _cv_job(data, quick: bool):
+    """A function running the cross-validation of :data:`CV_FABRIC` on a runner (None: the in-process loop)."""
+    from clothlab.fit.crossval import cross_validate
+    from clothlab.fit.problem import build_problem
+
+    cfg = data.load_config(CV_FABRIC)
+    problem = build_problem(cfg)
+    kwargs = {"k": CV_FOLDS, "seed": cfg.fit.optimizer.seed, "max_evals": CV_QUICK_EVALS if quick else None,
+              "percentiles": cfg.report.percentiles, "refit": "neutral", "optimizer": cfg.fit.optimizer}
+    return lambda runner: cross_validate(problem, problem.start, runner=runner, **kwargs)
+
+
+def _figures(cv: dict) -> dict:
+    return {key: value for key, value in cv.items() if key != "wall_time_s"}
+
+
 def run(context) -> dict:
     try:
         from clothlab.parallel import require_dask
@@ -92,7 +114,10 @@ def scaleout(quick: bool, *, data: StudyData | None = None) -> dict:
     out: dict = {"workers": WORKERS, "quick": quick}
     with study_data(data) as d, tempfile.TemporaryDirectory(prefix="clothlab-scaleout-") as tmp:
         tmp = Path(tmp)
+        _, local_warm_s = _timed(_warm)  # this process warmed like the workers: the ratio compares warm runs
         seq_rows, seq_s = _timed(lambda: run_batch(_items(d, tmp / "seq", quick), InProcessRunner()))
+        cv_folds = _cv_job(d, quick)
+        seq_cv, seq_cv_s = _timed(lambda: cv_folds(None))
         rng = np.random.default_rng(0)
         wi, wo = check.check_directions(200, rng)
         grid = check.grid_parameter_sets(fast=False)
@@ -106,6 +131,7 @@ def scaleout(quick: bool, *, data: StudyData | None = None) -> dict:
         with runner:
             _, warm_s = _timed(lambda: runner.client.run(_warm))
             par_rows, par_s = _timed(lambda: run_batch(_items(d, tmp / "par", quick), runner))
+            par_cv, par_cv_s = _timed(lambda: cv_folds(runner))
             _, overhead = _timed(lambda: runner.map(_noop, range(OVERHEAD_TASKS), progress=False))
             par_sweep, par_sweep_s = _timed(lambda: check.sweep_chunked(jobs, wi, wo, runner, tmp / "c2"))
             out["posterior"] = _crossover(runner, d, quick)
@@ -115,7 +141,11 @@ def scaleout(quick: bool, *, data: StudyData | None = None) -> dict:
     out.update({
         "batch": {"fits": len(seq_rows), "evaluations_each": QUICK_EVALS if quick else "as configured",
                   "sequential_s": seq_s, "workers_s": par_s, "ratio": seq_s / par_s,
-                  "cluster_start_s": start_s, "worker_warm_up_s": warm_s, "identical_parameters": identical},
+                  "cluster_start_s": start_s, "worker_warm_up_s": warm_s,
+                  "in_process_warm_up_s": local_warm_s, "identical_parameters": identical},
+        "cv_folds": {"fabric": CV_FABRIC, "folds": seq_cv["k"], "evaluations_each": seq_cv["budget"],
+                     "sequential_s": seq_cv_s, "workers_s": par_cv_s, "ratio": seq_cv_s / par_cv_s,
+                     "identical": _figures(seq_cv) == _figures(par_cv)},
         "overhead": {"tasks": OVERHEAD_TASKS, "cluster_ms_per_task": 1e3 * overhead / OVERHEAD_TASKS,
                      "in_process_ms_per_task": 1e3 * local_overhead / OVERHEAD_TASKS},
         "check": {"parameter_sets_per_rule": len(grid) + len(random_sets), "directions": len(wi),
@@ -157,13 +187,18 @@ def _crossover(runner, data, quick: bool) -> list[dict]:
 def lines(result: dict) -> list[str]:
     if "skipped" in result:
         return ["== scale-out (Dask) ==", f"  skipped: {result['skipped']}"]
-    b, o, c = result["batch"], result["overhead"], result["check"]
+    b, o, c, f = result["batch"], result["overhead"], result["check"], result["cv_folds"]
     out = ["== scale-out: sequential vs a 2-worker Dask LocalCluster ==",
            f"  batch of {b['fits']} example fits (no posterior, evaluations: {b['evaluations_each']}): sequential "
            f"{b['sequential_s']:.1f} s, {result['workers']} workers {b['workers_s']:.1f} s -> ratio {b['ratio']:.2f}; "
            f"parameters bit-identical: {b['identical_parameters']}",
            f"  (cluster start {b['cluster_start_s']:.1f} s and worker warm-up {b['worker_warm_up_s']:.1f} s, paid "
-           "once, not in the ratio)",
+           f"once, not in the ratio; this process warmed the same way first, "
+           f"{b.get('in_process_warm_up_s', float('nan')):.1f} s)",
+           f"  cross-validation folds of one fit ({f['fabric']}, {f['folds']} neutral fold refits of "
+           f"{f['evaluations_each']} evaluations + polish, one task each): sequential {f['sequential_s']:.1f} s, "
+           f"{result['workers']} workers {f['workers_s']:.1f} s -> ratio {f['ratio']:.2f}; every figure identical: "
+           f"{f['identical']}",
            f"  per-task overhead: {o['cluster_ms_per_task']:.1f} ms on the cluster, "
            f"{o['in_process_ms_per_task']:.3f} ms in-process ({o['tasks']} empty tasks)",
            f"  check extremes sweep ({c['parameter_sets_per_rule']} sets x {c['directions']} directions per rule, "
