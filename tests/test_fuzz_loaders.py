@@ -250,8 +250,8 @@ OPTION_VALUES = {
     "azimuth_offset": [0.0, 0, 90, -90.5, 359.9, 360, -360, 360.0001, 1e308, math.nan, math.inf, -math.inf,
                        True, "90", None, [90], 1e-320, 10**400],
     "quantity": ["brdf", "reflectance_factor", "cosine_weighted", "dsf", "", None],
-    "channels": [None, "R,G,B", "grey,g2,g3", "a,a,b", "R,G", "R,G,B,A", ",,", "", "x y,z,w", ["r", "g", "b"],
-                 "R,,B", "theta_i,G,B", "r#,g,b"],
+    "channels": [None, "R,G,B", "grey,g2,g3", "1e3,2,no", "a,a,b", "R,G", "R,G,B,A", ",,", "", "x y,z,w",
+                 ["r", "g", "b"], "R,,B", "theta_i,G,B", "r#,g,b"],
 }
 VALID_OPTIONS = {
     "columns": (LAB_COLUMNS, "theta_i,phi_i,theta_o,phi_o,R,G,B", "theta_i,phi_i,theta_o,phi_o,R,-,-"),
@@ -259,7 +259,7 @@ VALID_OPTIONS = {
     "angle_unit": ("deg", "rad"), "azimuth_zero": ("weft", "warp", "x", "y"), "azimuth_sense": ("ccw", "cw"),
     "azimuth_offset": (0.0, 0, 90, -90.5, 359.9, 360, -360), "quantity": ("brdf", "reflectance_factor",
                                                                         "cosine_weighted"),
-    "channels": (None, "R,G,B", "grey,g2,g3"),
+    "channels": (None, "R,G,B", "grey,g2,g3", "1e3,2,no"),
 }
 LAB_TABLES = {
     "semicolon header": "\n".join(lab_lines(";")),
@@ -878,6 +878,8 @@ IMPORT_ARGS = {  # the options each import reproducer is read with, and the plac
     "ok--import-trailing-skipped-columns.txt": (["--columns=theta_i,phi_i,theta_o,phi_o,R,-,-",
                                                  "--delimiter=tab"], None),
     "ok--import-no-comment-char.txt": (["--comment="], None),
+    "ok--import-channel-named-like-a-number.txt": (["--header=yes"], None),  # the header quotes '1e3'
+
 }
 
 

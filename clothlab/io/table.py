@@ -635,9 +635,29 @@ def _plain(value, where: str = "provenance"):
     return value
 
 
+_HEADER_DUMPER = None
+
+
+def _header_dumper():
+    """PyYAML's safe dumper that also quotes every string clothlab's strict reader would take for a number
+    (e.g. a channel named ``1e3``, which YAML 1.1 leaves plain), so that a written header reads back as
+    written."""
+    global _HEADER_DUMPER
+    if _HEADER_DUMPER is None:
+        class HeaderDumper(yaml.SafeDumper):
+            pass
+
+        HeaderDumper.add_implicit_resolver(
+            "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?$"),
+            list("-+0123456789."))
+        _HEADER_DUMPER = HeaderDumper
+    return _HEADER_DUMPER
+
+
 def _header_text(header: dict) -> list[str]:
     """'# '-prefixed YAML lines of the header (block mapping; innermost lists and mappings inline)."""
-    dumped = yaml.safe_dump(header, sort_keys=False, allow_unicode=True, width=2**31, default_flow_style=None)
+    dumped = yaml.dump(header, Dumper=_header_dumper(), sort_keys=False, allow_unicode=True, width=2**31,
+                       default_flow_style=None)
     return [f"# {line}".rstrip() for line in dumped.rstrip("\n").split("\n")]
 
 
