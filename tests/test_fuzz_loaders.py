@@ -15,8 +15,10 @@ negative, 1e308), or replace the file with something else.  Every outcome must b
 and the allocation peak of a binary read stays bounded (a header claiming huge dimensions is refused before
 anything is allocated; :mod:`tracemalloc` sees numpy's buffers).  Any other exception fails the test.
 
-The default run draws ``CLOTHLAB_FUZZ_EXAMPLES`` (default 25) cases per family; each family prints its
-outcome counts (``pytest -s``).
+The default run draws ``CLOTHLAB_FUZZ_EXAMPLES`` (default 25) cases per family (a few seconds in all); each
+family prints its outcome counts (``pytest -s``); ``--runslow`` adds a child run of 1,000 per family.
+Reproducers of what these families found are in ``tests/fuzz_corpus/`` (``import--``, ``ok--``, ``merl--``,
+``bsdf--``, ``measurement--``, ``select--``, ``sampling--``, ``cli--`` files) with their tests at the end.
 """
 
 from __future__ import annotations
@@ -1071,3 +1073,18 @@ def test_corpus_sampling_files(tmp_path, capsys, monkeypatch, name):
     rc = main(["simulate", "preset:cotton-denim", "-o", "out.csv", f"--sampling={path}", "--nodes=3"])
     refused_once(rc, capsys.readouterr().err, f"{path}:")
     assert not (tmp_path / "out.csv").exists()
+
+
+@pytest.mark.slow
+def test_fuzz_loaders_thousands(tmp_path):
+    """Every family above with 1,000 cases, in a child pytest (``--runslow``)."""
+    import subprocess
+    import sys
+
+    repo = str(Path(__file__).parent.parent)
+    env = dict(os.environ, CLOTHLAB_FUZZ_EXAMPLES="1000",
+               PYTHONPATH=os.pathsep.join([repo, *filter(None, [os.environ.get("PYTHONPATH")])]))
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-s", __file__, "-k", "not thousands",
+                           "-p", "no:cacheprovider"], env=env, capture_output=True, text=True, cwd=tmp_path)
+    print(done.stdout[-4000:])
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
