@@ -137,7 +137,7 @@ def run(args) -> int:
         return 0
     if not args.source or args.output is None:
         raise ConfigError("give a source (preset:<name>, a .wv file or a fabric.yaml) and -o OUTPUT, "
-                          "or --paper-examples DIR")
+                          "or --paper-examples DIR", field="-o" if args.source else "source")
     from clothlab.io.table import write_table
     from clothlab.models.registry import DEFAULT_KIND, build_model
     from clothlab.simulate.gonio import NoiseModel, simulate
@@ -153,7 +153,12 @@ def run(args) -> int:
         params, rule, nodes = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes
         kind, options = cfg.model.kind, dict(cfg.model.options)
     else:
-        weave = resolve_weave(source, Path.cwd())
+        try:
+            weave = resolve_weave(source, Path.cwd())
+        except ConfigError as exc:  # the weave named on the command line is the source argument
+            if exc.path is not None:
+                raise
+            raise ConfigError(exc.detail, field="source") from None
     channels = channel_names(args.channels)
     n = len(channels)
     coefficients = {"kd": channel_values("0.1" if args.kd is None else args.kd, "--kd", n),
