@@ -44,7 +44,7 @@ def add_selection_options(p) -> None:
 def _settings(cfg, args):
     from clothlab.config.checks import Location, as_choice
     from clothlab.errors import ConfigError
-    from clothlab.fit.select import settings_from_config
+    from clothlab.fit.select import check_settings, settings_from_config
     from clothlab.models.registry import MODEL_KINDS
     from clothlab.weave.presets import PRESET_PREFIX, canonical_preset_name
 
@@ -79,8 +79,10 @@ def _settings(cfg, args):
         if value is not None and (value < low or (flag == "--candidate-cv" and value == 1)):
             raise ConfigError(f"{flag} must be at least {low}{' and not 1' if low == 0 else ''}, got {value}",
                               field=flag)
-    return settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
-                                max_evals=args.candidate_evals, cv_folds=args.candidate_cv)
+    settings = settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
+                                    max_evals=args.candidate_evals, cv_folds=args.candidate_cv)
+    check_settings(settings, cfg.base_dir)  # every weave reads, before any candidate is fitted
+    return settings
 
 
 def run(args) -> int:
