@@ -1094,3 +1094,52 @@ def test_fuzz_loaders_thousands(tmp_path):
                            "-p", "no:cacheprovider"], env=env, capture_output=True, text=True, cwd=tmp_path)
     print(done.stdout[-4000:])
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
+
+
+def test_fuzz_import_reader_options(tmp_path, capsys):
+    """``clothlab import FILE --format merl|utia|clothlab --option KEY=VALUE``: a table written that reads back
+    valid, or exit 2 with one line naming the option (or the file and its place)."""
+    from clothlab.cli.main import main
+    from clothlab.io.table import read_table
+
+    sources = {"merl": tmp_path / "m.binary", "utia": tmp_path / "u.bin", "clothlab": tmp_path / "t.csv"}
+    merl_file(sources["merl"])
+    utia_file(sources["utia"])
+    sources["clothlab"].write_text(header_table("0"))
+    keys = ["theta_step", "phi_step", "theta_max", "azimuth_zero", "azimuth_sense", "azimuth_offset", "quantity",
+            "negative", "columns", "bogus", "", " ", "=", "theta_step ", "a\x00b"]
+    values = st.one_of(TOKENS, st.sampled_from(["7.5", "15", "30", "80", "89.9", "0.5", "warp", "cw", "-45", "zero",
+                                                "brdf", "[1", "{a: [", "&a 1", "*a", "!!str 5", "1e400", ".inf"]))
+    counts = collections.Counter()
+    out = tmp_path / "out.csv"
+
+    own = {"merl": {"theta_step": "15", "phi_step": "30", "theta_max": "80"},
+           "utia": {"azimuth_zero": "warp", "azimuth_sense": "cw", "azimuth_offset": "-45", "negative": "zero"},
+           "clothlab": {}}
+
+    @SETTINGS
+    @given(data=st.data())
+    def run(data):
+        fmt = data.draw(st.sampled_from(sorted(sources)))
+        options = [(key, value) for key, value in own[fmt].items() if data.draw(st.booleans())]
+        options += data.draw(st.lists(st.tuples(st.sampled_from(keys), values), max_size=2 if fmt == "clothlab"
+                                      else 1))
+        argv = ["import", str(sources[fmt]), "-o", str(out), "--force", f"--format={fmt}"]
+        argv += [f"--option={key}={value}" for key, value in options]
+        try:
+            rc = main(argv)
+        except SystemExit as exc:
+            rc = exc.code
+        err = capsys.readouterr().err
+        assert "Traceback" not in err
+        if rc == 0:
+            counts["accepted (valid)"] += 1
+            valid_measurement(read_table(out))
+        else:
+            lines = [line for line in err.splitlines() if line.strip()]
+            assert rc == 2 and len(lines) == 1 and lines[0].startswith("clothlab: error: "), err
+            assert "field '" in lines[0] or "byte offset" in lines[0] or f"{sources[fmt]}:" in lines[0], err
+            counts["refused (named)"] += 1
+
+    run()
+    report("import --format --option", counts)
