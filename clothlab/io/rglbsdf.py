@@ -140,7 +140,7 @@ def read_tensor_file(path) -> dict[str, TensorField]:
         array = array_at(data, offset, DTYPES[code], count_items, path=path, what=_WHAT).reshape(shape)
         if array.dtype.kind == "f":
             check_values(array.astype(np.float64), path=path, offset=offset, itemsize=itemsize,
-                         name=lambda k, n=name, s=shape: f"{n}{list(np.unravel_index(k, s)) if s else ''}",
+                         name=lambda k, n=name, s=shape: f"{n}{[int(i) for i in np.unravel_index(k, s)] if s else ''}",
                          allow_negative=name not in NON_NEGATIVE_FIELDS)
         elif name in NON_NEGATIVE_FIELDS and (array < 0).any():
             k = int(np.flatnonzero(np.ravel(array) < 0)[0])
