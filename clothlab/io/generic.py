@@ -209,8 +209,8 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     width = len(file_names) if file_names is not None else (mapping.width or max(index.values()) + 1)
     field_names = list(file_names) if file_names is not None else [
         next((n for n, k in index.items() if k == j), f"column {j + 1}") for j in range(width)]
-    table = parse_rows(rows, field_names, path=path, split=split, separator=" " if separator == "whitespace"
-                       else DELIMITERS[separator])
+    table = parse_rows(rows, field_names, path=path, split=split,  # a tab is shown as a space in messages
+                       separator=" " if separator in ("whitespace", "tab") else DELIMITERS[separator])
     value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
     sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]  # all or none, checked by _check_names
     try:
