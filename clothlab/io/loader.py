@@ -132,9 +132,9 @@ def _binary_format(path: Path, first: bytes, head: bytes) -> str | None:
     if first == TENSOR_MAGIC:
         return "bsdf"
     suffix = path.suffix.lower()
-    if suffix == ".bsdf" and _looks_binary(head):
+    if suffix == ".bsdf" and (_looks_binary(head) or not head):  # empty: the reader names the truncation
         return "bsdf"
-    if suffix == ".bin" and (path.stat().st_size == UTIA_BYTES or _looks_binary(head)):
+    if suffix == ".bin" and (path.stat().st_size == UTIA_BYTES or _looks_binary(head) or not head):
         return "utia"
     if suffix == ".binary":
         if len(first) < MERL_HEADER_BYTES:  # too short for any table: the MERL reader names the truncation
