@@ -104,7 +104,18 @@ def read_bounded_bytes(path, *, limit: int, what: str = "file", error=InputError
     path = check_regular_file(path, limit=limit, what=what, error=error)
     try:
         with open(path, "rb") as handle:
-            data = handle.read(limit + 1)
+            # read what stat reported (Python allocates the whole request up front, so never ask for the
+            # limit itself), then in bounded chunks only if the file grew meanwhile
+            size = os.fstat(handle.fileno()).st_size
+            chunks = [handle.read(min(size, limit) + 1)]
+            total = len(chunks[0])
+            while total > size and total <= limit:
+                chunk = handle.read(min(1 << 20, limit + 1 - total))
+                if not chunk:
+                    break
+                chunks.append(chunk)
+                total += len(chunk)
+            data = chunks[0] if len(chunks) == 1 else b"".join(chunks)
     except OSError as exc:
         raise error(f"cannot read the {what}: {exc.strerror or exc}", path=path) from None
     if len(data) > limit:

@@ -90,7 +90,10 @@ def _reader_options(items):
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--option expects KEY=VALUE, got {item!r}", field="--option")
-        options[key.strip()] = load_yaml_text(value, error=ConfigError) if value.strip() else ""
+        try:
+            options[key.strip()] = load_yaml_text(value, error=ConfigError) if value.strip() else ""
+        except ConfigError as exc:
+            raise ConfigError(f"{key.strip()}: {exc.detail}", field="--option") from None
     return options
 
 
@@ -105,11 +108,16 @@ def run(args) -> int:
                               "above", field="--option")
         from clothlab.io.generic import import_table
 
-        path, m = import_table(
-            args.source, args.output, overwrite=args.force, columns=args.columns, delimiter=args.delimiter,
-            comment=args.comment, header=args.header, angle_unit=args.angle_unit, azimuth_zero=args.azimuth_zero,
-            azimuth_sense=args.azimuth_sense, azimuth_offset=args.azimuth_offset, quantity=args.quantity,
-            channels=args.channels)
+        try:
+            path, m = import_table(
+                args.source, args.output, overwrite=args.force, columns=args.columns, delimiter=args.delimiter,
+                comment=args.comment, header=args.header, angle_unit=args.angle_unit,
+                azimuth_zero=args.azimuth_zero, azimuth_sense=args.azimuth_sense,
+                azimuth_offset=args.azimuth_offset, quantity=args.quantity, channels=args.channels)
+        except ConfigError as exc:  # an option's value: name the option as it is spelt here
+            if exc.path is not None or exc.field is None:
+                raise
+            raise ConfigError(exc.detail, field="--" + exc.field.replace("_", "-")) from None
     else:
         from clothlab.io.loader import load_measurement
         from clothlab.io.table import write_table

@@ -9,6 +9,7 @@ import contextlib
 from pathlib import Path
 
 from clothlab.cli.options import add_force, add_output, add_parallel
+from clothlab.cli.simulate import count_type
 
 
 def add_parser(sub):
@@ -32,38 +33,56 @@ def add_selection_options(p) -> None:
                                                     "or .wv files); default select.weaves, else every preset")
     p.add_argument("--kinds", metavar="LIST", help="comma-separated candidate model kinds, e.g. "
                                                    "irawan,irawan+oren-nayar (default select.kinds)")
-    p.add_argument("--orientation-starts", type=int, metavar="N", help="orientation starts per weave and kind "
-                                                                       "(default select.orientation_starts, 2)")
-    p.add_argument("--candidate-evals", type=int, metavar="N", help="evaluations per candidate fit "
-                                                                    "(default select.max_evals, 600)")
-    p.add_argument("--candidate-cv", type=int, metavar="K", help="cross-validation folds per candidate "
-                                                                 "(default select.cv_folds, 5; 0: rank by BIC)")
+    p.add_argument("--orientation-starts", type=count_type(1, 8), metavar="N",
+                   help="orientation starts per weave and kind, 1-8 (default select.orientation_starts, 2)")
+    p.add_argument("--candidate-evals", type=count_type(1, 2**31 - 1), metavar="N",
+                   help="evaluations per candidate fit (default select.max_evals, 600)")
+    p.add_argument("--candidate-cv", type=count_type(0, 2**31 - 1), metavar="K",
+                   help="cross-validation folds per candidate (default select.cv_folds, 5; 0: rank by BIC)")
 
 
 def _settings(cfg, args):
     from clothlab.config.checks import Location, as_choice
     from clothlab.errors import ConfigError
-    from clothlab.fit.select import settings_from_config
+    from clothlab.fit.select import check_settings, settings_from_config
     from clothlab.models.registry import MODEL_KINDS
     from clothlab.weave.presets import PRESET_PREFIX, canonical_preset_name
 
     weaves = kinds = None
-    if args.weaves:
+    if args.weaves is not None:
         weaves = []
-        for item in (w.strip() for w in args.weaves.split(",") if w.strip()):
+        for item in (w.strip() for w in args.weaves.split(",")):
             if item.endswith(".wv"):
+                if not Path(item).is_file():
+                    raise ConfigError(f"weave file not found: {item!r}", field="--weaves")
                 weaves.append(str(Path(item).absolute()))
+            elif item.lower().startswith("pattern:"):
+                from clothlab.weave.patterns import PATTERN_PREFIX, get_pattern
+
+                try:
+                    weaves.append(PATTERN_PREFIX + get_pattern(item[len(PATTERN_PREFIX):].strip()).name)
+                except ConfigError as exc:
+                    raise ConfigError(exc.detail, field="--weaves") from None
             else:
-                weaves.append(PRESET_PREFIX + canonical_preset_name(item.removeprefix(PRESET_PREFIX)))
-    if args.kinds:
+                try:
+                    weaves.append(PRESET_PREFIX + canonical_preset_name(item.removeprefix(PRESET_PREFIX)))
+                except ConfigError as exc:  # an unknown preset, or an empty entry
+                    raise ConfigError(exc.detail, field="--weaves") from None
+    if args.kinds is not None:
         kinds = [as_choice(k.strip(), Location(None, "--kinds"), MODEL_KINDS) for k in args.kinds.split(",")]
+    for flag, items in (("--weaves", weaves), ("--kinds", kinds)):
+        if items is not None and len(set(items)) != len(items):
+            twice = next(item for i, item in enumerate(items) if item in items[:i])
+            raise ConfigError(f"{twice!r} is listed twice", field=flag)
     for flag, value, low in (("--orientation-starts", args.orientation_starts, 1),
                              ("--candidate-evals", args.candidate_evals, 1), ("--candidate-cv", args.candidate_cv, 0)):
         if value is not None and (value < low or (flag == "--candidate-cv" and value == 1)):
             raise ConfigError(f"{flag} must be at least {low}{' and not 1' if low == 0 else ''}, got {value}",
                               field=flag)
-    return settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
-                                max_evals=args.candidate_evals, cv_folds=args.candidate_cv)
+    settings = settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
+                                    max_evals=args.candidate_evals, cv_folds=args.candidate_cv)
+    check_settings(settings, cfg.base_dir)  # every weave reads, before any candidate is fitted
+    return settings
 
 
 def run(args) -> int:

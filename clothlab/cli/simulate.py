@@ -7,6 +7,49 @@ from pathlib import Path
 
 from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
 
+MAX_NOISE_MULT = 10.0
+"""Largest --noise-mult (a log-normal sigma of 10 already spreads values over e^+-20)."""
+MAX_NOISE_ADD = 1e3
+"""Largest --noise-add in 1/sr."""
+MAX_SEED = 2**64 - 1
+
+
+def _number(low: float | None = None, high: float | None = None):
+    """An argparse type: a finite number in plain decimal notation (no ``nan``, ``inf``, ``1_0``) in
+    [low, high]."""
+    def parse(text: str) -> float:
+        import argparse
+
+        from clothlab.errors import ConfigError
+        from clothlab.strict import parse_number
+
+        try:
+            value = parse_number(text, error=ConfigError)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(exc.detail) from None
+        if (low is not None and value < low) or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{value:g} is outside [{low:g}, {high:g}]")
+        return value
+
+    return parse
+
+
+def count_type(low: int, high: int):
+    """An argparse type: an integer in plain decimal digits (no ``1_0``, ``+``, non-ASCII digits) in [low, high]."""
+    def parse(text: str) -> int:
+        import argparse
+        import re
+
+        stripped = text.strip()
+        if not re.fullmatch(r"-?[0-9]{1,30}", stripped):
+            raise argparse.ArgumentTypeError(f"expected an integer in decimal digits, got {text!r}")
+        value = int(stripped)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value} is outside [{low}, {high}]")
+        return value
+
+    return parse
+
 
 def add_parser(sub):
     p = sub.add_parser("simulate", help="virtual gonioreflectometer: model + paper sampling + noise -> table",
@@ -20,25 +63,29 @@ def add_parser(sub):
     p.add_argument("--btf", type=Path, metavar="DIR",
                    help="write a simulated BTF stack (texture model, EXR + manifest) of the source into DIR "
                         "(source: preset:<name>, a fabric.yaml or a fit directory)")
-    p.add_argument("--btf-directions", type=int, default=16, help="(light, view) pairs of the BTF stack (default 16)")
-    p.add_argument("--btf-size", type=int, default=64, help="BTF image size in pixels (default 64)")
-    p.add_argument("--btf-tiles", type=float, default=4.0, help="weave tiles across a BTF image (default 4)")
+    p.add_argument("--btf-directions", type=count_type(1, 4096), default=16,
+                   help="(light, view) pairs of the BTF stack (default 16)")
+    p.add_argument("--btf-size", type=count_type(1, 16384), default=64,
+                   help="BTF image size in pixels (default 64)")
+    p.add_argument("--btf-tiles", type=_number(1e-3, 1e4), default=4.0,
+                   help="weave tiles across a BTF image (default 4)")
     p.add_argument("--btf-offset", default="0.25,0.4", help="BTF tile offset u0,v0 in tiles (default 0.25,0.4)")
     p.add_argument("--kd", help="diffuse albedo per channel, e.g. 0.2,0.1,0.1 (default 0.1 each)")
     p.add_argument("--ks-warp", help="warp specular albedo per channel (default 0.1 each)")
     p.add_argument("--ks-weft", help="weft specular albedo per channel (default 0.1 each)")
     p.add_argument("--channels", default="R,G,B",
                    help="channel names (default R,G,B; with --btf the source's own when it has coefficients)")
-    p.add_argument("--noise-mult", type=float, default=0.0, help="multiplicative log-normal sigma (0.05 = 5 %%)")
-    p.add_argument("--noise-add", type=float, default=0.0, help="additive Gaussian sigma in 1/sr")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--noise-mult", type=_number(0.0, MAX_NOISE_MULT), default=0.0,
+                   help="multiplicative log-normal sigma (0.05 = 5 %%; at most 10)")
+    p.add_argument("--noise-add", type=_number(0.0, MAX_NOISE_ADD), default=0.0, help="additive Gaussian sigma in 1/sr")
+    p.add_argument("--seed", type=count_type(0, MAX_SEED), default=0, help="noise seed (default 0)")
     p.add_argument("--sampling", metavar="SPEC", default=None,
                    help="direction pairs of the table: paper (default: the paper's 225 x 7 grid), random:N "
                         "(N pairs, each direction uniform over the hemisphere in solid angle), random:N:cosine "
                         "(cosine-weighted), or a CSV file with columns theta_i,phi_i,theta_o,phi_o in degrees "
                         "(clothlab's azimuths)")
-    p.add_argument("--sampling-seed", type=int, default=0, help="seed of random:N (default 0)")
-    p.add_argument("--orientation", type=float, metavar="DEG", default=None,
+    p.add_argument("--sampling-seed", type=count_type(0, MAX_SEED), default=0, help="seed of random:N (default 0)")
+    p.add_argument("--orientation", type=_number(), metavar="DEG", default=None,
                    help="rotate the generating weave by DEG about the normal (counter-clockwise from above; the "
                         "model parameter orientation)")
     add_force(p, "output (table, example sets or BTF stack)")
@@ -47,20 +94,34 @@ def add_parser(sub):
 
 
 def channel_values(text: str, field: str, n: int):
-    """(n,) non-negative values from ``"0.2,0.1,0.1"`` (one value: the same in every channel)."""
+    """(n,) values of 0 or in [1e-30, 1000] from ``"0.2,0.1,0.1"`` (one value: the same in every channel), each in plain
+    decimal notation."""
     import numpy as np
 
     from clothlab.errors import ConfigError
+    from clothlab.strict import parse_number
 
-    try:
-        values = np.array([float(x) for x in text.split(",")])
-    except ValueError:
-        raise ConfigError(f"expected comma-separated numbers, got {text!r}", field=field) from None
+    values = np.array([parse_number(x, error=ConfigError, field=field) for x in text.split(",")])
     if values.size == 1:
         values = np.repeat(values, n)
-    if values.size != n or np.any(values < 0) or not np.all(np.isfinite(values)):
-        raise ConfigError(f"expected {n} non-negative values (one per channel), got {text!r}", field=field)
+    if values.size != n or np.any(values < 0) or np.any(values > 1e3) or np.any((values > 0) & (values < 1e-30)):
+        raise ConfigError(f"expected {n} values of 0 or in [1e-30, 1000] (one per channel), got {text!r}",
+                          field=field)
     return values
+
+
+def channel_names(text: str) -> tuple[str, ...]:
+    """Distinct channel names from ``"R,G,B"``, each one a table can hold (no spaces, commas or quotes, not an
+    angle column, not ``sigma_*``); ConfigError naming ``--channels``."""
+    from clothlab.errors import ConfigError
+    from clothlab.io.table import _CHANNEL_NAME, ANGLE_COLUMNS, SIGMA_PREFIX
+
+    names = tuple(c.strip() for c in text.split(","))
+    bad = [c for c in names if not _CHANNEL_NAME.match(c) or c in ANGLE_COLUMNS or c.startswith(SIGMA_PREFIX)]
+    if not names or bad or len(set(names)) != len(names):
+        raise ConfigError(f"expected distinct comma-separated channel names (no spaces or quotes, not an angle "
+                          f"column or sigma_*), got {text!r}", field="--channels")
+    return names
 
 
 def run(args) -> int:
@@ -76,7 +137,7 @@ def run(args) -> int:
         return 0
     if not args.source or args.output is None:
         raise ConfigError("give a source (preset:<name>, a .wv file or a fabric.yaml) and -o OUTPUT, "
-                          "or --paper-examples DIR")
+                          "or --paper-examples DIR", field="-o" if args.source else "source")
     from clothlab.io.table import write_table
     from clothlab.models.registry import DEFAULT_KIND, build_model
     from clothlab.simulate.gonio import NoiseModel, simulate
@@ -92,12 +153,21 @@ def run(args) -> int:
         params, rule, nodes = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes
         kind, options = cfg.model.kind, dict(cfg.model.options)
     else:
-        weave = resolve_weave(source, Path.cwd())
-    channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
+        try:
+            weave = resolve_weave(source, Path.cwd())
+        except ConfigError as exc:  # the weave named on the command line is the source argument
+            if exc.path is not None:
+                raise
+            raise ConfigError(exc.detail, field="source") from None
+    channels = channel_names(args.channels)
     n = len(channels)
-    coefficients = {"kd": channel_values(args.kd or "0.1", "--kd", n),
-                    "ks_warp": channel_values(args.ks_warp or "0.1", "--ks-warp", n),
-                    "ks_weft": channel_values(args.ks_weft or "0.1", "--ks-weft", n)}
+    coefficients = {"kd": channel_values("0.1" if args.kd is None else args.kd, "--kd", n),
+                    "ks_warp": channel_values("0.1" if args.ks_warp is None else args.ks_warp, "--ks-warp", n),
+                    "ks_weft": channel_values("0.1" if args.ks_weft is None else args.ks_weft, "--ks-weft", n)}
+    dark = [c for j, c in enumerate(channels) if not any(v[j] for v in coefficients.values())]
+    if dark:
+        raise ConfigError(f"channel {dark[0]} has --kd, --ks-warp and --ks-weft all 0: it would reflect no light",
+                          field="--kd")
     model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes), **options)
     for name in model.component_names:  # per-yarn diffuse components (kind surface) take --kd
         if name.startswith("diffuse_"):
@@ -128,10 +198,9 @@ def _run_btf(args) -> int:
                           "apply to --btf: the stack is written into the --btf directory, and its noise is the "
                           "texture model's intensity noise (paper sec. 7.2.1, seeded by --seed), not the table "
                           "simulation's measurement noise", field=not_applicable[0].split("/")[-1])
-    try:
-        offset = tuple(float(x) for x in args.btf_offset.split(","))
-    except ValueError:
-        offset = ()
+    from clothlab.strict import parse_number
+
+    offset = tuple(parse_number(x, error=ConfigError, field="--btf-offset") for x in args.btf_offset.split(","))
     if len(offset) != 2:
         raise ConfigError(f"expected u0,v0 numbers, got {args.btf_offset!r}", field="--btf-offset")
     return simulate_btf_command(args.source, args.btf, n_directions=args.btf_directions, size=args.btf_size,

@@ -178,6 +178,10 @@ class _Validator:
                       for i, k in enumerate(as_list(s.get("kinds", list(d.kinds)), self.at(p + ("kinds",)))))
         if not kinds:
             raise self.at(p + ("kinds",)).error("expected at least one model kind, got []")
+        for key, items in (("weaves", weaves), ("kinds", kinds)):  # a candidate fitted twice ranks against itself
+            for i, item in enumerate(items):
+                if item in items[:i]:
+                    raise self.at(p + (key, i)).error(f"{item!r} is listed twice (as entry {items.index(item)})")
         starts = as_int(s.get("orientation_starts", d.orientation_starts), self.at(p + ("orientation_starts",)), 1, 8)
         max_evals = as_int(s.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1, MAX_EVALS)
         cv_folds = as_int(s.get("cv_folds", d.cv_folds), self.at(p + ("cv_folds",)), 0)

@@ -135,6 +135,15 @@ def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=
                           cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds))
 
 
+def check_settings(settings: SelectSettings, base_dir=".") -> None:
+    """Input validation before any candidate is fitted: every weave reads (a damaged .wv file is refused here,
+    naming its file and line, instead of becoming a "not fitted" row after the other candidates ran)."""
+    from clothlab.weave.presets import resolve_weave
+
+    for weave in settings.weaves:
+        resolve_weave(weave, base_dir)
+
+
 def candidates(settings: SelectSettings, isotropic: bool = False) -> list[Candidate]:
     """The candidate list (module docstring), in weave, kind, orientation-start order; for an ``isotropic``
     measurement one candidate per weave and kind, the orientation not freed (the fit averages the model over
@@ -426,4 +435,4 @@ def save_selection(selection: Selection, *, force: bool = False, fits_dir=None):
 
 __all__ = ["Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection", "candidate_config",
            "candidates", "fit_candidate", "information_criteria", "rank", "save_selection",
-           "select", "selection_summary", "settings_from_config", "table_columns", "table_markdown"]
+           "select", "selection_summary", "settings_from_config", "check_settings", "table_columns", "table_markdown"]

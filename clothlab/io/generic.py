@@ -31,11 +31,13 @@ import numpy as np
 from clothlab.errors import ConfigError, InputError
 from clothlab.io.measurement import Measurement
 from clothlab.io.table import (
+    _CHANNEL_NAME,
     ANGLE_COLUMNS,
     SIGMA_PREFIX,
     RawRows,
     check_azimuth_offset,
     check_choice,
+    check_row_count,
     conventions_provenance,
     parse_rows,
     read_text_lines,
@@ -66,6 +68,8 @@ class ColumnMap:
     order: tuple[str, ...]
     positions: dict | None = None
     names: dict | None = None
+    width: int | None = None
+    """Positional form: how many columns the mapping names, skipped ('-') ones included."""
 
 
 def parse_columns(spec) -> ColumnMap | None:
@@ -73,8 +77,8 @@ def parse_columns(spec) -> ColumnMap | None:
     for None.  ConfigError (field ``columns``) for a malformed mapping."""
     if spec is None:
         return None
-    entries = [e.strip() for e in (spec.split(",") if isinstance(spec, str) else list(spec))]
-    if not entries or any(not isinstance(e, str) or not e for e in entries):
+    entries = _name_list(spec, "columns")
+    if not entries or not all(entries):
         raise ConfigError(f"columns must be comma-separated names, got {spec!r}", field="columns")
     by_name = [e for e in entries if "=" in e]
     if by_name and len(by_name) != len(entries):
@@ -89,7 +93,18 @@ def parse_columns(spec) -> ColumnMap | None:
         return ColumnMap(order, names=dict(pairs))
     order = tuple(e for e in entries if e != SKIP)
     _check_names(order)
-    return ColumnMap(order, positions={name: k for k, name in enumerate(entries) if name != SKIP})
+    return ColumnMap(order, positions={name: k for k, name in enumerate(entries) if name != SKIP},
+                     width=len(entries))
+
+
+def _name_list(value, field: str) -> list[str]:
+    """The stripped entries of a comma-separated string or a list of strings; ConfigError (``field``) for any
+    other value (a number, a mapping, a list holding a non-string)."""
+    if isinstance(value, str):
+        return [e.strip() for e in value.split(",")]
+    if not isinstance(value, list | tuple) or not all(isinstance(e, str) for e in value):
+        raise ConfigError(f"{field} must be comma-separated names or a list of names, got {value!r}", field=field)
+    return [e.strip() for e in value]
 
 
 def _check_names(order) -> None:
@@ -104,8 +119,15 @@ def _check_names(order) -> None:
     if missing:
         raise ConfigError(f"columns must map {', '.join(missing)} (the four angles theta_i, phi_i, theta_o, "
                           "phi_o and at least one channel)", field="columns")
-    if not [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]:
+    value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
+    if not value_names:
         raise ConfigError("columns map no value channel after the four angles", field="columns")
+    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]
+    for name in sigma_names:
+        if name[len(SIGMA_PREFIX):] not in value_names:
+            raise ConfigError(f"column {name!r} names no channel ({', '.join(value_names)})", field="columns")
+    if sigma_names and len(sigma_names) != len(value_names):
+        raise ConfigError("sigma columns must be given for every channel or none", field="columns")
 
 
 def _splitter(delimiter: str, sample: str):
@@ -117,6 +139,35 @@ def _splitter(delimiter: str, sample: str):
     if separator is None:
         return str.split, "whitespace"
     return (lambda text: [f.strip() for f in text.split(separator)]), delimiter
+
+
+def check_options(*, columns=None, delimiter: str = "auto", comment: str = "#", header: str = "auto",
+                  angle_unit: str = "deg", azimuth_zero: str = "weft", azimuth_sense: str = "ccw",
+                  azimuth_offset: float = 0.0, quantity: str = "brdf", channels=None):
+    """The options of :func:`read_generic` checked without reading a file: (column map, azimuth offset), or a
+    ConfigError whose ``field`` is the option at fault (so fabric.yaml's ``measurement.options`` and the
+    command line name it before anything is read)."""
+    for name, value in (("angle_unit", angle_unit), ("quantity", quantity), ("azimuth_zero", azimuth_zero),
+                        ("azimuth_sense", azimuth_sense)):
+        check_choice(name, value)
+    azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
+    if not isinstance(delimiter, str) or delimiter not in DELIMITERS:
+        raise ConfigError(f"unknown delimiter {delimiter!r}; expected one of {' | '.join(DELIMITERS)}",
+                          field="delimiter")
+    if not isinstance(header, str) or header not in HEADER_CHOICES:
+        raise ConfigError(f"unknown header {header!r}; expected one of {' | '.join(HEADER_CHOICES)}",
+                          field="header")
+    if not isinstance(comment, str) or len(comment) > 1 or (comment and (
+            comment.isalnum() or comment in "+-.,;" or comment.isspace() or not comment.isprintable())):
+        raise ConfigError(f"comment must be one printable character that cannot start a number and is not a "
+                          f"separator, or empty; got {comment!r}", field="comment")
+    mapping = parse_columns(columns)
+    if channels is not None:
+        _name_list(channels, "channels")
+        if mapping is not None:  # the channel count is known from the mapping
+            _channel_names(channels, [n for n in mapping.order if n not in ANGLE_COLUMNS
+                                      and not n.startswith(SIGMA_PREFIX)])
+    return mapping, azimuth_offset
 
 
 def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = "#", header: str = "auto",
@@ -134,49 +185,39 @@ def read_generic(path, *, columns=None, delimiter: str = "auto", comment: str = 
     """
     conventions = {"angle_unit": angle_unit, "quantity": quantity, "azimuth_zero": azimuth_zero,
                    "azimuth_sense": azimuth_sense}
-    for name, value in conventions.items():
-        check_choice(name, value)
-    azimuth_offset = check_azimuth_offset(azimuth_offset, error=ConfigError)
-    if delimiter not in DELIMITERS:
-        raise ConfigError(f"unknown delimiter {delimiter!r}; expected one of {' | '.join(DELIMITERS)}",
-                          field="delimiter")
-    if header not in HEADER_CHOICES:
-        raise ConfigError(f"unknown header {header!r}; expected one of {' | '.join(HEADER_CHOICES)}",
-                          field="header")
-    if not isinstance(comment, str) or len(comment) > 1 or comment.isalnum() or comment in "+-.":
-        raise ConfigError(f"comment must be one character that cannot start a number, or empty; got {comment!r}",
-                          field="comment")
-    mapping = parse_columns(columns)
+    mapping, azimuth_offset = check_options(columns=columns, delimiter=delimiter, comment=comment, header=header,
+                                            azimuth_offset=azimuth_offset, channels=channels, **conventions)
     path = Path(path)
     rows = []
-    for lineno, line in enumerate(read_text_lines(path), 1):
+    lines = read_text_lines(path)
+    for lineno, line in enumerate(lines, 1):
         text = line.split(comment, 1)[0] if comment else line
         if text.strip():
             rows.append((lineno, text.strip()))
     if not rows:
-        raise InputError("no data rows (only blank or comment lines)", path=path)
+        raise InputError("no data rows (only blank or comment lines)", path=path, line=max(len(lines), 1))
     split, separator = _splitter(delimiter, rows[0][1] if len(rows) == 1 else rows[1][1])
     has_header = header == "yes" or (header == "auto" and _is_header(split(rows[0][1])))
-    file_names = None
+    file_names = header_line = None
     if has_header:
         header_line, header_text = rows.pop(0)
         file_names = [n.strip().strip('"').strip("'") for n in split(header_text)]
         if not rows:
             raise InputError("no data rows after the header row", path=path, line=header_line)
-    order, index, names_for_messages = _resolve(mapping, file_names, path, rows[0][0] - (1 if has_header else 0))
-    width = len(file_names) if file_names is not None else max(index.values()) + 1
+    order, index, names_for_messages = _resolve(mapping, file_names, path,
+                                                header_line if has_header else rows[0][0])
+    width = len(file_names) if file_names is not None else (mapping.width or max(index.values()) + 1)
     field_names = list(file_names) if file_names is not None else [
         next((n for n, k in index.items() if k == j), f"column {j + 1}") for j in range(width)]
-    table = parse_rows(rows, field_names, path=path, split=split, separator=" " if separator == "whitespace"
-                       else DELIMITERS[separator])
+    table = parse_rows(rows, field_names, path=path, split=split,  # a tab is shown as a space in messages
+                       separator=" " if separator in ("whitespace", "tab") else DELIMITERS[separator])
     value_names = [n for n in order if n not in ANGLE_COLUMNS and not n.startswith(SIGMA_PREFIX)]
-    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]
-    for name in sigma_names:
-        if name[len(SIGMA_PREFIX):] not in value_names:
-            raise ConfigError(f"column {name!r} names no channel ({', '.join(value_names)})", field="columns")
-    if sigma_names and len(sigma_names) != len(value_names):
-        raise ConfigError("sigma columns must be given for every channel or none", field="columns")
-    new_names = _channel_names(channels, value_names)
+    sigma_names = [n for n in order if n.startswith(SIGMA_PREFIX)]  # all or none, checked by _check_names
+    try:
+        new_names = _channel_names(channels, value_names)
+    except ConfigError as exc:  # e.g. three names for the two channels the file's header row holds
+        raise InputError(exc.detail, path=path, line=header_line if has_header else rows[0][0],
+                         field="channels") from None
     raw = RawRows(
         path=str(path), lines=np.array([lineno for lineno, _ in rows]),
         angles=table[:, [index[a] for a in ANGLE_COLUMNS]],
@@ -193,8 +234,9 @@ def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
     """(clothlab names in order, file column index per name, file column name per name for messages)."""
     if mapping is None:
         if file_names is None:
-            raise ConfigError("the file has no header row naming its columns; give columns "
-                              "(e.g. theta_i,phi_i,theta_o,phi_o,R,G,B)", field="columns")
+            raise InputError("the file has no header row naming its columns; give columns "
+                             "(e.g. theta_i,phi_i,theta_o,phi_o,R,G,B)", path=path, line=header_line,
+                             field="columns")
         mapping = ColumnMap(tuple(file_names), names={n: n for n in file_names})
         try:
             _check_names(mapping.order)
@@ -202,8 +244,8 @@ def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
             raise InputError(f"header row: {exc.detail}; or give columns", path=path, line=header_line) from None
     if mapping.names is not None:
         if file_names is None:
-            raise ConfigError("columns map header names (name=header) but the file has no header row "
-                              "(header: no)", field="columns")
+            raise InputError("columns map header names (name=header) but the file has no header row (its first "
+                             "row is data, or header: no)", path=path, line=header_line, field="columns")
         index = {}
         for name, wanted in mapping.names.items():
             hits = [k for k, n in enumerate(file_names) if n == wanted]
@@ -222,10 +264,14 @@ def _resolve(mapping: ColumnMap | None, file_names, path, header_line):
 def _channel_names(channels, value_names):
     if channels is None:
         return value_names
-    names = [c.strip() for c in (channels.split(",") if isinstance(channels, str) else list(channels))]
+    names = _name_list(channels, "channels")
     if len(names) != len(value_names) or len(set(names)) != len(names) or not all(names):
         raise ConfigError(f"channels must give {len(value_names)} distinct names (for {', '.join(value_names)}), "
                           f"got {channels!r}", field="channels")
+    for name in names:
+        if not _CHANNEL_NAME.match(name) or name in ANGLE_COLUMNS or name.startswith(SIGMA_PREFIX):
+            raise ConfigError(f"bad channel name {name!r}: expected a name without spaces, commas or quotes that "
+                              f"is not an angle column and does not start with '{SIGMA_PREFIX}'", field="channels")
     return names
 
 
@@ -233,4 +279,5 @@ def import_table(source, output, *, overwrite: bool = False, **options) -> tuple
     """Read ``source`` with :func:`read_generic` (``options``) and write it as a clothlab table at ``output``
     (atomic; ResultExistsError unless ``overwrite``).  Returns the path written and the measurement."""
     measurement = read_generic(source, **options)
+    check_row_count(measurement.n, source)
     return write_table(measurement, output, overwrite=overwrite), measurement

@@ -25,18 +25,21 @@ import inspect
 import re
 from pathlib import Path
 
-from clothlab.errors import InputError
+from clothlab.errors import ClothlabError, InputError
 from clothlab.io.astm import read_astm
 from clothlab.io.generic import DELIMITERS, HEADER_CHOICES, read_generic
+from clothlab.io.generic import check_options as check_generic_options
 from clothlab.io.measurement import Measurement
 from clothlab.io.merl import HEADER_BYTES as MERL_HEADER_BYTES
 from clothlab.io.merl import MAX_DIM as MAX_MERL_DIM
+from clothlab.io.merl import check_options as check_merl_options
 from clothlab.io.merl import read_merl
 from clothlab.io.pabopto import SAMPLE_UP, read_pabopto
 from clothlab.io.rglbsdf import MAGIC as TENSOR_MAGIC
 from clothlab.io.rglbsdf import read_bsdf
 from clothlab.io.table import CONVENTION_CHOICES, check_row_count, find_sidecar, read_table
 from clothlab.io.utia import NEGATIVE, UTIA_BYTES, read_utia
+from clothlab.io.utia import check_options as check_utia_options
 from clothlab.strict import MAX_LINE_CHARS, MAX_TABLE_BYTES, check_regular_file
 
 READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto, "text": read_generic,
@@ -51,6 +54,8 @@ OPTION_CHOICES = {**{name: tuple(values) for name, values in CONVENTION_CHOICES.
                   "delimiter": tuple(DELIMITERS), "header": HEADER_CHOICES, "negative": NEGATIVE}
 """The allowed values of each reader option (the conventions of a table, the pab-opto sample ``up``, the
 text importer's delimiter and header, UTIA's handling of negative values)."""
+OPTION_CHECKS = {"text": check_generic_options, "merl": check_merl_options, "utia": check_utia_options}
+"""Per reader, a check of its option values that needs no file (raises with ``field`` = the option)."""
 _DETECT_LINES = 200
 _CLOTHLAB = re.compile(r"^#\s*clothlab-table\s*:")
 _PABOPTO = re.compile(r"^#\s*(format\s*:|intheta\b|inphi\b|incident_angle\b)", re.IGNORECASE)
@@ -91,7 +96,7 @@ def detect_format(path) -> str:
     if not text.strip():
         if find_sidecar(path) is not None:
             return "clothlab"
-        raise InputError("file is empty; expected a measurement table", path=path)
+        raise InputError("file is empty; expected a measurement table", path=path, line=1)
     lines = text.splitlines()
     if any(_CLOTHLAB.match(line) for line in lines) or find_sidecar(path) is not None:
         return "clothlab"
@@ -103,7 +108,8 @@ def detect_format(path) -> str:
         "unknown measurement format: expected a clothlab table ('# clothlab-table: 1' header or a sidecar "
         f"{path.name}.yaml), an ASTM E1392 file (NUM_POINTS / VARS keywords), pab-opto files ('#format:', "
         "'#intheta' or '#incident_angle' lines) or a MERL / UTIA / RGL-EPFL binary; or pass format= one of "
-        + ", ".join(FORMATS) + " (text: a lab's own table with its column mapping)", path=path)
+        + ", ".join(FORMATS) + " (text: a lab's own table with its column mapping)", path=path, line=1,
+        field="format")
 
 
 def _looks_binary(head: bytes) -> bool:
@@ -126,11 +132,13 @@ def _binary_format(path: Path, first: bytes, head: bytes) -> str | None:
     if first == TENSOR_MAGIC:
         return "bsdf"
     suffix = path.suffix.lower()
-    if suffix == ".bsdf" and _looks_binary(head):
+    if suffix == ".bsdf" and (_looks_binary(head) or not head):  # empty: the reader names the truncation
         return "bsdf"
-    if suffix == ".bin" and (path.stat().st_size == UTIA_BYTES or _looks_binary(head)):
+    if suffix == ".bin" and (path.stat().st_size == UTIA_BYTES or _looks_binary(head) or not head):
         return "utia"
-    if suffix == ".binary" and len(first) >= MERL_HEADER_BYTES:
+    if suffix == ".binary":
+        if len(first) < MERL_HEADER_BYTES:  # too short for any table: the MERL reader names the truncation
+            return "merl"
         dims = [int.from_bytes(first[k:k + 4], "little", signed=True) for k in (0, 4, 8)]
         if all(0 < n <= MAX_MERL_DIM for n in dims) or _looks_binary(head):
             return "merl"
@@ -153,6 +161,12 @@ def check_reader_options(path, format: str, options: dict) -> None:  # noqa: A00
         if choices is not None and value not in choices:
             raise InputError(f"unknown {name} {value!r} for the {format} reader; expected one of "
                              f"{' | '.join(choices)}", path=path, field=name)
+    check = OPTION_CHECKS.get(format)
+    if check is not None:  # the values themselves, before the file is read
+        try:
+            check(**options)
+        except ClothlabError as exc:
+            raise InputError(exc.detail, path=path, field=exc.field) from None
 
 
 def load_measurement(path, format: str | None = None, **options) -> Measurement:  # noqa: A002

@@ -36,6 +36,7 @@ from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.frames import spherical_to_vector
 from clothlab.io.binary import array_at, check_size, check_values, read_binary
 from clothlab.io.measurement import Measurement
+from clothlab.io.table import MIN_ROWS
 
 MERL_DIMS = (90, 90, 180)
 """(n_theta_h, n_theta_d, n_phi_d) of the MERL database's files."""
@@ -79,8 +80,8 @@ def read_merl_table(path) -> MerlTable:
     """The MERL table of ``path`` (values scaled to 1/sr), or InputError naming the byte offset."""
     data = read_binary(path, what=_WHAT)
     if len(data) < HEADER_BYTES:
-        raise InputError(f"truncated {_WHAT}: {len(data)} bytes, the int32 dims header alone needs "
-                         f"{HEADER_BYTES}", path=path)
+        raise InputError(f"truncated {_WHAT}: the file ends at byte offset {len(data)}, the int32 dims header "
+                         f"alone needs {HEADER_BYTES} bytes", path=path, field="dims")
     dims = tuple(int(n) for n in array_at(data, 0, "<i4", 3, path=path, what=_WHAT))
     if any(n < 1 or n > MAX_DIM for n in dims):
         raise InputError(f"dims header {dims} at byte offset 0 is not a MERL header: expected three int32 "
@@ -91,8 +92,13 @@ def read_merl_table(path) -> MerlTable:
     # negative = not measured (allowed); NaN, infinities and absurd magnitudes are refused
     check_values(raw, path=path, offset=HEADER_BYTES, itemsize=8, name=_bin_name(dims), allow_negative=True)
     brdf = raw.reshape(3, *dims) * np.asarray(MERL_SCALE)[:, None, None, None]
-    if not (brdf >= 0.0).any():
-        raise InputError("no measured bin: every value is negative (not measured)", path=path)
+    plane = 8 * dims[0] * dims[1] * dims[2]
+    for c, channel in enumerate(MERL_CHANNELS):  # a channel that reflects nothing is not a measurement
+        if not (brdf[c] > 0.0).any():
+            start = HEADER_BYTES + c * plane
+            raise InputError(f"no measured bin of channel {channel} holds light: every value from byte offset "
+                             f"{start} to {start + plane} is 0 or negative (negative: not measured)", path=path,
+                             field=channel)
     return MerlTable(brdf, str(path))
 
 
@@ -180,12 +186,25 @@ def sample_merl(table: MerlTable, theta_i, phi_i, theta_o, phi_o, *, provenance=
     theta_i, phi_i, theta_o, phi_o = (np.asarray(a, dtype=np.float64) for a in (theta_i, phi_i, theta_o, phi_o))
     values = lookup_merl(table, spherical_to_vector(theta_i, phi_i), spherical_to_vector(theta_o, phi_o))
     keep = np.isfinite(values).all(axis=1)
-    if not keep.any():
-        raise InputError("no requested direction pair falls in a measured bin", path=table.path)
+    if keep.sum() < MIN_ROWS:
+        raise InputError(f"{int(keep.sum())} of the {len(keep)} sampled direction pairs fall in bins measured in "
+                         f"every channel; a measurement needs at least {MIN_ROWS} (a negative value in the file "
+                         "marks a bin not measured): sample more densely", path=table.path, field="theta_step")
+    for c, channel in enumerate(MERL_CHANNELS):
+        if not (values[keep, c] > 0.0).any():
+            raise InputError(f"channel {channel} is 0 at every sampled direction pair: the file's positive "
+                             f"values of {channel} lie in bins no sampled pair reaches; sample more densely",
+                             path=table.path, field="theta_step")
     info = {"source_format": "merl", "isotropic": True, "merl_dims": list(table.dims),
             "merl_unmeasured_pairs": int((~keep).sum()), **(provenance or {})}
     return Measurement(theta_i[keep], phi_i[keep], theta_o[keep], phi_o[keep], values[keep], MERL_CHANNELS,
                        None, info, table.path)
+
+
+def check_options(*, theta_step: float = DEFAULT_THETA_STEP, phi_step: float = DEFAULT_PHI_STEP,
+                  theta_max: float = DEFAULT_THETA_MAX) -> None:
+    """ConfigError (``field`` = the option) unless :func:`read_merl`'s sampling options are valid."""
+    merl_directions(theta_step, phi_step, theta_max)
 
 
 def read_merl(path, *, theta_step: float = DEFAULT_THETA_STEP, phi_step: float = DEFAULT_PHI_STEP,

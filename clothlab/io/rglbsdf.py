@@ -21,6 +21,7 @@ saying so.  See docs/formats.md for what is missing.
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +42,8 @@ NON_NEGATIVE_FIELDS = ("ndf", "sigma", "vndf", "luminance", "rgb", "spectra", "j
 """Fields holding densities or reflectance samples, which must be >= 0."""
 MAX_FIELDS = 1024
 MAX_NDIM = 16
+MAX_NAME_CHARS = 128
+"""Longest field name read (the format's own names are a few characters)."""
 _WHAT = "tensor file"
 
 
@@ -97,6 +100,9 @@ def read_tensor_file(path) -> dict[str, TensorField]:
             name = raw_name.decode("utf-8")
         except UnicodeDecodeError:
             raise InputError(f"field name at byte offset {start + 2} is not UTF-8", path=path) from None
+        if len(name) > MAX_NAME_CHARS or not name.isprintable():  # a damaged length swallows header bytes
+            raise InputError(f"field name at byte offset {start + 2} ({length} bytes, length at byte offset "
+                             f"{start}) is not a printable name of at most {MAX_NAME_CHARS} characters", path=path)
         if not name or name in fields:
             raise InputError(f"field name {name!r} at byte offset {start + 2} is empty or repeated", path=path,
                              field=name or None)
@@ -109,8 +115,13 @@ def read_tensor_file(path) -> dict[str, TensorField]:
         offset = cur.take("<Q", f"the data offset of field {name!r}")
         if ndim > MAX_NDIM:
             raise InputError(f"field {name!r} has {ndim} dimensions (at most {MAX_NDIM})", path=path, field=name)
-        shape = tuple(int(n) for n in np.atleast_1d(cur.take(f"<{ndim}Q", f"the shape of field {name!r}"))) \
-            if ndim else ()
+        shape_at = cur.pos
+        raw_shape = cur.take(f"<{ndim}Q", f"the shape of field {name!r}") if ndim else ()
+        shape = (raw_shape,) if ndim == 1 else tuple(raw_shape)  # Python integers: exact
+        for k, n in enumerate(shape):  # no axis longer than the file has bytes (even of an empty field)
+            if n > len(data):
+                raise InputError(f"field {name!r} shape[{k}] = {n} at byte offset {shape_at + 8 * k} exceeds the "
+                                 f"file's {len(data)} bytes", path=path, field=name)
         fields[name] = TensorField(name, np.empty(0), int(offset), code)
         spans.append((name, int(offset), shape, code))
     header_end = cur.pos
@@ -118,7 +129,7 @@ def read_tensor_file(path) -> dict[str, TensorField]:
     previous_end, previous_name = header_end, "the header"
     for name, offset, shape, code in ordered:
         itemsize = np.dtype(DTYPES[code]).itemsize
-        count_items = int(np.prod(shape, dtype=np.float64)) if shape else 1
+        count_items = math.prod(shape)  # exact (Python integers); 1 for a scalar field
         if offset < previous_end:
             raise InputError(f"field {name!r} starts at byte offset {offset}, inside {previous_name} (which ends "
                              f"at byte offset {previous_end})", path=path, field=name)
@@ -129,7 +140,7 @@ def read_tensor_file(path) -> dict[str, TensorField]:
         array = array_at(data, offset, DTYPES[code], count_items, path=path, what=_WHAT).reshape(shape)
         if array.dtype.kind == "f":
             check_values(array.astype(np.float64), path=path, offset=offset, itemsize=itemsize,
-                         name=lambda k, n=name, s=shape: f"{n}{list(np.unravel_index(k, s)) if s else ''}",
+                         name=lambda k, n=name, s=shape: f"{n}{[int(i) for i in np.unravel_index(k, s)] if s else ''}",
                          allow_negative=name not in NON_NEGATIVE_FIELDS)
         elif name in NON_NEGATIVE_FIELDS and (array < 0).any():
             k = int(np.flatnonzero(np.ravel(array) < 0)[0])

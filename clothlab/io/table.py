@@ -278,9 +278,26 @@ def check_rows(raw: RawRows, *, angle_unit: str, quantity: str) -> None:
         _check_magnitude(raw.sigma, raw, sigma_names)
 
 
+def last_data_line(path) -> int | None:
+    """The 1-based number of the last non-blank line of a text file that is not a '#' comment (where a table's
+    last data row is), or None for a directory or a file that cannot be read as text."""
+    try:
+        lines = read_text_lines(path)
+    except (InputError, OSError):
+        return None
+    for number in range(len(lines), 0, -1):
+        text = lines[number - 1].strip()
+        if text and not text.startswith("#"):
+            return number
+    return max(len(lines), 1)
+
+
 def check_row_count(n: int, path, line=None) -> None:
-    """InputError unless a measurement has at least :data:`MIN_ROWS` rows."""
+    """InputError unless a measurement has at least :data:`MIN_ROWS` rows (naming ``line``, else the last data
+    line of a text file)."""
     if n < MIN_ROWS:
+        if line is None:
+            line = last_data_line(path)
         raise InputError(f"{n} data row{'s' if n != 1 else ''}; a measurement needs at least {MIN_ROWS} "
                          "(error percentiles and a fit of one direction pair mean nothing)", path=path, line=line)
 
@@ -297,7 +314,9 @@ def convert_rows(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: 
     offset = azimuth_offset if angle_unit == "deg" else math.degrees(azimuth_offset)
 
     def azimuth(phi):
-        return azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
+        out = azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
+        # np.mod of a tiny negative angle rounds to the full turn itself: keep azimuths in [0, 360)
+        return np.where(out >= 360.0, out - 360.0, out)
 
     values, sigma = raw.values, raw.sigma
     if quantity == "reflectance_factor":
@@ -341,7 +360,10 @@ def check_azimuth_offset(value, *, error=InputError, **where) -> float:
     """``value`` as a float if it is a finite number (not a bool) with |value| <= 360 deg, else ``error``."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise error(f"azimuth_offset must be a number of degrees, got {value!r}", field="azimuth_offset", **where)
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an integer beyond the float range
+        value = math.inf
     if not math.isfinite(value) or abs(value) > MAX_AZIMUTH_OFFSET:
         raise error(f"azimuth_offset {value!r} is not a finite angle within [-{MAX_AZIMUTH_OFFSET:g}, "
                     f"{MAX_AZIMUTH_OFFSET:g}] deg", field="azimuth_offset", **where)
@@ -613,9 +635,29 @@ def _plain(value, where: str = "provenance"):
     return value
 
 
+_HEADER_DUMPER = None
+
+
+def _header_dumper():
+    """PyYAML's safe dumper that also quotes every string clothlab's strict reader would take for a number
+    (e.g. a channel named ``1e3``, which YAML 1.1 leaves plain), so that a written header reads back as
+    written."""
+    global _HEADER_DUMPER
+    if _HEADER_DUMPER is None:
+        class HeaderDumper(yaml.SafeDumper):
+            pass
+
+        HeaderDumper.add_implicit_resolver(
+            "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?$"),
+            list("-+0123456789."))
+        _HEADER_DUMPER = HeaderDumper
+    return _HEADER_DUMPER
+
+
 def _header_text(header: dict) -> list[str]:
     """'# '-prefixed YAML lines of the header (block mapping; innermost lists and mappings inline)."""
-    dumped = yaml.safe_dump(header, sort_keys=False, allow_unicode=True, width=2**31, default_flow_style=None)
+    dumped = yaml.dump(header, Dumper=_header_dumper(), sort_keys=False, allow_unicode=True, width=2**31,
+                       default_flow_style=None)
     return [f"# {line}".rstrip() for line in dumped.rstrip("\n").split("\n")]
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.atomic import atomic_write_bytes
-from clothlab.errors import InputError, ResultExistsError
+from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.io.binary import check_size, check_values, read_binary
 from clothlab.io.measurement import Measurement
 from clothlab.io.table import (
@@ -70,7 +70,14 @@ def read_utia_table(path, *, negative: str = "error") -> UtiaTable:
     check_size(data, UTIA_BYTES, path=path, what=_WHAT)
     flat = np.frombuffer(data, dtype="<f8").astype(np.float64)
     check_values(flat, path=path, offset=0, itemsize=8, name=_name, allow_negative=negative == "zero")
-    return UtiaTable(np.maximum(flat, 0.0).reshape(UTIA_SHAPE), str(path))
+    brdf = np.maximum(flat, 0.0).reshape(UTIA_SHAPE)
+    plane = UTIA_BYTES // 3
+    for c, channel in enumerate(UTIA_CHANNELS):  # a channel that reflects nothing is not a measurement
+        if not brdf[c].any():
+            raise InputError(f"every value of channel {channel} (byte offsets {c * plane} to {(c + 1) * plane}) is 0"
+                             f"{' or negative' if negative == 'zero' else ''}: a measurement holds reflected light",
+                             path=path, field=channel)
+    return UtiaTable(brdf, str(path))
 
 
 def write_utia(brdf: np.ndarray, path, *, overwrite: bool = False) -> Path:
@@ -122,6 +129,16 @@ def _directions():
             it.append(i)
             ip.append(j)
     return np.array(thetas), np.array(phis), np.array(it), np.array(ip)
+
+
+def check_options(*, azimuth_zero: str = "weft", azimuth_sense: str = "ccw", azimuth_offset: float = 0.0,
+                  quantity: str = "brdf", negative: str = "error") -> None:
+    """InputError / ConfigError (``field`` = the option) unless :func:`read_utia`'s options are valid."""
+    for name, value in (("quantity", quantity), ("azimuth_zero", azimuth_zero), ("azimuth_sense", azimuth_sense)):
+        check_choice(name, value)
+    check_azimuth_offset(azimuth_offset, error=ConfigError)
+    if not isinstance(negative, str) or negative not in NEGATIVE:
+        raise ConfigError(f"unknown negative {negative!r}; expected one of {' | '.join(NEGATIVE)}", field="negative")
 
 
 def read_utia(path, *, azimuth_zero: str = "weft", azimuth_sense: str = "ccw", azimuth_offset: float = 0.0,

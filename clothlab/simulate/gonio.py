@@ -59,6 +59,10 @@ def paper_sampling(n: int = 15, max_theta: float = 75.0, exitant=EXITANT_DIRECTI
     return (np.tile(ti, k), np.tile(pi_, k), np.repeat(exitant[:, 0], len(ti)), np.repeat(exitant[:, 1], len(ti)))
 
 
+MIN_SIGMA = 1e-12
+"""Smallest sigma (1/sr) a noisy simulation records: a value that carries noise has a positive uncertainty."""
+
+
 @dataclass(frozen=True)
 class NoiseModel:
     """Multiplicative log-normal (``multiplicative``, relative sigma) plus additive Gaussian (1/sr)."""
@@ -78,6 +82,8 @@ class NoiseModel:
         floored = int(np.count_nonzero(noisy < self.floor))
         noisy = np.maximum(noisy, self.floor)
         sigma = np.sqrt((s_m * clean) ** 2 + self.additive**2)
+        # a tiny sigma squares to 0 (underflow): at least MIN_SIGMA, as a valid table's sigma is > 0
+        sigma = np.where(sigma < MIN_SIGMA, MIN_SIGMA, sigma)
         return noisy, sigma, floored
 
 
