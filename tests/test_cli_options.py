@@ -267,3 +267,19 @@ def test_only_the_cli_prints():
         if any(n.func.id == "print" for n in calls):
             printing.add(rel)
     assert not printing, sorted(printing)
+
+
+@pytest.mark.parametrize("argv", [["fit", "x.yaml", "--max-evals", "1_0"], ["fit", "x.yaml", "--seed", "+3"],
+                                  ["fit", "x.yaml", "--cv", "\u0665"], ["fit", "x.yaml", "--nodes", "1"],
+                                  ["fit", "x.yaml", "--workers", "0"], ["check", "--seed", "-1"],
+                                  ["render", "s.yaml", "--spp", "1e3"],
+                                  ["eval", "f", "d.csv", "--footprint-seed", "x"]])
+def test_integer_options_take_plain_decimal_digits_in_range(argv, capsys):
+    """Every integer option goes through one strict type (clothlab.cli.options.count_type): no Python-only
+    spellings (1_0, +3, non-ASCII digits), no values outside the range; argparse's exit 2 naming the option."""
+    from clothlab.cli.main import main
+
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    option = next(a for a in argv if a.startswith("--"))
+    assert info.value.code == 2 and option in capsys.readouterr().err

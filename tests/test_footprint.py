@@ -426,8 +426,9 @@ def test_eval_footprint_column_errors(tmp_path, capsys):
     assert main(["eval", str(fit_dir), str(zero)]) == 2
     err = capsys.readouterr().err
     assert f"{zero}:3" in err and "field 'footprint'" in err and "> 0" in err
-    assert main(["eval", str(fit_dir), str(zero), "--footprint-samples", "0", "--footprint-method", "mc"]) == 2
-    assert "--footprint-samples" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:  # refused by the option's type, before any work
+        main(["eval", str(fit_dir), str(zero), "--footprint-samples", "0", "--footprint-method", "mc"])
+    assert info.value.code == 2 and "--footprint-samples" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------ the bench section

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothlab.cli.options import LazyText, add_force, add_output, names_of, one_of
+from clothlab.cli.options import LazyText, add_force, add_output, count_type, names_of, one_of
 
 METHODS = names_of("clothlab.colour.chart", "METHODS")
 
@@ -17,7 +17,7 @@ def add_parser(sub):
     p.add_argument("chart", type=Path, help="CSV with R, G, B linear camera values per patch (24 rows)")
     p.add_argument("--method", default="Cheung 2004", type=one_of(METHODS, "method"),
                    help=LazyText(lambda: f"one of {', '.join(repr(m) for m in METHODS())} (default 'Cheung 2004')"))
-    p.add_argument("--degree", type=int, help="root-polynomial / Vandermonde degree")
+    p.add_argument("--degree", type=count_type(1, 10), help="root-polynomial / Vandermonde degree")
     p.add_argument("--apply", type=Path, metavar="TABLE", help="correct this measurement table (needs -o)")
     add_output(p, "corrected table (with --apply)", metavar="TABLE")
     p.add_argument("--report", type=Path, metavar="DIR", help="write a page with delta E 2000 before / after")

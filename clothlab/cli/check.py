@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothlab.cli.options import add_output, add_parallel
+from clothlab.cli.options import add_output, add_parallel, count_type
 
 
 def add_parser(sub):
@@ -14,7 +14,8 @@ def add_parser(sub):
                        description="Evaluate the model at extreme inputs and along parameter sweeps; exit code 1 "
                                    "on a non-finite or negative value or a reciprocity violation.")
     p.add_argument("--full", action="store_true", help=">= 10^6 configurations and the stiff-fit study (minutes)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random parameter sets (default 0)")
+    p.add_argument("--seed", type=count_type(0, 2**32 - 1), default=0,
+                   help="seed of the random parameter sets (default 0)")
     p.add_argument("--data", type=Path, metavar="DIR",
                    help="directory with the example measurements and fits (default: the shipped examples)")
     add_output(p, "report directory: an HTML page of the findings and the plots (PNG)", metavar="DIR",

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
+from clothlab.cli.options import add_force, add_output, add_quadrature_overrides, count_type
 
 
 def add_parser(sub):
@@ -24,11 +24,12 @@ def add_parser(sub):
     p.add_argument("--footprint-method", choices=("sat", "mc"), default="sat",
                    help="footprint estimator: periodic summed-area tables (exact for box footprints; default) "
                         "or stratified Monte Carlo")
-    p.add_argument("--footprint-resolution", type=int, default=128, metavar="R",
+    p.add_argument("--footprint-resolution", type=count_type(2, 8192), default=128, metavar="R",
                    help="texels per tile side of the summed-area tables (default 128)")
-    p.add_argument("--footprint-samples", type=int, default=256, metavar="N",
+    p.add_argument("--footprint-samples", type=count_type(1, 1_000_000), default=256, metavar="N",
                    help="Monte Carlo samples per footprint (default 256)")
-    p.add_argument("--footprint-seed", type=int, default=0, metavar="SEED", help="Monte Carlo seed (default 0)")
+    p.add_argument("--footprint-seed", type=count_type(0, 2**32 - 1), default=0, metavar="SEED",
+                   help="Monte Carlo seed (default 0)")
     return p
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output, add_parallel, add_quadrature_overrides
+from clothlab.cli.options import add_force, add_output, add_parallel, add_quadrature_overrides, count_type
 
 
 def add_parser(sub):
@@ -22,8 +22,9 @@ def add_parser(sub):
                         "are a batch: one task per fit, fits already done with the same configuration skipped "
                         "(docs/parallel.md)")
     add_force(p, "fits/<name>/")
-    p.add_argument("--max-evals", type=int, help="optimiser evaluation budget (overrides the yaml)")
-    p.add_argument("--seed", type=int, help="optimiser seed (overrides the yaml)")
+    p.add_argument("--max-evals", type=count_type(1, 2**31 - 1),
+                   help="optimiser evaluation budget (overrides the yaml)")
+    p.add_argument("--seed", type=count_type(0, 2**32 - 1), help="optimiser seed (overrides the yaml)")
     add_output(p, "write the fit directories <name>/ under DIR (default: the yaml's output.fits)", metavar="DIR",
                deprecated=("--fits-dir",))
     p.add_argument("--report", action="store_true", help="also build reports/<name>/ afterwards (output.reports)")
@@ -31,7 +32,8 @@ def add_parser(sub):
                    help="also sample the posterior with emcee (fit.posterior settings, else the defaults); an "
                         "interrupted run continues from its checkpoint when the same command is run again")
     p.add_argument("--no-posterior", action="store_true", help="skip the posterior even if fabric.yaml asks for it")
-    p.add_argument("--cv", type=int, metavar="K", help="k-fold cross-validated error percentiles (K >= 2)")
+    p.add_argument("--cv", type=count_type(0, 100_000), metavar="K",
+                   help="k-fold cross-validated error percentiles (K >= 2)")
     p.add_argument("--select", action="store_true",
                    help="model selection instead of one fit: the same as `clothlab select` (docs/select.md)")
     from clothlab.cli.select import add_selection_options

@@ -67,6 +67,43 @@ class DeprecatedAlias(argparse.Action):
         setattr(namespace, DEPRECATED, [*given, (option_string, self.new)])
 
 
+def number_type(low: float | None = None, high: float | None = None):
+    """An argparse type: a finite number in plain decimal notation (no ``nan``, ``inf``, ``1_0``) in
+    [low, high]."""
+    def parse(text: str) -> float:
+        import argparse
+
+        from clothlab.errors import ConfigError
+        from clothlab.strict import parse_number
+
+        try:
+            value = parse_number(text, error=ConfigError)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(exc.detail) from None
+        if (low is not None and value < low) or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{value:g} is outside [{low:g}, {high:g}]")
+        return value
+
+    return parse
+
+
+def count_type(low: int, high: int):
+    """An argparse type: an integer in plain decimal digits (no ``1_0``, ``+``, non-ASCII digits) in [low, high]."""
+    def parse(text: str) -> int:
+        import argparse
+        import re
+
+        stripped = text.strip()
+        if not re.fullmatch(r"-?[0-9]{1,30}", stripped):
+            raise argparse.ArgumentTypeError(f"expected an integer in decimal digits, got {text!r}")
+        value = int(stripped)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value} is outside [{low}, {high}]")
+        return value
+
+    return parse
+
+
 def add_output(parser, help: str, *, deprecated: Sequence[str] = (), **kwargs) -> None:
     """``-o/--output`` (a Path) with ``help``; ``deprecated`` old spellings stay as hidden aliases."""
     kwargs.setdefault("type", Path)
@@ -82,7 +119,8 @@ def add_quadrature_overrides(parser) -> None:
     parser.add_argument("--rule", type=one_of(rules, "quadrature rule"),
                         help=LazyText(lambda: f"quadrature rule, one of {', '.join(rules())} "
                                               "(overrides fabric.yaml model.quadrature.rule)"))
-    parser.add_argument("--nodes", type=int, help="quadrature nodes (per piece for the support and adaptive rules; "
+    parser.add_argument("--nodes", type=count_type(2, 1000),
+                        help="quadrature nodes (per piece for the support and adaptive rules; "
                                                   "overrides fabric.yaml model.quadrature.nodes)")
 
 
@@ -97,7 +135,7 @@ def add_parallel(parser, what: str) -> None:
     Dask cluster; default ``$DASK_SCHEDULER_ADDRESS``) for ``what``; without either, in-process.  Dask is the
     optional extra ``clothlab[dask]`` (docs/parallel.md); :func:`runner_of` builds the runner."""
     group = parser.add_argument_group("parallel execution (docs/parallel.md; needs pip install \"clothlab[dask]\")")
-    group.add_argument("--workers", type=int, metavar="N",
+    group.add_argument("--workers", type=count_type(1, 1024), metavar="N",
                        help=f"run {what} on a local Dask cluster of N worker processes (1 thread each)")
     group.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help=f"run {what} on the existing Dask cluster at this scheduler address (default: "

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothlab.cli.options import LazyText, add_force, add_output, names_of, one_of
+from clothlab.cli.options import LazyText, add_force, add_output, count_type, names_of, one_of
 
 SHADERS = names_of("clothlab.render.shade", "SHADERS")
 #: Directory of the default output stem (``renders/<scene stem>``), relative to the working directory.
@@ -22,7 +22,7 @@ def add_parser(sub):
     add_output(p, "output path stem (writes STEM.exr, STEM.png; default renders/<scene file stem>)", metavar="STEM")
     p.add_argument("--shader", default="im-lod", type=one_of(SHADERS, "shader"),
                    help=LazyText(lambda: f"one of {', '.join(SHADERS())} (default im-lod)"))
-    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.spp)")
+    p.add_argument("--spp", type=count_type(1, 1_000_000), help="samples per pixel (default: the scene's render.spp)")
     add_force(p, "STEM.exr and STEM.png")
     return p
 

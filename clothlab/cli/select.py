@@ -8,8 +8,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output, add_parallel
-from clothlab.cli.simulate import count_type
+from clothlab.cli.options import add_force, add_output, add_parallel, count_type
 
 
 def add_parser(sub):

@@ -5,50 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output, add_quadrature_overrides
+from clothlab.cli.options import add_force, add_output, add_quadrature_overrides, count_type, number_type
 
 MAX_NOISE_MULT = 10.0
 """Largest --noise-mult (a log-normal sigma of 10 already spreads values over e^+-20)."""
 MAX_NOISE_ADD = 1e3
 """Largest --noise-add in 1/sr."""
 MAX_SEED = 2**64 - 1
-
-
-def _number(low: float | None = None, high: float | None = None):
-    """An argparse type: a finite number in plain decimal notation (no ``nan``, ``inf``, ``1_0``) in
-    [low, high]."""
-    def parse(text: str) -> float:
-        import argparse
-
-        from clothlab.errors import ConfigError
-        from clothlab.strict import parse_number
-
-        try:
-            value = parse_number(text, error=ConfigError)
-        except ConfigError as exc:
-            raise argparse.ArgumentTypeError(exc.detail) from None
-        if (low is not None and value < low) or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"{value:g} is outside [{low:g}, {high:g}]")
-        return value
-
-    return parse
-
-
-def count_type(low: int, high: int):
-    """An argparse type: an integer in plain decimal digits (no ``1_0``, ``+``, non-ASCII digits) in [low, high]."""
-    def parse(text: str) -> int:
-        import argparse
-        import re
-
-        stripped = text.strip()
-        if not re.fullmatch(r"-?[0-9]{1,30}", stripped):
-            raise argparse.ArgumentTypeError(f"expected an integer in decimal digits, got {text!r}")
-        value = int(stripped)
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{value} is outside [{low}, {high}]")
-        return value
-
-    return parse
 
 
 def add_parser(sub):
@@ -67,7 +30,7 @@ def add_parser(sub):
                    help="(light, view) pairs of the BTF stack (default 16)")
     p.add_argument("--btf-size", type=count_type(1, 16384), default=64,
                    help="BTF image size in pixels (default 64)")
-    p.add_argument("--btf-tiles", type=_number(1e-3, 1e4), default=4.0,
+    p.add_argument("--btf-tiles", type=number_type(1e-3, 1e4), default=4.0,
                    help="weave tiles across a BTF image (default 4)")
     p.add_argument("--btf-offset", default="0.25,0.4", help="BTF tile offset u0,v0 in tiles (default 0.25,0.4)")
     p.add_argument("--kd", help="diffuse albedo per channel, e.g. 0.2,0.1,0.1 (default 0.1 each)")
@@ -75,9 +38,10 @@ def add_parser(sub):
     p.add_argument("--ks-weft", help="weft specular albedo per channel (default 0.1 each)")
     p.add_argument("--channels", default="R,G,B",
                    help="channel names (default R,G,B; with --btf the source's own when it has coefficients)")
-    p.add_argument("--noise-mult", type=_number(0.0, MAX_NOISE_MULT), default=0.0,
+    p.add_argument("--noise-mult", type=number_type(0.0, MAX_NOISE_MULT), default=0.0,
                    help="multiplicative log-normal sigma (0.05 = 5 %%; at most 10)")
-    p.add_argument("--noise-add", type=_number(0.0, MAX_NOISE_ADD), default=0.0, help="additive Gaussian sigma in 1/sr")
+    p.add_argument("--noise-add", type=number_type(0.0, MAX_NOISE_ADD), default=0.0,
+                   help="additive Gaussian sigma in 1/sr")
     p.add_argument("--seed", type=count_type(0, MAX_SEED), default=0, help="noise seed (default 0)")
     p.add_argument("--sampling", metavar="SPEC", default=None,
                    help="direction pairs of the table: paper (default: the paper's 225 x 7 grid), random:N "
@@ -85,7 +49,7 @@ def add_parser(sub):
                         "(cosine-weighted), or a CSV file with columns theta_i,phi_i,theta_o,phi_o in degrees "
                         "(clothlab's azimuths)")
     p.add_argument("--sampling-seed", type=count_type(0, MAX_SEED), default=0, help="seed of random:N (default 0)")
-    p.add_argument("--orientation", type=_number(), metavar="DEG", default=None,
+    p.add_argument("--orientation", type=number_type(), metavar="DEG", default=None,
                    help="rotate the generating weave by DEG about the normal (counter-clockwise from above; the "
                         "model parameter orientation)")
     add_force(p, "output (table, example sets or BTF stack)")
@@ -198,6 +162,7 @@ def _run_btf(args) -> int:
                           "apply to --btf: the stack is written into the --btf directory, and its noise is the "
                           "texture model's intensity noise (paper sec. 7.2.1, seeded by --seed), not the table "
                           "simulation's measurement noise", field=not_applicable[0].split("/")[-1])
+
     from clothlab.strict import parse_number
 
     offset = tuple(parse_number(x, error=ConfigError, field="--btf-offset") for x in args.btf_offset.split(","))
