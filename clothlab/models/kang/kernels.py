@@ -32,12 +32,17 @@ import math
 import numpy as np
 from numba import njit
 
-#: scale of the tan map in units of the lobe's first-order width: lam = LAM_WIDTHS * sigma.
+#: scale of the map in units of the lobe's first-order width: lam = LAM_WIDTHS * sigma.
 LAM_WIDTHS = 2.0
-#: node count of an axis [-c, c] spanning r = c / sigma lobe widths: 1 when both r and c are below R_SINGLE,
-#: else 2 + ceil(NODES_PER_WIDTH r + NODES_PER_CURVATURE c) (the second term for the ambient occlusion
-#: n_p.z = sqrt(1 - da^2 - dl^2), which bends sharply near the rectangle's corners), at most ``most``.
+#: an axis [-c, c] with both c and c / sigma below R_SINGLE gets one node (its centre).
 R_SINGLE = 1e-3
+#: node count of an axis spanning r lobe widths (half its length / sigma): NODES_BASE + ceil(k r), k =
+#: NODES_PER_WIDTH_ALONG (along, in t = tan(psi / 2)) or NODES_PER_WIDTH_ACROSS (across, in da), at most ``most``.
+NODES_BASE = 2
+NODES_PER_WIDTH_ALONG = 1.5
+NODES_PER_WIDTH_ACROSS = 2.0
+#: the previous rule's constants (:func:`previous_peak_tile_average`): 2 + ceil(NODES_PER_WIDTH r +
+#: NODES_PER_CURVATURE c) per axis in dl / da.
 NODES_PER_WIDTH = 1.5
 NODES_PER_CURVATURE = 4.0
 
@@ -95,8 +100,11 @@ def _lobe(hx, hy, hz, da, dl, inv_s, nx, ny):
 
 
 @njit(cache=True)
-def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
-    """A(h) (N,) of the module docstring for unit half vectors h (N, 3) in the yarn frame (1/sr, with the eq. 2
+def previous_peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
+    """The previous peak rule (kept for the ``kang`` bench section's side-by-side timing): dl-space tan map with
+    a tan per node, node count 2 + ceil(1.5 r + 4 c), no support clipping.
+
+    A(h) (N,) of the module docstring for unit half vectors h (N, 3) in the yarn frame (1/sr, with the eq. 2
     constant sqrt((nx+1)(ny+1)) / (2 pi)); 0 where h_z <= 0.  ``gl_x``, ``gl_w`` (M + 1, M): row k the
     k-node Gauss-Legendre rule on [-1, 1], weights summing to 1; ``most`` <= M nodes per axis."""
     n = h.shape[0]
@@ -136,6 +144,149 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
             for b in range(count_l):
                 inner += wl[b] * _lobe(hx, hy, hz, da, xl[b], inv, nx, ny)
             acc += wa[a] * inner
+        out[i] = scale * acc
+    return out
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _mapped_rule(centre, lam, lo, hi, count, plain, gl_x, gl_w, out_x, out_w):
+    """``count`` nodes / weights (weights integrate over [lo, hi], they do not average) of the map
+    x = centre + lam v / sqrt(1 - v^2) (v = sin u of the tan map x = centre + lam tan u: the same Cauchy-tailed
+    spread of nodes over the lobe, with a square root per node instead of a tan) with Gauss-Legendre in v;
+    if ``plain``, plain Gauss-Legendre on [lo, hi] when lam >= (hi - lo) / 2 (the lobe is wider than the
+    interval)."""
+    half_x = 0.5 * (hi - lo)
+    if plain and lam >= half_x:
+        mid_x = 0.5 * (hi + lo)
+        for k in range(count):
+            out_x[k] = mid_x + half_x * gl_x[count, k]
+            out_w[k] = 2.0 * half_x * gl_w[count, k]
+        return
+    pa = lo - centre
+    pb = hi - centre
+    va = pa / math.sqrt(lam * lam + pa * pa)
+    vb = pb / math.sqrt(lam * lam + pb * pb)
+    half = 0.5 * (vb - va)
+    mid = 0.5 * (vb + va)
+    scale = 2.0 * half * lam  # gl_w sums to 1 over [-1, 1], i.e. dv = 2 half gl_w; dx = lam q^3 dv
+    for k in range(count):
+        v = mid + half * gl_x[count, k]
+        q = 1.0 / math.sqrt(1.0 - v * v)
+        out_x[k] = min(max(centre + lam * v * q, lo), hi)
+        out_w[k] = gl_w[count, k] * scale * q * q * q
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _lit_across(hx, hy, hz, hyz, c_f):
+    """Largest |da| (>= 0) on the side opposite to h_x at which some dl in [-c_f, c_f] still gives h.n_p > 0
+    (2.0: no limit).  The lobe of eq. 2 is 0 where h.n_p <= 0; h.n_p is concave in (da, dl), so its positive set
+    in da is an interval, and it is unbounded on h_x's side (h.n_p(da, 0) > 0 there).  With the conditional
+    peak dl* = h_y s / hyz inside the range the bound is |da| = hyz (h.n_p = |h_x| da + s hyz = 0); otherwise
+    h.n_p = 0 on the edge dl = sign(h_y) c_f: a quadratic in da.  Arguments |h_x|, |h_y| >= 0."""
+    if hx <= 0.0:
+        return 2.0
+    if hy * hx / hyz <= c_f:
+        return hyz
+    k = hy * c_f
+    r2 = 1.0 - c_f * c_f
+    if k >= hx * math.sqrt(r2):
+        return 2.0
+    a2 = hx * hx + hz * hz
+    return (k * hx + hz * math.sqrt(a2 * r2 - k * k)) / a2
+
+
+@njit(cache=True, error_model="numpy")
+def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
+    """A(h) (N,) of the module docstring (1/sr, with the eq. 2 constant sqrt((nx+1)(ny+1)) / (2 pi)) for unit
+    half vectors h (N, 3) in the yarn frame; 0 where h_z <= 0.  ``gl_x``, ``gl_w`` (M + 1, M): row k the k-node
+    Gauss-Legendre rule on [-1, 1], weights summing to 1; at most ``most`` <= M nodes per axis.
+
+    The peak-centred rule on the lit part of the rectangle (module docstring, "The rule"): A depends on
+    (|h_x|, |h_y|, h_z) only (the rectangle is symmetric), so the signs are dropped."""
+    n = h.shape[0]
+    out = np.zeros(n)
+    scale = math.sqrt((nx + 1.0) * (ny + 1.0)) / (2.0 * math.pi)  # eq. 2 constant
+    xa = np.zeros(most)
+    wa = np.zeros(most)
+    xl = np.zeros(most)
+    wl = np.zeros(most)
+    root_nx = math.sqrt(max(nx, 1e-12))
+    root_ny = math.sqrt(max(ny, 1e-12))
+    for i in range(n):
+        hx, hy, hz = abs(h[i, 0]), abs(h[i, 1]), h[i, 2]
+        if hz <= 0.0:
+            continue
+        hyz = math.sqrt(hy * hy + hz * hz)  # = sqrt(1 - hx^2)
+        sb = hy / hyz  # sin, cos of beta0 = atan2(h_y, h_z): the along angle of the lobe's peak
+        cb = hz / hyz
+        # --- across (da): centred on the highest reachable h.n_p, width hyz / sqrt(nx), on the lit interval
+        sigma_a = hyz / root_nx
+        if c_y < R_SINGLE and c_y < R_SINGLE * sigma_a:
+            count_a = 1
+            xa[0] = 0.0
+            wa[0] = 1.0
+        else:
+            mu_a = hx
+            if hy > c_f:  # the peak dl* = h_y lies beyond the edge: the highest point along dl = c_f
+                mu_a = hx * math.sqrt(1.0 - c_f * c_f) / math.sqrt(hx * hx + hz * hz)
+            lo_a = -min(c_y, _lit_across(hx, hy, hz, hyz, c_f))
+            half_a = 0.5 * (c_y - lo_a)
+            count_a = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * half_a / sigma_a)))
+            _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, gl_x, gl_w, xa, wa)
+            for a in range(count_a):
+                wa[a] /= 2.0 * c_y  # mean over [-c_y, c_y]
+        acc = 0.0
+        for a in range(count_a):
+            da = xa[a]
+            s = math.sqrt(1.0 - da * da)
+            hxda = hx * da
+            hxs = hx / s
+            das = da / s
+            if c_f < R_SINGLE and c_f * hyz * hyz * root_ny < R_SINGLE * hz * s:
+                # one node dl = 0 (eqs. 3-4 with delta_along = 0): n_p = (da, 0, s), ao = s
+                cz = hxda + hz * s
+                if cz > 0.0:
+                    tx = hxs - das * cz  # h.t
+                    sin2 = tx * tx + hy * hy  # h.b = h_y
+                    e = (nx * tx * tx + ny * hy * hy) / sin2 if sin2 > 1e-300 else 0.0
+                    acc += wa[a] * s * math.exp(e * math.log(cz))  # eq. 2: (h.n)^e, times ao (sec. 4.2.2)
+                continue
+            # --- along: n_p = (da, s sin beta, s cos beta), beta = beta0 + psi, t = tan(psi / 2) (rational
+            # sin psi, cos psi); dl = s sin beta in [-c_f, c_f] and h.n_p = h_x da + s hyz cos psi > 0
+            sin_b = c_f / s
+            cos_b = math.sqrt(1.0 - sin_b * sin_b)
+            t_hi = (sin_b * cb - cos_b * sb) / (1.0 + cos_b * cb + sin_b * sb)  # tan((B - beta0) / 2)
+            t_lo = -(sin_b * cb + cos_b * sb) / (1.0 + cos_b * cb - sin_b * sb)  # tan((-B - beta0) / 2)
+            kappa = -hxda / (s * hyz)  # cos psi > kappa is the lit part
+            if kappa >= 1.0:
+                continue
+            if kappa > -1.0:
+                t_lit = math.sqrt(1.0 - kappa * kappa) / (1.0 + kappa)  # tan(acos(kappa) / 2)
+                t_lo = max(t_lo, -t_lit)
+                t_hi = min(t_hi, t_lit)
+                if t_hi <= t_lo:
+                    continue
+            sigma_t = 0.5 / (hyz * root_ny)  # the lobe exp(-ny hyz^2 psi^2 / 2) in t ~ psi / 2
+            count_l = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * 0.5 * (t_hi - t_lo) / sigma_t)))
+            _mapped_rule(0.0, min(LAM_WIDTHS * sigma_t, 1.0), t_lo, t_hi, count_l, False, gl_x, gl_w, xl, wl)
+            hyz_s = hyz * s
+            inner = 0.0
+            for b in range(count_l):
+                t = xl[b]
+                u = 1.0 / (1.0 + t * t)
+                cos_p = (1.0 - t * t) * u
+                sin_p = 2.0 * t * u
+                nz = s * (cb * cos_p - sb * sin_p)  # n_p.z = s cos beta = ao (sec. 4.2.2)
+                cz = hxda + hyz_s * cos_p  # h.n_p
+                if cz <= 0.0 or nz <= 0.0:
+                    continue
+                tx = hxs - das * cz  # h.t
+                ty = hyz * sin_p  # |h.b|
+                sin2 = tx * tx + ty * ty
+                e = (nx * tx * tx + ny * ty * ty) / sin2 if sin2 > 1e-300 else 0.0  # eq. 2 exponent
+                # ao p d(dl) = nz * (h.n_p)^e * nz d(psi), d(psi) = 2 u dt
+                inner += wl[b] * nz * nz * 2.0 * u * math.exp(e * math.log(cz))
+            acc += wa[a] * inner / (2.0 * c_f)  # mean over [-c_f, c_f]
         out[i] = scale * acc
     return out
 
