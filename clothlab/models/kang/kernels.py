@@ -40,6 +40,7 @@ R_SINGLE = 1e-3
 #: NODES_PER_WIDTH_ALONG (along, in t = tan(psi / 2)) or NODES_PER_WIDTH_ACROSS (across, in da), at most ``most``.
 NODES_BASE = 2
 NODES_PER_WIDTH_ALONG = 1.5
+NODES_PER_ALONG_SHIFT = 0.5
 NODES_PER_WIDTH_ACROSS = 2.0
 #: the previous rule's constants (:func:`previous_peak_tile_average`): 2 + ceil(NODES_PER_WIDTH r +
 #: NODES_PER_CURVATURE c) per axis in dl / da.
@@ -206,12 +207,15 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
     n = h.shape[0]
     out = np.zeros(n)
     scale = math.sqrt((nx + 1.0) * (ny + 1.0)) / (2.0 * math.pi)  # eq. 2 constant
-    xa = np.zeros(most)
-    wa = np.zeros(most)
+    xa = np.zeros(4 * most)
+    wa = np.zeros(4 * most)
+    xp = np.zeros(most)
+    wp = np.zeros(most)
     xl = np.zeros(most)
     wl = np.zeros(most)
     root_nx = math.sqrt(max(nx, 1e-12))
     root_ny = math.sqrt(max(ny, 1e-12))
+    delta = 0.0
     for i in range(n):
         hx, hy, hz = abs(h[i, 0]), abs(h[i, 1]), h[i, 2]
         if hz <= 0.0:
@@ -230,11 +234,41 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
             if hy > c_f:  # the peak dl* = h_y lies beyond the edge: the highest point along dl = c_f
                 mu_a = hx * math.sqrt(1.0 - c_f * c_f) / math.sqrt(hx * hx + hz * hz)
             lo_a = -min(c_y, _lit_across(hx, hy, hz, hyz, c_f))
-            half_a = 0.5 * (c_y - lo_a)
-            count_a = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * half_a / sigma_a)))
-            _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, gl_x, gl_w, xa, wa)
-            for a in range(count_a):
-                wa[a] /= 2.0 * c_y  # mean over [-c_y, c_y]
+            # the along peak (beta = beta0) enters [-B, B], B = asin(c_f / s), where s = c_f / sin(beta0): a step
+            # of width delta in the across integrand at da = +-da_c; split there when it is sharper than the piece
+            da_c = 2.0
+            if sb > c_f:
+                s_c = c_f / sb
+                da_c = math.sqrt(1.0 - s_c * s_c)
+                delta = s_c * s_c * math.sqrt(max(s_c * s_c - c_f * c_f, 0.0)) / (c_f * da_c * hyz * root_ny)
+            if da_c < c_y and LAM_WIDTHS * delta < 0.5 * (c_y - lo_a):
+                # pieces [lo_a, -da_c], [-da_c, 0], [0, da_c], [da_c, c_y] (those inside), mapped on their step end
+                count_a = 0
+                for piece in range(4):
+                    p0 = (lo_a, -da_c, 0.0, da_c)[piece]
+                    p1 = (-da_c, 0.0, da_c, c_y)[piece]
+                    p0 = max(p0, lo_a)
+                    if p1 <= p0:
+                        continue
+                    centre, width = (p1 if piece % 2 == 0 else p0), delta  # on the step
+                    if sigma_a < delta and p0 <= mu_a <= p1:
+                        centre, width = mu_a, sigma_a  # on the across peak, where it is the sharper feature
+                    count = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * 0.5 * (p1 - p0)
+                                                                 / min(sigma_a, delta))))
+                    _mapped_rule(centre, LAM_WIDTHS * width, p0, p1, count, True, gl_x, gl_w, xp, wp)
+                    for k in range(count):
+                        xa[count_a + k] = xp[k]
+                        wa[count_a + k] = wp[k] / (2.0 * c_y)
+                    count_a += count
+            else:
+                half_a = 0.5 * (c_y - lo_a)
+                # the along range B(da) = asin(c_f / s) widens over the across range; in along lobe widths:
+                shift = (math.asin(min(c_f / math.sqrt(1.0 - c_y * c_y), 1.0)) - math.asin(c_f)) * hyz * root_ny
+                count_a = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * half_a / sigma_a
+                                                               + NODES_PER_ALONG_SHIFT * shift)))
+                _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, gl_x, gl_w, xa, wa)
+                for a in range(count_a):
+                    wa[a] /= 2.0 * c_y  # mean over [-c_y, c_y]
         acc = 0.0
         for a in range(count_a):
             da = xa[a]
