@@ -42,6 +42,9 @@ NODES_BASE = 2
 NODES_PER_WIDTH_ALONG = 1.5
 NODES_PER_ALONG_SHIFT = 0.5
 NODES_PER_WIDTH_ACROSS = 2.0
+#: map of each axis (:func:`_mapped_rule`): tan (True) or sin
+TAN_ACROSS = True
+TAN_ALONG = False
 #: the previous rule's constants (:func:`previous_peak_tile_average`): 2 + ceil(NODES_PER_WIDTH r +
 #: NODES_PER_CURVATURE c) per axis in dl / da.
 NODES_PER_WIDTH = 1.5
@@ -150,18 +153,35 @@ def previous_peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _mapped_rule(centre, lam, lo, hi, count, plain, gl_x, gl_w, out_x, out_w):
-    """``count`` nodes / weights (weights integrate over [lo, hi], they do not average) of the map
-    x = centre + lam v / sqrt(1 - v^2) (v = sin u of the tan map x = centre + lam tan u: the same Cauchy-tailed
-    spread of nodes over the lobe, with a square root per node instead of a tan) with Gauss-Legendre in v;
-    if ``plain``, plain Gauss-Legendre on [lo, hi] when lam >= (hi - lo) / 2 (the lobe is wider than the
-    interval)."""
+def _mapped_rule(centre, lam, lo, hi, count, plain, tan_map, gl_x, gl_w, out_x, out_w):
+    """``count`` nodes / weights (the weights integrate over [lo, hi], they do not average) of Gauss-Legendre
+    after a change of variables that puts the nodes on a lobe of scale lam at ``centre`` (inside [lo, hi] or
+    not), with Cauchy-like tails so that nothing is truncated:
+
+    - ``tan_map``: x = centre + lam tan u, Gauss-Legendre in u (nodes evenly in the lobe's angle); tan of the
+      nodes by angle addition, tan(m +- d) = (tan m +- tan d) / (1 -+ tan m tan d): one tan per symmetric pair
+      of nodes instead of one per node;
+    - else: x = centre + lam v / sqrt(1 - v^2) (v = sin u), Gauss-Legendre in v: a square root per node, no
+      trigonometry (cheaper; fewer nodes in the far tails);
+    - ``plain`` and lam >= (hi - lo) / 2 (a lobe wider than the interval): plain Gauss-Legendre on [lo, hi]."""
     half_x = 0.5 * (hi - lo)
     if plain and lam >= half_x:
         mid_x = 0.5 * (hi + lo)
         for k in range(count):
             out_x[k] = mid_x + half_x * gl_x[count, k]
             out_w[k] = 2.0 * half_x * gl_w[count, k]
+        return
+    if tan_map:
+        ua = math.atan((lo - centre) / lam)
+        ub = math.atan((hi - centre) / lam)
+        half = 0.5 * (ub - ua)
+        tan_mid = math.tan(0.5 * (ub + ua))
+        for k in range((count + 1) // 2):  # gl_x ascending: nodes k and count - 1 - k are symmetric
+            tan_d = math.tan(half * gl_x[count, count - 1 - k])
+            for sign, j in ((1.0, count - 1 - k), (-1.0, k)):
+                t = (tan_mid + sign * tan_d) / (1.0 - sign * tan_mid * tan_d)
+                out_x[j] = min(max(centre + lam * t, lo), hi)
+                out_w[j] = gl_w[count, j] * 2.0 * half * lam * (1.0 + t * t)  # dx = lam sec^2 u du
         return
     pa = lo - centre
     pb = hi - centre
@@ -211,8 +231,8 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
     wa = np.zeros(4 * most)
     xp = np.zeros(most)
     wp = np.zeros(most)
-    xl = np.zeros(most)
-    wl = np.zeros(most)
+    xl = np.zeros(2 * most)
+    wl = np.zeros(2 * most)
     root_nx = math.sqrt(max(nx, 1e-12))
     root_ny = math.sqrt(max(ny, 1e-12))
     delta = 0.0
@@ -255,7 +275,7 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                         centre, width = mu_a, sigma_a  # on the across peak, where it is the sharper feature
                     count = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * 0.5 * (p1 - p0)
                                                                  / min(sigma_a, delta))))
-                    _mapped_rule(centre, LAM_WIDTHS * width, p0, p1, count, True, gl_x, gl_w, xp, wp)
+                    _mapped_rule(centre, LAM_WIDTHS * width, p0, p1, count, True, TAN_ACROSS, gl_x, gl_w, xp, wp)
                     for k in range(count):
                         xa[count_a + k] = xp[k]
                         wa[count_a + k] = wp[k] / (2.0 * c_y)
@@ -266,7 +286,7 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                 shift = (math.asin(min(c_f / math.sqrt(1.0 - c_y * c_y), 1.0)) - math.asin(c_f)) * hyz * root_ny
                 count_a = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * half_a / sigma_a
                                                                + NODES_PER_ALONG_SHIFT * shift)))
-                _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, gl_x, gl_w, xa, wa)
+                _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, TAN_ACROSS, gl_x, gl_w, xa, wa)
                 for a in range(count_a):
                     wa[a] /= 2.0 * c_y  # mean over [-c_y, c_y]
         acc = 0.0
@@ -301,8 +321,36 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                 if t_hi <= t_lo:
                     continue
             sigma_t = 0.5 / (hyz * root_ny)  # the lobe exp(-ny hyz^2 psi^2 / 2) in t ~ psi / 2
-            count_l = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * 0.5 * (t_hi - t_lo) / sigma_t)))
-            _mapped_rule(0.0, min(LAM_WIDTHS * sigma_t, 1.0), t_lo, t_hi, count_l, False, gl_x, gl_w, xl, wl)
+            # h.t = 0 where h.n_p = h_x / da (da > 0): with nx > ny the lobe peaks there, at psi = +-psi_x,
+            # cos psi_x = h_x s / (da hyz) - two peaks, width 1 / (sqrt(nx) da hyz sin psi_x): split at t = 0
+            t_x = 0.0
+            if nx > ny and da > 0.0 and hx > 0.0:
+                cos_x = hx * s / (da * hyz)
+                if kappa < cos_x < 1.0:
+                    sin_x = math.sqrt(1.0 - cos_x * cos_x)
+                    sigma_x = 0.5 / (root_nx * da * hyz * sin_x)  # in psi / 2
+                    if sin_x > 0.0 and math.asin(sin_x) > LAM_WIDTHS * sigma_x and sigma_x < sigma_t:
+                        t_x = sin_x / (1.0 + cos_x)  # tan(psi_x / 2)
+                        sigma_x *= 1.0 + t_x * t_x  # dt = (1 + t^2) / 2 d(psi)
+            if t_x > 0.0 and t_lo < 0.0 < t_hi:
+                count_l = 0
+                for piece in range(2):
+                    p0, p1, centre = (t_lo, 0.0, -t_x) if piece == 0 else (0.0, t_hi, t_x)
+                    count = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * 0.5 * (p1 - p0) / sigma_x)))
+                    _mapped_rule(centre, LAM_WIDTHS * sigma_x, p0, p1, count, False, TAN_ALONG, gl_x, gl_w, xp, wp)
+                    for k in range(count):
+                        xl[count_l + k] = xp[k]
+                        wl[count_l + k] = wp[k]
+                    count_l += count
+            else:
+                # h.t = h_x s - da hyz cos psi varies along too: by da hyz (1 - cos psi) over the range, which
+                # the across exponent nx turns into sqrt(nx) x that lobe widths (nx >> ny: the lobe's shape)
+                t_m = max(-t_lo, t_hi)
+                sweep = root_nx * abs(da) * hyz * 2.0 * t_m * t_m / (1.0 + t_m * t_m)
+                count_l = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * (0.5 * (t_hi - t_lo)
+                                                                                        / sigma_t + sweep))))
+                _mapped_rule(0.0, min(LAM_WIDTHS * sigma_t, 1.0), t_lo, t_hi, count_l, False, TAN_ALONG, gl_x, gl_w,
+                             xl, wl)
             hyz_s = hyz * s
             inner = 0.0
             for b in range(count_l):
