@@ -703,9 +703,10 @@ def test_peak_rule_reciprocal_non_negative_and_symmetric(params):
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_grouped_tile_average_equals_the_pair_by_pair_rule(name):
     """components() on the paper directions (direction cache; A once per group of equal |h|, shared by the
-    two yarn types) equals the rule evaluated pair by pair to 1e-7 relative (1e-6 of the largest value
-    absolute), at the saved fit and at two limit lobes; the cache follows the directions' contents (changed
-    in place: new values)."""
+    two yarn types) equals the rule evaluated pair by pair: > 99 % of the values to 1e-9 relative, all to 1e-4
+    (relative floored at 1 % of the mean, as the error metric)
+    (where a group member's 1e-12 offset in h moves a node count), at the saved fit and at two limit lobes;
+    the cache follows the directions' contents (changed in place: new values)."""
     from clothlab.fit.store import load_fitted
     from clothlab.studies.data import paper_directions
 
@@ -720,9 +721,11 @@ def test_grouped_tile_average_equals_the_pair_by_pair_rule(name):
                 continue
             single = model.shares[kind] * model._peak_average(kind, to_yarn_frame(wi, kind), to_yarn_frame(wo, kind),
                                                                p)
-            # members of a group differ by < 1e-12 in h; where that moves a node count (a ceil) the value
-            # moves by the rule's own error, seen only far below the peak: hence the absolute floor
-            np.testing.assert_allclose(grouped[f"specular_{kind}"], single, rtol=1e-7, atol=1e-6 * single.max())
+            # members of a group differ by < 1e-12 in h: the same value to rounding, except where that moves
+            # a node count (a ceil), where the two differ by the rule's own error (< 1e-4, docs/kang.md)
+            got = grouped[f"specular_{kind}"]
+            relative = np.abs(got - single) / np.maximum(single, 0.01 * single.mean())  # as the error metric
+            assert np.mean(relative < 1e-9) > 0.99 and relative.max() < 1e-4, (name, kind, relative.max())
     moved = wi.copy()
     model.components(moved, wo, p)
     moved[:] = wo  # changed in place: a different direction set in the same array
