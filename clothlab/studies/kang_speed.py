@@ -230,8 +230,9 @@ def _pair(error: dict) -> str:
 def lines(result: dict) -> list[str]:
     load = result.get("load_average")
     out = ["== Kang tile average: previous peak rule vs current, 1,575 paper directions, timed in alternation ==",
-           "  pairs/s from the fastest call's CPU time (wall in brackets); ratio = previous / new CPU time; fit: the "
-           "direction set's terms kept (a fit's evaluation), cold: recomputed every call",
+           "  pairs/s from the fastest call's CPU time (wall in brackets); ratio = previous / new CPU time; per pair: "
+           "the rule alone (no cache, no grouping); fit: the direction set's terms kept (a fit's evaluation); cold: "
+           "recomputed every call; groups: distinct |h| (of 3,150) the kernel evaluates",
            f"  error: specular vs a {REFERENCE_NODES} x {REFERENCE_NODES} Gauss-Legendre rule on 300 directions, "
            "max / p99, floored at 1 % of its mean"
            + (f"; load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}" if load else ""),
