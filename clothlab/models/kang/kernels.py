@@ -11,15 +11,28 @@ with n_p = (da, dl, sqrt(1 - da^2 - dl^2)) in the yarn frame (eqs. 3-4) and ao =
 frame of eq. 2 about n_p has closed forms: t = (x - da n_p) / s and b = n_p x t = (0, n_z, -dl) / s with
 s = sqrt(1 - da^2), so h.t = (h_x - da h.n) / s and h.b = (h_y n_z - h_z dl) / s.
 
-Peak-centred rule.  p(h; n_p) peaks where n_p = h, i.e. at (da, dl) = (h_x, h_y), with widths (first order
-in the offset, from the derivatives of h.t and h.b there) sigma_a = sqrt(1 - h_x^2) / sqrt(nx) across and
-sigma_l = h_z / (sqrt(1 - h_x^2) sqrt(ny)) along, and (h.n)^e <= exp(-(nx (h.t)^2 + ny (h.b)^2) / 2) for all
-angles (log cos theta <= -sin^2 theta / 2).  Each axis is integrated with the substitution
-x = mu + lam tan u (mu the peak, lam its width), which maps the whole interval [-c, c] - no truncation - onto
-[atan((-c - mu) / lam), atan((c - mu) / lam)] and spreads Gauss-Legendre nodes evenly over the lobe whether
-its peak is inside, at the edge of or outside the rectangle; a lobe much wider than the rectangle gives
-lam tan u ~ linear, i.e. the plain rule.  The node count per axis is fixed (``nodes``), so the cost is
-the same at every parameter set: nodes^2 lobe evaluations per direction and yarn type.
+The rule (:func:`peak_tile_average`).  A depends on (|h_x|, |h_y|, h_z) only (the rectangle is symmetric).
+Across (outer, in da): Gauss-Legendre after the tan map x = mu + lam tan u (lam = 2 widths; the nodes' tans by
+angle addition, one per symmetric pair), centred on the highest reachable h.n_p (h_x, or the edge's
+conditional peak when |h_y| > c_f), width hyz / sqrt(nx), on the *lit* interval only: the lobe is 0 where
+h.n_p <= 0 (eq. 2 needs h.n > 0), and {da: max over dl of h.n_p > 0} is an interval (h.n_p is concave), cut at
+|da| = hyz or at the root of a quadratic on the edge (:func:`_lit_across`) - integrating across that kink is
+what limited the previous rule at grazing h_x (0.22 % on wool-gabardine).  Where the along lobe's peak enters
+the rectangle inside the across range (a step in the across integrand at da = +-da_c) the across axis is split
+there.  Along (inner, per across node): with n_p = (da, s sin beta, s cos beta), s = sqrt(1 - da^2), the lobe
+is a function of psi = beta - beta0 (beta0 = atan2(h_y, h_z)): h.n_p = h_x da + s hyz cos psi,
+h.b = hyz sin psi, h.t = h_x s - da hyz cos psi, and ao d(dl) = n_z^2 d(psi) with n_z = s cos beta (no square
+root: the ambient occlusion is analytic in psi, so no node term for it), of width 1 / (hyz sqrt(ny)) in psi
+whatever h_z (in dl it shrinks with h_z).  The substitution t = tan(psi / 2) makes sin psi, cos psi rational:
+no trigonometry per node; the range is dl in [-c_f, c_f] (|beta| <= asin(c_f / s)) cut to the lit part
+cos psi > -h_x da / (s hyz).  The nodes in t come from the sin map x = mu + lam v / sqrt(1 - v^2) (v = sin u
+of the tan map: a square root per node), split at t = 0 where nx > ny puts two peaks at h.t = 0.  Node
+counts: 2 + ceil(2 r_a + 0.5 x (growth of the along range in lobe widths)) across and 2 + ceil(1.5 (r_t +
+sqrt(nx) da hyz (1 - cos psi_max))) along (r = half the interval in lobe widths), at most ``most`` per piece;
+1 on an axis whose curvature and curvature / width are both < 1e-3.  Measured accuracy: docs/kang.md.
+
+The previous rule (:func:`previous_peak_tile_average`, kept for the bench's side-by-side timing) integrated
+dl directly with a tan per node and 2 + ceil(1.5 r + 4 c) nodes per axis over the whole rectangle.
 
 Serial on purpose, as :mod:`clothlab.models.irawan.kernels` (numba's thread pool is slower on a loaded
 2-core machine).  Imported lazily; compiled code cached on disk.
@@ -32,12 +45,21 @@ import math
 import numpy as np
 from numba import njit
 
-#: scale of the tan map in units of the lobe's first-order width: lam = LAM_WIDTHS * sigma.
+#: scale of the map in units of the lobe's first-order width: lam = LAM_WIDTHS * sigma.
 LAM_WIDTHS = 2.0
-#: node count of an axis [-c, c] spanning r = c / sigma lobe widths: 1 when both r and c are below R_SINGLE,
-#: else 2 + ceil(NODES_PER_WIDTH r + NODES_PER_CURVATURE c) (the second term for the ambient occlusion
-#: n_p.z = sqrt(1 - da^2 - dl^2), which bends sharply near the rectangle's corners), at most ``most``.
+#: an axis [-c, c] with both c and c / sigma below R_SINGLE gets one node (its centre).
 R_SINGLE = 1e-3
+#: node count of an axis spanning r lobe widths (half its length / sigma): NODES_BASE + ceil(k r), k =
+#: NODES_PER_WIDTH_ALONG (along, in t = tan(psi / 2)) or NODES_PER_WIDTH_ACROSS (across, in da), at most ``most``.
+NODES_BASE = 2
+NODES_PER_WIDTH_ALONG = 1.5
+NODES_PER_ALONG_SHIFT = 0.5
+NODES_PER_WIDTH_ACROSS = 2.0
+#: map of each axis (:func:`_mapped_rule`): tan (True) or sin
+TAN_ACROSS = True
+TAN_ALONG = False
+#: the previous rule's constants (:func:`previous_peak_tile_average`): 2 + ceil(NODES_PER_WIDTH r +
+#: NODES_PER_CURVATURE c) per axis in dl / da.
 NODES_PER_WIDTH = 1.5
 NODES_PER_CURVATURE = 4.0
 
@@ -95,8 +117,11 @@ def _lobe(hx, hy, hz, da, dl, inv_s, nx, ny):
 
 
 @njit(cache=True)
-def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
-    """A(h) (N,) of the module docstring for unit half vectors h (N, 3) in the yarn frame (1/sr, with the eq. 2
+def previous_peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
+    """The previous peak rule (kept for the ``kang`` bench section's side-by-side timing): dl-space tan map with
+    a tan per node, node count 2 + ceil(1.5 r + 4 c), no support clipping.
+
+    A(h) (N,) of the module docstring for unit half vectors h (N, 3) in the yarn frame (1/sr, with the eq. 2
     constant sqrt((nx+1)(ny+1)) / (2 pi)); 0 where h_z <= 0.  ``gl_x``, ``gl_w`` (M + 1, M): row k the
     k-node Gauss-Legendre rule on [-1, 1], weights summing to 1; ``most`` <= M nodes per axis."""
     n = h.shape[0]
@@ -136,6 +161,227 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
             for b in range(count_l):
                 inner += wl[b] * _lobe(hx, hy, hz, da, xl[b], inv, nx, ny)
             acc += wa[a] * inner
+        out[i] = scale * acc
+    return out
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _mapped_rule(centre, lam, lo, hi, count, plain, tan_map, gl_x, gl_w, out_x, out_w):
+    """``count`` nodes / weights (the weights integrate over [lo, hi], they do not average) of Gauss-Legendre
+    after a change of variables that puts the nodes on a lobe of scale lam at ``centre`` (inside [lo, hi] or
+    not), with Cauchy-like tails so that nothing is truncated:
+
+    - ``tan_map``: x = centre + lam tan u, Gauss-Legendre in u (nodes evenly in the lobe's angle); tan of the
+      nodes by angle addition, tan(m +- d) = (tan m +- tan d) / (1 -+ tan m tan d): one tan per symmetric pair
+      of nodes instead of one per node;
+    - else: x = centre + lam v / sqrt(1 - v^2) (v = sin u), Gauss-Legendre in v: a square root per node, no
+      trigonometry (cheaper; fewer nodes in the far tails);
+    - ``plain`` and lam >= (hi - lo) / 2 (a lobe wider than the interval): plain Gauss-Legendre on [lo, hi]."""
+    half_x = 0.5 * (hi - lo)
+    if plain and lam >= half_x:
+        mid_x = 0.5 * (hi + lo)
+        for k in range(count):
+            out_x[k] = mid_x + half_x * gl_x[count, k]
+            out_w[k] = 2.0 * half_x * gl_w[count, k]
+        return
+    if tan_map:
+        ua = math.atan((lo - centre) / lam)
+        ub = math.atan((hi - centre) / lam)
+        half = 0.5 * (ub - ua)
+        tan_mid = math.tan(0.5 * (ub + ua))
+        for k in range((count + 1) // 2):  # gl_x ascending: nodes k and count - 1 - k are symmetric
+            tan_d = math.tan(half * gl_x[count, count - 1 - k])
+            for sign, j in ((1.0, count - 1 - k), (-1.0, k)):
+                t = (tan_mid + sign * tan_d) / (1.0 - sign * tan_mid * tan_d)
+                out_x[j] = min(max(centre + lam * t, lo), hi)
+                out_w[j] = gl_w[count, j] * 2.0 * half * lam * (1.0 + t * t)  # dx = lam sec^2 u du
+        return
+    pa = lo - centre
+    pb = hi - centre
+    va = pa / math.sqrt(lam * lam + pa * pa)
+    vb = pb / math.sqrt(lam * lam + pb * pb)
+    half = 0.5 * (vb - va)
+    mid = 0.5 * (vb + va)
+    scale = 2.0 * half * lam  # gl_w sums to 1 over [-1, 1], i.e. dv = 2 half gl_w; dx = lam q^3 dv
+    for k in range(count):
+        v = mid + half * gl_x[count, k]
+        q = 1.0 / math.sqrt(1.0 - v * v)
+        out_x[k] = min(max(centre + lam * v * q, lo), hi)
+        out_w[k] = gl_w[count, k] * scale * q * q * q
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _lit_across(hx, hy, hz, hyz, c_f):
+    """Largest |da| (>= 0) on the side opposite to h_x at which some dl in [-c_f, c_f] still gives h.n_p > 0
+    (2.0: no limit).  The lobe of eq. 2 is 0 where h.n_p <= 0; h.n_p is concave in (da, dl), so its positive set
+    in da is an interval, and it is unbounded on h_x's side (h.n_p(da, 0) > 0 there).  With the conditional
+    peak dl* = h_y s / hyz inside the range the bound is |da| = hyz (h.n_p = |h_x| da + s hyz = 0); otherwise
+    h.n_p = 0 on the edge dl = sign(h_y) c_f: a quadratic in da.  Arguments |h_x|, |h_y| >= 0."""
+    if hx <= 0.0:
+        return 2.0
+    if hy * hx / hyz <= c_f:
+        return hyz
+    k = hy * c_f
+    r2 = 1.0 - c_f * c_f
+    if k >= hx * math.sqrt(r2):
+        return 2.0
+    a2 = hx * hx + hz * hz
+    return (k * hx + hz * math.sqrt(a2 * r2 - k * k)) / a2
+
+
+@njit(cache=True, error_model="numpy")
+def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
+    """A(h) (N,) of the module docstring (1/sr, with the eq. 2 constant sqrt((nx+1)(ny+1)) / (2 pi)) for unit
+    half vectors h (N, 3) in the yarn frame; 0 where h_z <= 0.  ``gl_x``, ``gl_w`` (M + 1, M): row k the k-node
+    Gauss-Legendre rule on [-1, 1], weights summing to 1; at most ``most`` <= M nodes per axis.
+
+    The peak-centred rule on the lit part of the rectangle (module docstring, "The rule"): A depends on
+    (|h_x|, |h_y|, h_z) only (the rectangle is symmetric), so the signs are dropped."""
+    n = h.shape[0]
+    out = np.zeros(n)
+    scale = math.sqrt((nx + 1.0) * (ny + 1.0)) / (2.0 * math.pi)  # eq. 2 constant
+    xa = np.zeros(4 * most)
+    wa = np.zeros(4 * most)
+    xp = np.zeros(most)
+    wp = np.zeros(most)
+    xl = np.zeros(2 * most)
+    wl = np.zeros(2 * most)
+    root_nx = math.sqrt(max(nx, 1e-12))
+    root_ny = math.sqrt(max(ny, 1e-12))
+    delta = 0.0
+    for i in range(n):
+        hx, hy, hz = abs(h[i, 0]), abs(h[i, 1]), h[i, 2]
+        if hz <= 0.0:
+            continue
+        hyz = math.sqrt(hy * hy + hz * hz)  # = sqrt(1 - hx^2)
+        sb = hy / hyz  # sin, cos of beta0 = atan2(h_y, h_z): the along angle of the lobe's peak
+        cb = hz / hyz
+        # --- across (da): centred on the highest reachable h.n_p, width hyz / sqrt(nx), on the lit interval
+        sigma_a = hyz / root_nx
+        if c_y < R_SINGLE and c_y < R_SINGLE * sigma_a:
+            count_a = 1
+            xa[0] = 0.0
+            wa[0] = 1.0
+        else:
+            mu_a = hx
+            if hy > c_f:  # the peak dl* = h_y lies beyond the edge: the highest point along dl = c_f
+                mu_a = hx * math.sqrt(1.0 - c_f * c_f) / math.sqrt(hx * hx + hz * hz)
+            lo_a = -min(c_y, _lit_across(hx, hy, hz, hyz, c_f))
+            # the along peak (beta = beta0) enters [-B, B], B = asin(c_f / s), where s = c_f / sin(beta0): a step
+            # of width delta in the across integrand at da = +-da_c; split there when it is sharper than the piece
+            da_c = 2.0
+            if sb > c_f:
+                s_c = c_f / sb
+                da_c = math.sqrt(1.0 - s_c * s_c)
+                delta = s_c * s_c * math.sqrt(max(s_c * s_c - c_f * c_f, 0.0)) / (c_f * da_c * hyz * root_ny)
+            if da_c < c_y and LAM_WIDTHS * delta < 0.5 * (c_y - lo_a):
+                # pieces [lo_a, -da_c], [-da_c, 0], [0, da_c], [da_c, c_y] (those inside), mapped on their step end
+                count_a = 0
+                for piece in range(4):
+                    p0 = (lo_a, -da_c, 0.0, da_c)[piece]
+                    p1 = (-da_c, 0.0, da_c, c_y)[piece]
+                    p0 = max(p0, lo_a)
+                    if p1 <= p0:
+                        continue
+                    centre, width = (p1 if piece % 2 == 0 else p0), delta  # on the step
+                    if sigma_a < delta and p0 <= mu_a <= p1:
+                        centre, width = mu_a, sigma_a  # on the across peak, where it is the sharper feature
+                    count = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * 0.5 * (p1 - p0)
+                                                                 / min(sigma_a, delta))))
+                    _mapped_rule(centre, LAM_WIDTHS * width, p0, p1, count, True, TAN_ACROSS, gl_x, gl_w, xp, wp)
+                    for k in range(count):
+                        xa[count_a + k] = xp[k]
+                        wa[count_a + k] = wp[k] / (2.0 * c_y)
+                    count_a += count
+            else:
+                half_a = 0.5 * (c_y - lo_a)
+                # the along range B(da) = asin(c_f / s) widens over the across range; in along lobe widths:
+                shift = (math.asin(min(c_f / math.sqrt(1.0 - c_y * c_y), 1.0)) - math.asin(c_f)) * hyz * root_ny
+                count_a = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ACROSS * half_a / sigma_a
+                                                               + NODES_PER_ALONG_SHIFT * shift)))
+                _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, TAN_ACROSS, gl_x, gl_w, xa, wa)
+                for a in range(count_a):
+                    wa[a] /= 2.0 * c_y  # mean over [-c_y, c_y]
+        acc = 0.0
+        for a in range(count_a):
+            da = xa[a]
+            s = math.sqrt(1.0 - da * da)
+            hxda = hx * da
+            hxs = hx / s
+            das = da / s
+            if c_f < R_SINGLE and c_f * hyz * hyz * root_ny < R_SINGLE * hz * s:
+                # one node dl = 0 (eqs. 3-4 with delta_along = 0): n_p = (da, 0, s), ao = s
+                cz = hxda + hz * s
+                if cz > 0.0:
+                    tx = hxs - das * cz  # h.t
+                    sin2 = tx * tx + hy * hy  # h.b = h_y
+                    e = (nx * tx * tx + ny * hy * hy) / sin2 if sin2 > 1e-300 else 0.0
+                    acc += wa[a] * s * math.exp(e * math.log(cz))  # eq. 2: (h.n)^e, times ao (sec. 4.2.2)
+                continue
+            # --- along: n_p = (da, s sin beta, s cos beta), beta = beta0 + psi, t = tan(psi / 2) (rational
+            # sin psi, cos psi); dl = s sin beta in [-c_f, c_f] and h.n_p = h_x da + s hyz cos psi > 0
+            sin_b = c_f / s
+            cos_b = math.sqrt(1.0 - sin_b * sin_b)
+            t_hi = (sin_b * cb - cos_b * sb) / (1.0 + cos_b * cb + sin_b * sb)  # tan((B - beta0) / 2)
+            t_lo = -(sin_b * cb + cos_b * sb) / (1.0 + cos_b * cb - sin_b * sb)  # tan((-B - beta0) / 2)
+            kappa = -hxda / (s * hyz)  # cos psi > kappa is the lit part
+            if kappa >= 1.0:
+                continue
+            if kappa > -1.0:
+                t_lit = math.sqrt(1.0 - kappa * kappa) / (1.0 + kappa)  # tan(acos(kappa) / 2)
+                t_lo = max(t_lo, -t_lit)
+                t_hi = min(t_hi, t_lit)
+                if t_hi <= t_lo:
+                    continue
+            sigma_t = 0.5 / (hyz * root_ny)  # the lobe exp(-ny hyz^2 psi^2 / 2) in t ~ psi / 2
+            # h.t = 0 where h.n_p = h_x / da (da > 0): with nx > ny the lobe peaks there, at psi = +-psi_x,
+            # cos psi_x = h_x s / (da hyz) - two peaks, width 1 / (sqrt(nx) da hyz sin psi_x): split at t = 0
+            t_x = 0.0
+            if nx > ny and da > 0.0 and hx > 0.0:
+                cos_x = hx * s / (da * hyz)
+                if kappa < cos_x < 1.0:
+                    sin_x = math.sqrt(1.0 - cos_x * cos_x)
+                    sigma_x = 0.5 / (root_nx * da * hyz * sin_x)  # in psi / 2
+                    if sin_x > 0.0 and math.asin(sin_x) > LAM_WIDTHS * sigma_x and sigma_x < sigma_t:
+                        t_x = sin_x / (1.0 + cos_x)  # tan(psi_x / 2)
+                        sigma_x *= 1.0 + t_x * t_x  # dt = (1 + t^2) / 2 d(psi)
+            if t_x > 0.0 and t_lo < 0.0 < t_hi:
+                count_l = 0
+                for piece in range(2):
+                    p0, p1, centre = (t_lo, 0.0, -t_x) if piece == 0 else (0.0, t_hi, t_x)
+                    count = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * 0.5 * (p1 - p0) / sigma_x)))
+                    _mapped_rule(centre, LAM_WIDTHS * sigma_x, p0, p1, count, False, TAN_ALONG, gl_x, gl_w, xp, wp)
+                    for k in range(count):
+                        xl[count_l + k] = xp[k]
+                        wl[count_l + k] = wp[k]
+                    count_l += count
+            else:
+                # h.t = h_x s - da hyz cos psi varies along too: by da hyz (1 - cos psi) over the range, which
+                # the across exponent nx turns into sqrt(nx) x that lobe widths (nx >> ny: the lobe's shape)
+                t_m = max(-t_lo, t_hi)
+                sweep = root_nx * abs(da) * hyz * 2.0 * t_m * t_m / (1.0 + t_m * t_m)
+                count_l = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * (0.5 * (t_hi - t_lo)
+                                                                                        / sigma_t + sweep))))
+                _mapped_rule(0.0, min(LAM_WIDTHS * sigma_t, 1.0), t_lo, t_hi, count_l, False, TAN_ALONG, gl_x, gl_w,
+                             xl, wl)
+            hyz_s = hyz * s
+            inner = 0.0
+            for b in range(count_l):
+                t = xl[b]
+                u = 1.0 / (1.0 + t * t)
+                cos_p = (1.0 - t * t) * u
+                sin_p = 2.0 * t * u
+                nz = s * (cb * cos_p - sb * sin_p)  # n_p.z = s cos beta = ao (sec. 4.2.2)
+                cz = hxda + hyz_s * cos_p  # h.n_p
+                if cz <= 0.0 or nz <= 0.0:
+                    continue
+                tx = hxs - das * cz  # h.t
+                ty = hyz * sin_p  # |h.b|
+                sin2 = tx * tx + ty * ty
+                e = (nx * tx * tx + ny * ty * ty) / sin2 if sin2 > 1e-300 else 0.0  # eq. 2 exponent
+                # ao p d(dl) = nz * (h.n_p)^e * nz d(psi), d(psi) = 2 u dt
+                inner += wl[b] * nz * nz * 2.0 * u * math.exp(e * math.log(cz))
+            acc += wa[a] * inner / (2.0 * c_f)  # mean over [-c_f, c_f]
         out[i] = scale * acc
     return out
 
