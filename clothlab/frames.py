@@ -60,7 +60,7 @@ def azimuth_to_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees:
     full, offset = _convention(zero, sense, degrees)
     phi = np.asarray(phi, dtype=np.float64)
     signed = phi if sense == "ccw" else -phi
-    return np.mod(signed + offset, full)
+    return wrap_azimuth(signed + offset, full)
 
 
 def azimuth_from_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degrees: bool = True):
@@ -68,7 +68,14 @@ def azimuth_from_clothlab(phi, *, zero: str = "weft", sense: str = "ccw", degree
     full, offset = _convention(zero, sense, degrees)
     phi = np.asarray(phi, dtype=np.float64)
     shifted = phi - offset
-    return np.mod(shifted if sense == "ccw" else -shifted, full)
+    return wrap_azimuth(shifted if sense == "ccw" else -shifted, full)
+
+
+def wrap_azimuth(phi, full: float = 360.0):
+    """``phi`` wrapped into [0, full): ``np.mod`` of a tiny negative angle rounds to ``full`` itself (e.g.
+    mod(-1e-14, 360) == 360.0), which is mapped to 0."""
+    out = np.mod(phi, full)
+    return np.where(out >= full, 0.0, out)
 
 
 def to_yarn_frame(w: np.ndarray, kind: str) -> np.ndarray:

@@ -526,3 +526,17 @@ def test_write_rejects_bad_azimuth_offset(tmp_path):
     with pytest.raises(ConfigError, match="azimuth_offset"):
         write_table(random_measurement(np.random.default_rng(1)), tmp_path / "x.csv", azimuth_offset=float("nan"))
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("sense", ["ccw", "cw"])
+@pytest.mark.parametrize("zero", ["weft", "warp"])
+def test_azimuth_conversions_stay_in_one_turn(zero, sense):
+    """np.mod(-1e-14, 360) is 360.0: the conversions map such an angle to 0, never to a full turn."""
+    from clothlab.frames import azimuth_from_clothlab, azimuth_to_clothlab
+
+    phi = np.array([0.0, 1e-14, -1e-14, 90.0 - 1e-14, 270.0 + 1e-13, 360.0 - 1e-13, 359.99999999999994])
+    for convert in (azimuth_to_clothlab, azimuth_from_clothlab):
+        out = convert(phi, zero=zero, sense=sense)
+        assert np.all((out >= 0.0) & (out < 360.0))
+        back = azimuth_from_clothlab(azimuth_to_clothlab(phi, zero=zero, sense=sense), zero=zero, sense=sense)
+        assert np.allclose(np.cos(np.radians(back)), np.cos(np.radians(phi)), atol=1e-12)

@@ -313,10 +313,8 @@ def convert_rows(raw: RawRows, *, angle_unit: str, quantity: str, azimuth_zero: 
     theta_o = np.minimum(angles[:, 2], 90.0)
     offset = azimuth_offset if angle_unit == "deg" else math.degrees(azimuth_offset)
 
-    def azimuth(phi):
-        out = azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
-        # np.mod of a tiny negative angle rounds to the full turn itself: keep azimuths in [0, 360)
-        return np.where(out >= 360.0, out - 360.0, out)
+    def azimuth(phi):  # in [0, 360) (frames.wrap_azimuth)
+        return azimuth_to_clothlab(phi + offset if offset else phi, zero=azimuth_zero, sense=azimuth_sense)
 
     values, sigma = raw.values, raw.sigma
     if quantity == "reflectance_factor":
