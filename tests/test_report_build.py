@@ -113,8 +113,26 @@ def _jobs(log=None, fail=()):
 
 
 def test_two_process_figures_are_the_one_process_figures(tmp_path):
-    """Run in a fresh interpreter: the fork needs a caller without other Python threads, and earlier tests of
-    this session may have left one (a progress monitor, a Dask client)."""
+    body = """
+(root / "one").mkdir(); (root / "two").mkdir()
+one = build.render_figures(_jobs(), root / "one", processes=1)
+seen = []
+two = build.render_figures(_jobs(root / "pids.txt"), root / "two", processes=2, meanwhile=seen.append)
+result = {"one": one, "two": two, "seen": seen, "pid": os.getpid()}
+"""
+    out = _in_fresh_interpreter(tmp_path, body)
+    assert out["one"] == out["two"] == {n: f"{n}.png" for n, _ in _jobs()} and out["seen"] == [out["two"]]
+    for name in out["two"]:
+        assert (tmp_path / "one" / f"{name}.png").read_bytes() == (tmp_path / "two" / f"{name}.png").read_bytes()
+    pids = {line.split()[1] for line in (tmp_path / "pids.txt").read_text().splitlines()}
+    assert len(pids) == 2 and str(out["pid"]) in pids  # half of them drawn by a child
+    assert not out["left"]  # and no child is left behind
+
+
+def _in_fresh_interpreter(tmp_path, body: str) -> dict:
+    """Run ``body`` (which sets ``result``) in a new Python with this file's helpers: the fork needs a caller
+    without other Python threads, and only a fresh process can tell that no child is left behind (earlier
+    tests of this session may have left threads and children)."""
     import subprocess
     import sys
 
@@ -125,35 +143,29 @@ from pathlib import Path
 from test_report_build import _jobs
 from clothlab.report import build
 root = Path({str(tmp_path)!r})
-(root / "one").mkdir(); (root / "two").mkdir()
-one = build.render_figures(_jobs(), root / "one", processes=1)
-seen = []
-two = build.render_figures(_jobs(root / "pids.txt"), root / "two", processes=2, meanwhile=seen.append)
+{body}
 try:
     os.waitpid(-1, os.WNOHANG)
-    left = True
+    result["left"] = True
 except ChildProcessError:
-    left = False
-print(json.dumps({{"one": one, "two": two, "seen": seen, "pid": os.getpid(), "left": left}}))
+    result["left"] = False
+print(json.dumps(result))
 """
-    out = json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                                    check=True).stdout)
-    assert out["one"] == out["two"] == {n: f"{n}.png" for n, _ in _jobs()} and out["seen"] == [out["two"]]
-    for name in out["two"]:
-        assert (tmp_path / "one" / f"{name}.png").read_bytes() == (tmp_path / "two" / f"{name}.png").read_bytes()
-    pids = {line.split()[1] for line in (tmp_path / "pids.txt").read_text().splitlines()}
-    assert len(pids) == 2 and str(out["pid"]) in pids  # half of them drawn by a child
-    assert not out["left"]  # and no child is left behind
+    return json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                     check=True).stdout)
 
 
 @pytest.mark.parametrize("fail", ["hemispheres", "corner"])
 def test_a_figure_that_fails_raises_here_whichever_process_drew_it(tmp_path, fail):
-    import os
-
-    with pytest.raises(ValueError, match=f"figure {fail} cannot be drawn"):
-        report_build.render_figures(_jobs(fail=(fail,)), tmp_path, processes=2)
-    with pytest.raises(ChildProcessError):
-        os.waitpid(-1, os.WNOHANG)
+    body = f"""
+result = {{}}
+try:
+    build.render_figures(_jobs(fail=({fail!r},)), root, processes=2)
+except ValueError as exc:
+    result["error"] = str(exc)
+"""
+    out = _in_fresh_interpreter(tmp_path, body)
+    assert out["error"] == f"figure {fail} cannot be drawn" and not out["left"]
 
 
 def test_with_another_python_thread_every_figure_is_drawn_here(tmp_path):
