@@ -185,6 +185,35 @@ def heldout_errors(weights, fresh) -> dict:
     return {"bins": rows, "far_view": far}
 
 
+def compare_networks(weights: dict, per_bin: int = 150, mc_queries: int = 300) -> dict:
+    """Networks of one fabric trained on the same data (``weights``: {variant: .npz}) on the same held-out
+    queries: :func:`heldout_errors` against one set of :func:`fresh_heldout_labels`, and MC 16 / surrogate MSE
+    at >= 1 tile (:func:`surrogate_vs_mc`, ``mc_queries`` queries).  The docs' ablation table."""
+    import json
+
+    first = Path(next(iter(weights.values())))
+    sidecar = json.loads(first.with_suffix(".json").read_text(encoding="utf-8"))
+    fresh = fresh_heldout_labels(sidecar, per_bin)
+    out = {}
+    for name, path in weights.items():
+        versus = surrogate_vs_mc(False, sidecar["encoding"]["weave"], mc_queries, weights=path)
+        metrics = json.loads(Path(path).with_suffix(".json").read_text(encoding="utf-8"))["metrics"]
+        out[name] = {**heldout_errors(path, fresh), "mc16_over_surrogate_size_ge_1": versus["mse_ratio_mc16_size_ge_1"],
+                     "us_per_query": versus["rows"][0]["us_per_query"], "steps": metrics["steps"],
+                     "train_cpu_s": metrics["cpu_s"]}
+    return out
+
+
+def comparison_lines(table: dict) -> list[str]:
+    """Markdown rows of :func:`compare_networks`: relative RMSE by bin, far view, MC 16 / surrogate."""
+    out = []
+    for name, r in table.items():
+        bins = " | ".join(f"{b['surrogate']:.3g}" for b in r["bins"])
+        out.append(f"| {name} | {r['steps']:,} | {r['train_cpu_s']:.0f} | {bins} | {100 * r['far_view']:.1f} % | "
+                   f"{r['mc16_over_surrogate_size_ge_1']:.1f} | {r['us_per_query']:.2f} |")
+    return out
+
+
 def shipped_fabrics() -> list[str]:
     """The presets with shipped per-fabric weights (:data:`clothlab.models.neural.model.SHIPPED`)."""
     from clothlab.models.neural.model import SHIPPED
