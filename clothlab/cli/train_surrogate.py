@@ -40,6 +40,11 @@ def add_parser(sub):
                         "Table 2)")
     p.add_argument("--yarn-bins", type=int, default=0, metavar="N",
                    help="one-blob bins of the yarn-local position features (default 0: none, as the paper)")
+    p.add_argument("--residual", action="store_true",
+                   help="the network predicts a correction over the reflectance model in the loss space of eqs. "
+                        "9-11 (g = T(R) + net): whole-tile footprints become exact (default: off, as the paper)")
+    p.add_argument("--residual-input", action="store_true",
+                   help="also give T(R) of the reflectance model to the angular decoder as an input")
     p.add_argument("--vary", action="append", default=[], metavar="NAME=LO:HI:N",
                    help="a multi-material network: N values of parameter NAME from LO to HI (geometric for "
                         "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
@@ -142,6 +147,10 @@ def run(args) -> int:
                             ("--small-sizes", args.small_sizes, 0), ("--yarn-bins", args.yarn_bins, 0)):
         if not value >= lo:
             raise ConfigError(f"expected a number >= {lo}, got {value}", field=name)
+    if args.vary and (args.residual or args.residual_input):
+        raise ConfigError("--residual / --residual-input are not supported with --vary (the Fig. 8 interpolation "
+                          "and the fast material fit would need the reflectance model between materials)",
+                          field="--residual")
     out = Path(args.output)
     if out.exists() and any(out.iterdir()) and not args.resume:
         if not args.force:
@@ -156,6 +165,9 @@ def run(args) -> int:
     p = model.resolve(params)
     sets, heldout = material_grid(model.params, p, args.vary)
     labels = [_labels(args.labels, model, q, args.samples, args.seed) for q in sets]
+    from clothlab.neural.labels import ModelLabels
+
+    references = [ModelLabels(model, q) for q in sets]  # the far-view metric; what --residual corrects
     names = [n for n in model.params.names() if n != ORIENTATION]  # a frame rotation, applied outside the network
     materials = np.stack([material_vector(weave, q, model.params, names) for q in sets])
     encoding = {"parameters": names, "pattern_order": PATTERN_ORDER, "kind": model.kind, "weave": weave.name,
@@ -171,9 +183,10 @@ def run(args) -> int:
     with runner_of(args) if parallel_requested(args) else contextlib.nullcontext() as runner:
         result = run_training(out, labels, materials, data_spec,
                               TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed,
-                                        yarn_bins=args.yarn_bins),
+                                        yarn_bins=args.yarn_bins, residual=args.residual,
+                                        residual_input=args.residual_input),
                               budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
-                              heldout_materials=heldout, runner=runner)
+                              heldout_materials=heldout, runner=runner, references=references)
     from clothlab.neural.run import write_report_page
 
     latent = None
@@ -192,4 +205,7 @@ def run(args) -> int:
         for b in m.get(key, []):
             print(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
                   f"{b['relative_rmse']:.3f} ({b['rows']} queries)")
+    if m.get("far_view", {}).get("rows"):
+        print(f"  far view (>= 4 tiles, held-out pairs): {m['far_view']['relative_rms_vs_reflectance']:.3f} "
+              "relative RMS from the reflectance model")
     return 0

@@ -26,11 +26,11 @@ LOG = get_logger("neural.run")
 
 def run_training(directory, label_sources, materials, data_spec: DataSpec, train_spec: TrainSpec, *,
                  budget_s: float, label_share: float = 0.5, heldout_materials=(), encoding: dict | None = None,
-                 resume: bool = False, plots: bool = True, runner=None) -> TrainResult:
+                 resume: bool = False, plots: bool = True, runner=None, references=None) -> TrainResult:
     """Label and train within ``budget_s`` CPU seconds; ``label_sources[m]`` and ``materials[m]`` (encoder
     input) describe material m.  Returns the result after writing every file of the directory.  ``runner``
     (:class:`clothlab.parallel.Runner`): the labelling chunks as tasks on its workers, their CPU counted as
-    wall time x workers."""
+    wall time x workers.  ``references``: per material the reflectance model (residual networks)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     manifest = directory / "data" / "data.json"
@@ -55,7 +55,7 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
     spec = replace(train_spec, budget_s=max(1.0, budget_s - label_s)) if train_spec.steps is None else train_spec
     encoding = {**(encoding or {}), "data_spec": data_spec.to_dict()}  # the held-out cells follow from it
     result = train(data, names, materials, spec, encoding=encoding, heldout_materials=heldout_materials,
-                   checkpoint=directory / "checkpoint.npz", resume=resume)
+                   checkpoint=directory / "checkpoint.npz", resume=resume, references=references)
     result.metrics["label_cpu_s"] = label_s
     result.metrics["queries"] = int(data.shape[0])
     save_surrogate(result.surrogate, directory / "surrogate.npz", data_hash=sha, metrics=result.metrics)

@@ -4,6 +4,15 @@
 side ``size`` tiles centred at ``centre`` (tiles) for fabric-frame directions; material latents are encoded
 once (Chen, Wang & Wang 2024, sec. 4.3: "only the decoder needs to be evaluated during rendering").
 Inference runs in float32 in chunks of ``chunk`` rows (1-2 k rows keep a layer's activations in cache).
+
+Residual over the reflectance model (``encoding["residual"]``, issue 10 build item 2; not in the paper):
+the reflectance model R(wi, wo) is exactly the whole-tile footprint average (the texture-average =
+reflectance identity of Irawan & Marschner 2012), so the network predicts a correction in the loss space
+of eqs. 9-11: g_c = T_c(R_c(wi, wo)) + net_c, T_c(x) = ln(k x + 1) for specular components and x for
+diffuse (:func:`clothlab.neural.losses.encode_targets`).  ``encoding["residual_input"]`` also appends
+T(R) to the direction features.  R comes from ``references`` (one label source per trained material, e.g.
+:class:`clothlab.neural.labels.ModelLabels`; attached by the caller, this package does not build models)
+or, for another material, from the ``reference`` values handed to :meth:`Surrogate.query`.
 """
 
 from __future__ import annotations
@@ -14,7 +23,7 @@ import numpy as np
 
 from clothlab.neural.encodings import BLOB_BINS, direction_features, spatial_features, yarn_features
 from clothlab.neural.inference import DecoderPlan
-from clothlab.neural.losses import K_SPECULAR, decode_outputs, is_specular
+from clothlab.neural.losses import K_SPECULAR, decode_outputs, encode_targets, is_specular
 from clothlab.neural.network import SurrogateNetwork
 
 CHUNK = 2048
@@ -30,6 +39,7 @@ class Surrogate:
     materials: np.ndarray
     encoding: dict = field(default_factory=dict)
     k: float = K_SPECULAR
+    references: list | None = None  # per trained material: (wi, wo, centre, size) -> (N, C) R (residual only)
 
     def __post_init__(self):
         self._specular = is_specular(self.component_names)
@@ -55,6 +65,30 @@ class Surrogate:
         """One-blob bins of the yarn-local coordinates (0: no yarn features; :func:`.yarn_features`)."""
         return int(self.encoding.get("yarn_bins", 0))
 
+    @property
+    def residual(self) -> bool:
+        """The outputs are corrections over T(R) (module docstring; files without the setting: False)."""
+        return bool(self.encoding.get("residual", False))
+
+    @property
+    def residual_input(self) -> bool:
+        """T(R) is also an input of the angular decoder (files without the setting: False)."""
+        return bool(self.encoding.get("residual_input", False))
+
+    def transformed_reference(self, centre, size, wi, wo, material=0, reference=None) -> np.ndarray | None:
+        """T(R) (N, C) float64 of the reflectance model for the queries (None when the network uses no
+        R): ``reference`` (N, C) R values (1/sr) if given, else ``references[material]`` of a trained row."""
+        if not (self.residual or self.residual_input):
+            return None
+        if reference is None:
+            if not isinstance(material, int | np.integer) or not self.references:
+                raise ValueError("this surrogate is a residual over the reflectance model: attach `references` "
+                                 "(clothlab.models.neural.model.load_neural) or pass the model's values as "
+                                 "`reference`")
+            reference = self.references[int(material)](np.atleast_2d(wi), np.atleast_2d(wo), np.atleast_2d(centre),
+                                                       np.atleast_1d(size))
+        return encode_targets(np.asarray(reference, dtype=np.float64), self._specular, self.k)
+
     def _weave(self):
         """The weave of the yarn features, parsed once from the ``.wv`` text recorded in the encoding."""
         if self._weave_cache is None:
@@ -76,16 +110,21 @@ class Surrogate:
         """Forget the cached latents and inference plans (after the weights changed)."""
         self._bias, self._plans = None, {}
 
-    def features(self, centre, size, wi, wo) -> tuple[np.ndarray, np.ndarray]:
-        """float32 spatial and direction features of queries."""
+    def features(self, centre, size, wi, wo, t_reference=None) -> tuple[np.ndarray, np.ndarray]:
+        """float32 spatial and direction features of queries (``t_reference``: T(R) (N, C), appended to the
+        direction features when ``residual_input``)."""
         dt = self.network.dtype
         centre = np.atleast_2d(centre)
         spatial = spatial_features(centre, np.atleast_1d(size), self.position_bins, self.size_bins)
         if self.yarn_bins:
             extent = {k: tuple(v) for k, v in self.encoding["yarn_extent"].items()}
             spatial = np.concatenate([spatial, yarn_features(self._weave(), centre, extent, self.yarn_bins)], axis=1)
-        return (spatial.astype(dt),
-                direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector).astype(dt))
+        angular = direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector)
+        if self.residual_input:
+            if t_reference is None:
+                raise ValueError("this network reads T(R) as an input: give t_reference")
+            angular = np.concatenate([angular, t_reference], axis=1)
+        return spatial.astype(dt), angular.astype(dt)
 
     def latent(self, material) -> np.ndarray:
         """z (latent,) of a trained material's row or of an encoder input vector."""
@@ -93,13 +132,23 @@ class Surrogate:
             return self.network.encode(self.materials[int(material)][None])[0]
         return self.network.encode(np.asarray(material, dtype=np.float64).reshape(1, -1))[0]
 
-    def query_latent(self, z, centre, size, wi, wo) -> np.ndarray:
-        """:meth:`query` with the decoder reading latent ``z`` (latent,) directly (Fig. 8's interpolation)."""
+    def query_latent(self, z, centre, size, wi, wo, reference=None) -> np.ndarray:
+        """:meth:`query` with the decoder reading latent ``z`` (latent,) directly (Fig. 8's interpolation);
+        a residual network needs the ``reference`` values (N, C) of the material meant."""
         wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
         plan = DecoderPlan(self.network, self.network.fusion_bias(np.asarray(z).reshape(1, -1))[0])
-        spatial, angular = self.features(centre, size, wi, wo)
+        t_ref = self.transformed_reference(centre, size, wi, wo, material=None, reference=reference)
+        spatial, angular = self.features(centre, size, wi, wo, t_ref)
         out = np.concatenate([plan(spatial[i:i + CHUNK], angular[i:i + CHUNK]) for i in range(0, len(wi), CHUNK)])
-        values = decode_outputs(out.astype(np.float64), self._specular, self.k)
+        return self._values(out, t_ref, wi, wo)
+
+    def _values(self, out: np.ndarray, t_reference, wi, wo) -> np.ndarray:
+        """Components (N, C) float64 from raw outputs: + T(R) when residual, decoded (eq. 9 inverted),
+        0 for back-facing pairs."""
+        g = out.astype(np.float64)
+        if self.residual:
+            g += t_reference
+        values = decode_outputs(g, self._specular, self.k)
         return np.where(((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))[:, None], values, 0.0)
 
     def _plan(self, material) -> DecoderPlan:
@@ -123,16 +172,15 @@ class Surrogate:
             out[start:stop] = plan(spatial[start:stop], angular[start:stop])
         return out
 
-    def query(self, centre, size, wi, wo, material=0, chunk: int = CHUNK) -> np.ndarray:
-        """(N, C) components (1/sr, float64) of box footprints; back-facing pairs give 0."""
+    def query(self, centre, size, wi, wo, material=0, chunk: int = CHUNK, reference=None) -> np.ndarray:
+        """(N, C) components (1/sr, float64) of box footprints; back-facing pairs give 0.  ``reference``:
+        the reflectance model's (N, C) values for a residual network queried at a material vector."""
         wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
-        spatial, angular = self.features(centre, size, wi, wo)
-        values = decode_outputs(self.outputs(spatial, angular, material, chunk).astype(np.float64), self._specular,
-                                self.k)
-        front = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
-        return np.where(front[:, None], values, 0.0)
+        t_ref = self.transformed_reference(centre, size, wi, wo, material, reference)
+        spatial, angular = self.features(centre, size, wi, wo, t_ref)
+        return self._values(self.outputs(spatial, angular, material, chunk), t_ref, wi, wo)
 
-    def components(self, centre, size, wi, wo, material=0) -> dict[str, np.ndarray]:
+    def components(self, centre, size, wi, wo, material=0, reference=None) -> dict[str, np.ndarray]:
         """:meth:`query` as a dict of components."""
-        values = self.query(centre, size, wi, wo, material)
+        values = self.query(centre, size, wi, wo, material, reference=reference)
         return {name: values[:, i] for i, name in enumerate(self.component_names)}

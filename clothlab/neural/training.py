@@ -7,6 +7,10 @@ direction pairs (the ``heldout_pair`` column) and held-out materials (every row 
 Held-out error by footprint size bin (:data:`SIZE_BINS`, tiles): relative RMSE of f = the sum of the
 components (unit coefficients), sqrt(sum (f_pred - f)^2 / sum f^2), and the MSE.
 A checkpoint (network, Adam moments, step, CPU time, loss curve) makes a run resumable.
+
+``residual`` (:mod:`.surrogate`): the loss of eqs. 9-11 compares T(R) + net with T(label); R is a constant
+of each row (computed once from ``references`` before the first step, its CPU time counted in the run), so
+the network's backward pass is unchanged (d loss / d net = d loss / d g).
 """
 
 from __future__ import annotations
@@ -46,6 +50,8 @@ class TrainSpec:
     position_bins: int = BLOB_BINS
     size_bins: int = BLOB_BINS
     yarn_bins: int = 0
+    residual: bool = False
+    residual_input: bool = False
     batch: int = 4096
     lr: float = 3e-3
     weight_decay: float = 1e-6
@@ -77,21 +83,43 @@ def split_rows(data: np.ndarray, heldout_materials=()) -> dict[str, np.ndarray]:
             "heldout_materials": np.flatnonzero(unseen)}
 
 
-def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict) -> Surrogate:
+def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict, references=None) -> Surrogate:
+    """A new (untrained) surrogate of ``spec``; ``references``: per material the reflectance model's label
+    source (needed when ``spec.residual`` or ``spec.residual_input``)."""
+    if (spec.residual or spec.residual_input) and not references:
+        raise ValueError("a residual network needs the reflectance model of each material (references)")
     n_spatial = 2 * spec.position_bins + spec.size_bins + n_yarn_features(spec.yarn_bins)
-    arch = Architecture(n_material=materials.shape[1], n_spatial=n_spatial,
-                        n_angular=n_direction_features(spec.half_vector), n_out=len(names),
+    n_angular = n_direction_features(spec.half_vector) + (len(names) if spec.residual_input else 0)
+    arch = Architecture(n_material=materials.shape[1], n_spatial=n_spatial, n_angular=n_angular, n_out=len(names),
                         enc_width=spec.enc_width, latent=spec.latent, width=spec.width, spatial=spec.spatial)
     return Surrogate(SurrogateNetwork(arch, seed=spec.seed), tuple(names), np.asarray(materials, dtype=np.float64),
                      {**encoding, "half_vector": spec.half_vector, "position_bins": spec.position_bins,
-                      "size_bins": spec.size_bins, "yarn_bins": spec.yarn_bins})
+                      "size_bins": spec.size_bins, "yarn_bins": spec.yarn_bins, "residual": spec.residual,
+                      "residual_input": spec.residual_input},
+                     references=list(references) if references else None)
 
 
-def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray):
+def transformed_references(surrogate: Surrogate, data: np.ndarray) -> np.ndarray | None:
+    """T(R) (rows, C) float32 of every row of ``data`` (each by its material's reference), or None."""
+    if not (surrogate.residual or surrogate.residual_input):
+        return None
+    q = np.asarray(data[:, :N_QUERY])
+    out = np.empty((q.shape[0], len(surrogate.component_names)), dtype=np.float32)
+    for m in np.unique(q[:, 0]).astype(np.int64):
+        sel = q[:, 0] == m
+        out[sel] = surrogate.transformed_reference(q[sel, 1:3], q[sel, 3], q[sel, 4:7], q[sel, 7:10], int(m))
+    return out
+
+
+def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray, t_reference=None):
+    """Material index, features and loss-space targets of a batch; with a residual network the targets are
+    T(label) - T(R), the part the network's outputs must supply (g_pred = T(R) + net, eqs. 9-11)."""
     q = np.asarray(rows[:, :N_QUERY])
-    spatial, angular = surrogate.features(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10])
-    targets = encode_targets(np.asarray(rows[:, N_QUERY:]), specular).astype(spatial.dtype)
-    return q[:, 0].astype(np.int64), spatial, angular, targets
+    spatial, angular = surrogate.features(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10], t_reference)
+    targets = encode_targets(np.asarray(rows[:, N_QUERY:]), specular)
+    if surrogate.residual:
+        targets = targets - t_reference
+    return q[:, 0].astype(np.int64), spatial, angular, targets.astype(spatial.dtype)
 
 
 def _save_checkpoint(path: Path, surrogate, optimizer, step, cpu_s, curve) -> None:
@@ -116,12 +144,14 @@ def _load_checkpoint(path: Path, surrogate, optimizer):
 
 
 def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, encoding: dict | None = None,
-          heldout_materials=(), checkpoint: Path | None = None, resume: bool = False) -> TrainResult:
+          heldout_materials=(), checkpoint: Path | None = None, resume: bool = False,
+          references=None) -> TrainResult:
     """Train a surrogate on ``data`` (rows of :data:`clothlab.neural.data.COLUMNS` + components ``names``)
-    for the materials whose encoder inputs are ``materials`` (M, n_material)."""
+    for the materials whose encoder inputs are ``materials`` (M, n_material); ``references``: per material
+    the reflectance model's label source (residual networks)."""
     if spec.steps is None and spec.budget_s is None:
         raise ValueError("give steps or budget_s")
-    surrogate = make_surrogate(spec, materials, names, encoding or {})
+    surrogate = make_surrogate(spec, materials, names, encoding or {}, references)
     specular = is_specular(names)
     weights = column_weights(specular).astype(np.float32)
     optimizer = Adam(surrogate.network.params(), lr=spec.lr, weight_decay=spec.weight_decay)
@@ -136,6 +166,7 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
     rng = np.random.default_rng([spec.seed, step])
     net = surrogate.network
     start = time.process_time() - cpu_used
+    t_reference = transformed_references(surrogate, data)  # a constant per row (inside the CPU budget)
 
     def fraction() -> float:
         parts = []
@@ -150,7 +181,8 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         bar.update(step)
         while fraction() < 1.0:
             pick = np.sort(rng.choice(train_rows, size=min(spec.batch, train_rows.size), replace=False))
-            index, spatial, angular, targets = _batch(surrogate, data[pick], specular)
+            index, spatial, angular, targets = _batch(surrogate, data[pick], specular,
+                                                      None if t_reference is None else t_reference[pick])
             lr = step_schedule(spec.lr, fraction(), spec.milestones, spec.gamma)
             out = net.forward(surrogate.materials, index, spatial, angular, train=True)
             loss, d_out = loss_and_gradient(out, targets, weights)
@@ -171,7 +203,26 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
     for key in ("heldout_pairs", "heldout_materials"):
         if split[key].size:
             metrics[key] = errors_by_size(surrogate, data, split[key])
+    if surrogate.references:
+        metrics["far_view"] = far_view_error(surrogate, data, split["heldout_pairs"])
     return TrainResult(surrogate, curve, metrics)
+
+
+def far_view_error(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, min_size: float = 4.0) -> dict:
+    """Far view (issue 10: footprints >= 4 tiles): relative RMS difference of f between the surrogate and
+    the reflectance model (``surrogate.references``) on the ``rows`` with size >= ``min_size`` tiles."""
+    block = np.asarray(data[np.sort(rows)])
+    q = block[block[:, 3] >= min_size, :N_QUERY]
+    if not len(q):
+        return {"rows": 0}
+    f_pred, f_ref = np.zeros(len(q)), np.zeros(len(q))
+    for m in np.unique(q[:, 0]).astype(np.int64):
+        sel = q[:, 0] == m
+        args = (q[sel, 1:3], q[sel, 3], q[sel, 4:7], q[sel, 7:10])
+        f_pred[sel] = surrogate.query(*args, material=int(m)).sum(axis=1)
+        f_ref[sel] = surrogate.references[m](args[2], args[3], args[0], args[1]).sum(axis=1)
+    return {"rows": int(len(q)), "min_size": min_size,
+            "relative_rms_vs_reflectance": float(np.sqrt(np.sum((f_pred - f_ref) ** 2) / np.sum(f_ref ** 2)))}
 
 
 def errors_by_size(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, bins=SIZE_BINS) -> list[dict]:

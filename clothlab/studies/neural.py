@@ -20,6 +20,7 @@ components, seconds per query measured in this process.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -96,20 +97,20 @@ MC_SAMPLES = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 SHIPPED_FABRIC = "silk-shantung"
 
 
-def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | None = None) -> dict:
-    """MSE and seconds per query of the shipped surrogate and of k-sample MC, by footprint group."""
-    from clothlab.models.neural.model import SHIPPED
+def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | None = None, weights=None) -> dict:
+    """MSE and seconds per query of the shipped surrogate (or the ``weights`` .npz) and of k-sample MC, by
+    footprint group; a residual network's time includes its reflectance-model evaluation."""
+    from clothlab.models.neural.model import SHIPPED, load_neural
     from clothlab.models.registry import build_model
     from clothlab.neural.data import DataSpec, heldout_queries
     from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
-    from clothlab.neural.serialise import load_surrogate
     from clothlab.studies.timing import best_time
     from clothlab.weave.presets import get_preset
 
-    path = SHIPPED / f"{fabric}.npz"
+    path = SHIPPED / f"{fabric}.npz" if weights is None else Path(weights)
     if not path.exists():
         return {"skipped": f"no shipped surrogate for {fabric}"}
-    surrogate, sidecar = load_surrogate(path)
+    surrogate, sidecar = load_neural(path)  # a residual network evaluates the reflectance model per query
     enc = sidecar["encoding"]
     model = build_model("irawan", get_preset(enc["weave"]))
     params, texture = enc["params"], model.texture()
@@ -136,6 +137,81 @@ def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | No
     return {"fabric": fabric, "queries": int(len(q)), "reference_samples": REFERENCE_SAMPLES // (4 if quick else 1),
             "rows": rows, "equal_time_mc": equal["method"], "mse_ratio_equal_time": ratios,
             "mse_ratio_mc16_size_ge_1": mc16["size >= 1"] / max(sur["size >= 1"], 1e-300)}
+
+
+HELDOUT_BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)  # tiles (as training.SIZE_BINS)
+
+
+def fresh_heldout_labels(sidecar: dict, per_bin: int = 150, samples: int = REFERENCE_SAMPLES, seed: int = 21):
+    """Per footprint bin of :data:`HELDOUT_BINS`: ``per_bin`` queries on held-out direction pairs of the
+    sidecar's data spec, their fresh whole-tile-split MC labels (``samples`` per query) and the reflectance
+    model R (N, C) at them; a list of (lo, hi, queries, labels, R).  Independent of the network, so one call
+    serves every variant trained on the same data."""
+    from clothlab.models.neural.model import reference_model
+    from clothlab.neural.data import DataSpec, heldout_queries
+    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+
+    enc = sidecar["encoding"]
+    model = reference_model(sidecar)
+    far = ModelLabels(model, enc["params"])
+    mc = TextureMonteCarloLabels(model.texture(), enc["params"], samples=samples, seed=seed + 1, tile_average=far)
+    out = []
+    for i, (lo, hi) in enumerate(zip(HELDOUT_BINS[:-1], HELDOUT_BINS[1:], strict=True)):
+        q = heldout_queries(DataSpec(**enc["data_spec"]), per_bin, seed=seed + 100 * i, sizes=(lo, hi))
+        args = (q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3])
+        out.append((lo, hi, q, mc(*args), far(*args)))
+    return out
+
+
+def heldout_errors(weights, fresh) -> dict:
+    """The surrogate at ``weights`` (.npz) on :func:`fresh_heldout_labels` ``fresh``: relative RMSE of f (the
+    sum of the components) by bin, that of the reflectance model, and the far view (>= 4 tiles): relative RMS
+    difference between surrogate and reflectance model."""
+    from clothlab.models.neural.model import load_neural
+
+    surrogate, _ = load_neural(weights)
+    rows, far = [], None
+
+    def rel(a, b) -> float:
+        return float(np.sqrt(np.sum(np.square(a - b)) / np.sum(np.square(b))))
+
+    for lo, hi, q, labels, reflectance in fresh:
+        f = labels.sum(axis=1)
+        pred = surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10]).sum(axis=1)
+        rows.append({"size_lo": lo, "size_hi": hi, "queries": int(len(q)), "surrogate": rel(pred, f),
+                     "reflectance_model": rel(reflectance.sum(axis=1), f)})
+        if lo >= 4.0:
+            far = rel(pred, reflectance.sum(axis=1))
+    return {"bins": rows, "far_view": far}
+
+
+def compare_networks(weights: dict, per_bin: int = 150, mc_queries: int = 300) -> dict:
+    """Networks of one fabric trained on the same data (``weights``: {variant: .npz}) on the same held-out
+    queries: :func:`heldout_errors` against one set of :func:`fresh_heldout_labels`, and MC 16 / surrogate MSE
+    at >= 1 tile (:func:`surrogate_vs_mc`, ``mc_queries`` queries).  The docs' ablation table."""
+    import json
+
+    first = Path(next(iter(weights.values())))
+    sidecar = json.loads(first.with_suffix(".json").read_text(encoding="utf-8"))
+    fresh = fresh_heldout_labels(sidecar, per_bin)
+    out = {}
+    for name, path in weights.items():
+        versus = surrogate_vs_mc(False, sidecar["encoding"]["weave"], mc_queries, weights=path)
+        metrics = json.loads(Path(path).with_suffix(".json").read_text(encoding="utf-8"))["metrics"]
+        out[name] = {**heldout_errors(path, fresh), "mc16_over_surrogate_size_ge_1": versus["mse_ratio_mc16_size_ge_1"],
+                     "us_per_query": versus["rows"][0]["us_per_query"], "steps": metrics["steps"],
+                     "train_cpu_s": metrics["cpu_s"]}
+    return out
+
+
+def comparison_lines(table: dict) -> list[str]:
+    """Markdown rows of :func:`compare_networks`: relative RMSE by bin, far view, MC 16 / surrogate."""
+    out = []
+    for name, r in table.items():
+        bins = " | ".join(f"{b['surrogate']:.3g}" for b in r["bins"])
+        out.append(f"| {name} | {r['steps']:,} | {r['train_cpu_s']:.0f} | {bins} | {100 * r['far_view']:.1f} % | "
+                   f"{r['mc16_over_surrogate_size_ge_1']:.1f} | {r['us_per_query']:.2f} |")
+    return out
 
 
 def shipped_fabrics() -> list[str]:

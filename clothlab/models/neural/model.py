@@ -8,6 +8,10 @@ queries of the Irawan-Marschner texture model.  As a model:
 * :meth:`NeuralModel.texture` is a filtering texture model (``texture_filters``): the query centre is the
   texture point (u, v) and the footprint size is ``footprint`` (tiles; :data:`MIN_FOOTPRINT` when None).
 
+A residual network (``--residual``; :mod:`clothlab.neural.surrogate`) adds its outputs to the transformed
+reflectance model T(R(wi, wo)) of the sidecar's ``kind`` at the queried parameters (the trained ones, or
+``params`` for another material): :func:`load_neural` attaches it, and each query evaluates it.
+
 Options: ``weights`` (the ``.npz`` written by ``clothlab train-surrogate``; default: the shipped weights of
 the weave's preset, :data:`SHIPPED`, where there are some).  Parameters are those
 of the target model (the Irawan-Marschner table); a parameter set other than the trained one goes through
@@ -40,6 +44,33 @@ FAR_SIZE = 4.5  # tiles
 MIN_FOOTPRINT = 0.01  # tiles
 
 
+def reference_model(sidecar: dict, weave=None):
+    """The reflectance model a residual surrogate corrects: the sidecar's ``kind`` on ``weave`` (default:
+    the weave recorded in the sidecar, ``encoding["weave_wv"]``)."""
+    from clothlab.models.registry import build_model
+
+    enc = sidecar.get("encoding", {})
+    if weave is None:
+        from clothlab.weave.wvformat import parse_wv_text
+
+        weave = parse_wv_text(enc["weave_wv"], source="surrogate sidecar")
+    return build_model(enc.get("kind", "irawan"), weave)
+
+
+def load_neural(path, weave=None):
+    """:func:`clothlab.neural.serialise.load_surrogate` with, for a residual network, the reflectance model
+    of each trained material attached (``references``); returns (surrogate, sidecar)."""
+    from clothlab.neural.labels import ModelLabels
+
+    surrogate, sidecar = load_surrogate(Path(path))
+    if surrogate.residual or surrogate.residual_input:
+        enc = surrogate.encoding
+        model = reference_model(sidecar, weave)
+        surrogate.references = [ModelLabels(model, {k: float(v) for k, v in q.items()})
+                                for q in enc.get("materials_params", [enc.get("params", {})])]
+    return surrogate, sidecar
+
+
 class NeuralModel(Model):
     """A trained surrogate of the IM texture model's footprint averages, for one weave."""
 
@@ -60,7 +91,7 @@ class NeuralModel(Model):
                 raise ConfigError(f"no shipped surrogate for weave {weave.name!r} (shipped: {shipped}); give "
                                   "model.options.weights: a .npz written by clothlab train-surrogate",
                                   field="model.options.weights")
-        self.surrogate, self.sidecar = load_surrogate(Path(weights))
+        self.surrogate, self.sidecar = load_neural(weights, weave)
         if tuple(self.surrogate.component_names) != COMPONENTS:
             raise ConfigError(f"{weights}: components {self.surrogate.component_names}, expected {COMPONENTS} "
                               "(an Irawan-Marschner target)", field="model.options.weights")
@@ -69,6 +100,7 @@ class NeuralModel(Model):
         # the trained materials' parameters by row (a multi-material network lists them all)
         self._materials = [{k: float(v) for k, v in q.items()}
                            for q in self._encoding.get("materials_params", [self._trained])]
+        self._reference = None
         self._pattern = pattern_descriptor(weave, self._encoding.get("pattern_order", 2))  # the encoder's pattern part
 
     def default_parameters(self) -> dict[str, float]:
@@ -103,6 +135,10 @@ class NeuralModel(Model):
         from clothlab.models.registry import build_model
         from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
 
+        if self.surrogate.residual or self.surrogate.residual_input:
+            raise ConfigError("the fast material fit needs a network without --residual (the reflectance model's "
+                              "parameters are not inputs of the encoder); fit kind irawan instead",
+                              field="model.options.weights")
         names = list(self._encoding.get("parameters", self._material_names()))
         free = list(free or self.default_free)
         result = fit_material(self.surrogate, wi, wo, values, self.material_vector(params),
@@ -117,7 +153,10 @@ class NeuralModel(Model):
 
     def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
         """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles."""
-        values = self.surrogate.query(centre, size, wi, wo, material=self._material(params))
+        material, reference = self._material(params), None
+        if not isinstance(material, int) and (self.surrogate.residual or self.surrogate.residual_input):
+            reference = self.surrogate_reference(params)(wi, wo, centre, size)
+        values = self.surrogate.query(centre, size, wi, wo, material=material, reference=reference)
         return {name: values[:, i] for i, name in enumerate(COMPONENTS)}
 
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
@@ -127,6 +166,14 @@ class NeuralModel(Model):
         n = wi.shape[0]
         out = self.query(np.full((n, 2), 0.5), np.full(n, FAR_SIZE), wi, wo, params)
         return {k: v for k, v in out.items() if need is None or k in need}
+
+    def surrogate_reference(self, params: dict | None):
+        """The reflectance model at ``params`` as a label source (what a residual network corrects)."""
+        from clothlab.neural.labels import ModelLabels
+
+        if self._reference is None:
+            self._reference = reference_model(self.sidecar, self.weave)
+        return ModelLabels(self._reference, self.resolve(params))
 
     def texture(self, *, seed: int = 0):
         return NeuralTexture(self)
