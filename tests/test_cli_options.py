@@ -273,6 +273,8 @@ def test_only_the_cli_prints():
                                   ["fit", "x.yaml", "--cv", "\u0665"], ["fit", "x.yaml", "--nodes", "1"],
                                   ["fit", "x.yaml", "--workers", "0"], ["check", "--seed", "-1"],
                                   ["render", "s.yaml", "--spp", "1e3"],
+                                  ["train-surrogate", "preset:silk-shantung", "--width", "1_28"],
+                                  ["train-surrogate", "preset:silk-shantung", "--budget", "nan"],
                                   ["eval", "f", "d.csv", "--footprint-seed", "x"]])
 def test_integer_options_take_plain_decimal_digits_in_range(argv, capsys):
     """Every integer option goes through one strict type (clothlab.cli.options.count_type): no Python-only

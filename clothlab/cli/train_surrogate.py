@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from clothlab.cli.options import add_force, add_output, add_parallel
+from clothlab.cli.options import add_force, add_output, add_parallel, count_type, number_type
 
 TARGETS = {"im": "irawan", "surface": "surface"}
 LABELS = ("mc", "sat", "model")
@@ -21,24 +21,27 @@ def add_parser(sub):
     add_output(p, "output directory (data, checkpoint, surrogate.npz/json, training.json, PNGs)", metavar="DIR")
     p.add_argument("--target", choices=tuple(TARGETS), default="im",
                    help="the model whose footprint averages are learnt (default im: Irawan-Marschner texture)")
-    p.add_argument("--budget", type=float, default=5.0, help="CPU-minutes for labelling and training (default 5)")
+    p.add_argument("--budget", type=number_type(0.01, 1e6), default=5.0,
+                   help="CPU-minutes for labelling and training (default 5)")
     p.add_argument("--resume", action="store_true", help="continue a run in DIR (its data and checkpoint)")
     p.add_argument("--labels", choices=LABELS, default="mc",
                    help="label source: mc (default: stratified MC of the texture model over the part of the "
                         "footprint that is not whole tiles, the rest exact), sat (summed-area tables of "
                         "clothlab.models.footprint: one table per direction pair, and each query here has its "
                         "own, so slow), model (the reflectance model, footprint-independent)")
-    p.add_argument("--samples", type=int, default=64, help="MC samples per query for mc labels (default 64)")
-    p.add_argument("--pairs", type=int, default=64, help="direction pairs per footprint (default 64)")
-    p.add_argument("--width", type=int, default=64, help="decoder width (default 64)")
-    p.add_argument("--spatial", type=int, default=32, help="spatial feature width (default 32)")
-    p.add_argument("--seed", type=int, default=0, help="data and initialisation seed (default 0)")
-    p.add_argument("--small-sizes", type=int, default=0, metavar="N",
+    p.add_argument("--samples", type=count_type(1, 1_000_000), default=64,
+                   help="MC samples per query for mc labels (default 64)")
+    p.add_argument("--pairs", type=count_type(1, 100_000), default=64,
+                   help="direction pairs per footprint (default 64)")
+    p.add_argument("--width", type=count_type(4, 4096), default=64, help="decoder width (default 64)")
+    p.add_argument("--spatial", type=count_type(4, 4096), default=32, help="spatial feature width (default 32)")
+    p.add_argument("--seed", type=count_type(0, 2**32 - 1), default=0, help="data and initialisation seed (default 0)")
+    p.add_argument("--small-sizes", type=count_type(0, 1000), default=0, metavar="N",
                    help="extra footprint sizes per centre, log-stratified in 0.01-0.12 tile (default 0: Table 2)")
     p.add_argument("--row-centres", action="store_true",
                    help="every query its own footprint centre in its grid cell (default: one centre per cell, "
                         "Table 2)")
-    p.add_argument("--yarn-bins", type=int, default=0, metavar="N",
+    p.add_argument("--yarn-bins", type=count_type(0, 256), default=0, metavar="N",
                    help="one-blob bins of the yarn-local position features (default 0: none, as the paper)")
     p.add_argument("--residual", action="store_true",
                    help="the network predicts a correction over the reflectance model in the loss space of eqs. "
@@ -142,11 +145,6 @@ def run(args) -> int:
 
     if args.output is None:
         raise ConfigError("give the output directory with -o DIR", field="-o")
-    for name, value, lo in (("--budget", args.budget, 0.01), ("--samples", args.samples, 1),
-                            ("--pairs", args.pairs, 1), ("--width", args.width, 4), ("--spatial", args.spatial, 4),
-                            ("--small-sizes", args.small_sizes, 0), ("--yarn-bins", args.yarn_bins, 0)):
-        if not value >= lo:
-            raise ConfigError(f"expected a number >= {lo}, got {value}", field=name)
     if args.vary and (args.residual or args.residual_input):
         raise ConfigError("--residual / --residual-input are not supported with --vary (the Fig. 8 interpolation "
                           "and the fast material fit would need the reflectance model between materials)",
