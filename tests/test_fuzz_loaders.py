@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_fuzz_inputs import mutate_lines  # one line-level mutation for every fuzz family
 
 from clothlab.errors import ClothlabError
 
@@ -145,20 +146,6 @@ def replace_field(line: str, col: int, token: str, sep: str) -> str:
     fields = line.split(sep) if sep != " " else line.split()
     fields[col % len(fields)] = token
     return (sep if sep != " " else " ").join(fields)
-
-
-def mutate_lines(lines: list[str], op: int, index: int, token: str) -> list[str]:
-    out = list(lines)
-    index %= len(out)
-    if op == 0:
-        del out[index]
-    elif op == 1:
-        out.insert(index, out[index])
-    elif op == 2:
-        out.insert(index, token)
-    else:
-        out[index] = out[index] + token
-    return out
 
 
 def encode(text: str) -> bytes:
