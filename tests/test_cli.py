@@ -182,7 +182,7 @@ def test_sigint_during_posterior_then_rerun_continues(tmp_path):
     import signal
     import time
 
-    config = _posterior_project(tmp_path, 3000, 3000)
+    config = _posterior_project(tmp_path, 1200, 1200)  # checkpoints every 100 steps: interrupted after the first
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     cmd = [sys.executable, "-m", "clothlab.cli", "fit", str(config), "--quiet"]
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
