@@ -109,3 +109,21 @@ def test_selection_of_an_isotropic_table_frees_no_orientation():
     assert len(candidates(settings)) == 2 * 2 * 3
     iso = candidates(settings, isotropic=True)
     assert len(iso) == 4 and all(c.orientation_start is None for c in iso)
+
+
+def test_enlarged_box_and_cv_folds_keep_the_orientation_average(denim, monkeypatch):
+    from clothlab.fit import crossval
+
+    m = _measurement(np.ones((40, 1)), _directions(40, 6))
+    problem = FitProblem(denim, m, ("alpha",), denim.default_parameters(), orientation_nodes=12)
+    assert len(problem.orientations) == 12 and len(problem.enlarged(0.25).orientations) == 12
+    seen = []
+
+    class Recording(FitProblem):  # the fold problems cross_validate builds
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            seen.append(None if self.orientations is None else len(self.orientations))
+
+    monkeypatch.setattr(crossval, "FitProblem", Recording)
+    crossval.cross_validate(problem, problem.start, k=2, seed=0, max_evals=4, scheme="random", refit="local")
+    assert seen and set(seen) == {12}

@@ -199,7 +199,7 @@ def fold_task(job: FoldJob, fold: int) -> dict:
     neutral = job.refit == "neutral" and bool(problem.free)
     sub = FitProblem(problem.model, problem.measurement.subset(~test), problem.free,
                      problem.start if neutral else job.optimum_params, bounds, problem.metric, loss=problem.loss,
-                     loss_scale=problem.loss_scale)
+                     loss_scale=problem.loss_scale, orientation_nodes=problem.orientation_nodes)
     if neutral:
         settings = job.settings
         with Progress(settings.max_evals + settings.polish_evals, desc, unit="eval") as bar:

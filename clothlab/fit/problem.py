@@ -92,7 +92,8 @@ class FitProblem:
         self.weights = linear_weights(self.y, metric)
         self.component_names = tuple(model.component_names)
         self.evaluations = 0
-        self.orientations = self._averaged_orientations(orientation_nodes)
+        self.orientation_nodes = int(orientation_nodes)
+        self.orientations = self._averaged_orientations(self.orientation_nodes)
 
     def _averaged_orientations(self, nodes: int) -> np.ndarray | None:
         """The orientations (deg) an isotropic measurement averages the model over (module docstring), or
@@ -179,7 +180,8 @@ class FitProblem:
             b = min(b, v_hi - (eps if spec.open_upper else 0.0))
             bounds[spec.name] = (float(min(a, old_a)), float(max(b, old_b)))
         return FitProblem(self.model, self.measurement, self.free, self.start, bounds, self.metric,
-                          loss=self.loss, loss_scale=self.loss_scale)  # the enlarged box: no geometry cap
+                          loss=self.loss, loss_scale=self.loss_scale,
+                          orientation_nodes=self.orientation_nodes)  # the enlarged box: no geometry cap
 
     # ------------------------------------------------------------------ evaluation
     def design(self, params: dict, *, normalised: bool = False) -> np.ndarray:
