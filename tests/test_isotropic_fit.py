@@ -115,15 +115,15 @@ def test_enlarged_box_and_cv_folds_keep_the_orientation_average(denim, monkeypat
     from clothlab.fit import crossval
 
     m = _measurement(np.ones((40, 1)), _directions(40, 6))
-    problem = FitProblem(denim, m, ("alpha",), denim.default_parameters(), orientation_nodes=12)
-    assert len(problem.orientations) == 12 and len(problem.enlarged(0.25).orientations) == 12
     seen = []
 
-    class Recording(FitProblem):  # the fold problems cross_validate builds
+    class Recording(FitProblem):  # every problem made from here on records its orientation count
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
             seen.append(None if self.orientations is None else len(self.orientations))
 
     monkeypatch.setattr(crossval, "FitProblem", Recording)
+    problem = Recording(denim, m, ("alpha",), denim.default_parameters(), orientation_nodes=12)
+    assert len(problem.enlarged(0.25).orientations) == 12
     crossval.cross_validate(problem, problem.start, k=2, seed=0, max_evals=4, scheme="random", refit="local")
-    assert seen and set(seen) == {12}
+    assert len(seen) == 3 and set(seen) == {12}  # the problem and its two fold problems
