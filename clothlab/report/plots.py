@@ -11,6 +11,8 @@ dicts of column arrays read by :func:`clothlab.report.data.read_csv_table`.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 
 from clothlab.config.schema import DEFAULT_PERCENTILES
@@ -749,5 +751,6 @@ def plot_corner(samples: dict, truths: dict | None = None, units: dict | None = 
                "Below: joint histograms, red contours enclosing 39 % and 87 % of the samples (1 and 2 sigma)")
     if any_truth:
         explain += ". Blue lines: the values that generated the simulated data"
-    fig.text(0.5, 1.0 - 0.12 / size[1], explain + ".", ha="center", va="top", fontsize=8, wrap=True)
+    text = textwrap.fill(explain + ".", width=int(15 * size[0]))  # ~15 characters per inch at 8 pt
+    fig.text(0.5, 1.0 - 0.12 / size[1], text, ha="center", va="top", fontsize=8)
     return fig
