@@ -211,3 +211,19 @@ def test_common_period():
     assert common_period([0.0, 0.0]) == 0.0
     assert common_period([90.0, 180.0]) == 180.0
     assert common_period([120.0, 180.0]) == 360.0
+
+
+def test_orientation_bounds_wider_than_one_period_are_refused():
+    from clothlab.errors import ConfigError
+    from clothlab.fit.problem import FitProblem
+    from clothlab.io.measurement import Measurement
+    from clothlab.models.registry import build_model
+    from clothlab.weave.presets import get_preset
+
+    model = build_model("irawan", get_preset("cotton-denim"))
+    m = Measurement(np.full(4, 30.0), np.zeros(4), np.full(4, 40.0), np.arange(4) * 90.0, np.ones((4, 1)), ("grey",))
+    period = model.params["orientation"].period
+    FitProblem(model, m, ("orientation",), {"orientation": 0.0}, {"orientation": (-period / 2, period / 2)})
+    with pytest.raises(ConfigError, match="period") as info:
+        FitProblem(model, m, ("orientation",), {"orientation": 0.0}, {"orientation": (-period / 2, period / 2 + 1)})
+    assert info.value.field == "fit.bounds.orientation"

@@ -81,6 +81,10 @@ class FitProblem:
             if not lo < hi or (spec.transform == "log" and lo <= 0):
                 raise ConfigError(f"bounds [{lo:g}, {hi:g}] of {spec.name} are empty or not positive for a "
                                   "log-scaled parameter", field=f"fit.bounds.{spec.name}")
+            if spec.period and hi - lo > spec.period * (1.0 + 1e-12):
+                raise ConfigError(f"bounds [{lo:g}, {hi:g}] of {spec.name} span more than its period of "
+                                  f"{spec.period:g} {spec.unit}: values one period apart are the same model; give at "
+                                  "most one period", field=f"fit.bounds.{spec.name}")
         self.valid_geometry = bool(valid_geometry)
         self.geometry_caps: dict = {}
         if valid_geometry:
@@ -168,7 +172,7 @@ class FitProblem:
     def enlarged(self, fraction: float) -> FitProblem:
         """The same problem on a larger box: every bound moved out by ``fraction`` of the range in the
         optimiser's coordinates (log for log-scaled parameters), clipped to the physical range (an open end
-        kept 1e-9 of the range away)."""
+        kept 1e-9 of the range away) and, for a periodic parameter, to one period about the box's centre."""
         lo, hi = self._t(self.lower), self._t(self.upper)
         lo, hi = lo - fraction * (hi - lo), hi + fraction * (hi - lo)
         bounds = {}
@@ -178,6 +182,9 @@ class FitProblem:
             eps = 1e-9 * (v_hi - v_lo)
             a = max(a, v_lo + (eps if spec.open_lower else 0.0))
             b = min(b, v_hi - (eps if spec.open_upper else 0.0))
+            if spec.period and b - a > spec.period:  # a periodic parameter's box is at most one period wide
+                mid = 0.5 * (old_a + old_b)
+                a, b = mid - 0.5 * spec.period, mid + 0.5 * spec.period
             bounds[spec.name] = (float(min(a, old_a)), float(max(b, old_b)))
         return FitProblem(self.model, self.measurement, self.free, self.start, bounds, self.metric,
                           loss=self.loss, loss_scale=self.loss_scale,
