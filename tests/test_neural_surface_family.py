@@ -1,6 +1,7 @@
 """The shipped multi-material network of the surface model (Chen, Wang & Wang 2024, kind ``surface``) on
 ``pattern:twill-3x3``: it loads, and on an unseen material (a held-out midpoint of its --vary grid, never
-trained on) it agrees with fresh footprint labels within the error its sidecar records for unseen materials."""
+trained on) it agrees with fresh footprint labels within the error its sidecar records for unseen materials.
+It is a residual network (``--residual``): it corrects the surface reflectance model of each material."""
 
 from __future__ import annotations
 
@@ -17,10 +18,9 @@ def _relative_rmse(pred: np.ndarray, label: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def family():
-    from clothlab.models.neural.model import SHIPPED
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.models.neural.model import SHIPPED, load_neural
 
-    return load_surrogate(SHIPPED / f"{SURFACE_FAMILY}.npz")
+    return load_neural(SHIPPED / f"{SURFACE_FAMILY}.npz")  # residual: R of every material attached
 
 
 def test_shipped_surface_family_is_small_and_describes_its_grid(family):
@@ -28,7 +28,8 @@ def test_shipped_surface_family_is_small_and_describes_its_grid(family):
 
     surrogate, sidecar = family
     enc = sidecar["encoding"]
-    assert enc["kind"] == "surface" and enc["weave"] == "twill-3x3"
+    assert enc["kind"] == "surface" and enc["weave"] == "twill-3x3" and enc["residual"]
+    assert len(surrogate.references) == 13
     assert sidecar["components"] == ["diffuse_warp", "diffuse_weft", "specular_warp", "specular_weft"]
     assert len(enc["materials_params"]) == 13 and enc["heldout_materials"] == [9, 10, 11, 12]
     assert surrogate.materials.shape[0] == 13
