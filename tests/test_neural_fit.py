@@ -58,6 +58,23 @@ def test_cli_vary_trains_a_multi_material_network_with_unseen_materials_and_fig_
     assert (out / "latent.png").stat().st_size > 0 and "Fig. 8" in (out / "report.html").read_text()
 
 
+def test_cli_vary_with_residual_interpolates_over_the_reflectance_model_between_materials(tmp_path):
+    """--residual with --vary: every grid material (and unseen midpoint) has its reflectance model R; the
+    Fig. 8 curves query the residual network with R at the interpolated parameters.  With labels = R the
+    network learns a zero correction, so its curves stay near the exact model's."""
+    from clothlab.cli.main import main
+
+    out = tmp_path / "family-residual"
+    assert main(["train-surrogate", "pattern:twill-3x3", "--target", "surface", "-o", str(out), "--budget", "0.03",
+                 "--labels", "model", "--pairs", "2", "--width", "8", "--spatial", "8", "--residual",
+                 "--vary", "warp.alpha=0.1:1:2", "-q"]) == 0
+    sidecar = json.loads((out / "surrogate.json").read_text())
+    assert sidecar["encoding"]["residual"] and sidecar["encoding"]["heldout_materials"] == [2]
+    latent = json.loads((out / "latent.json").read_text())
+    exact, encoder = np.array(latent["model"]), np.array(latent["encoder"])
+    assert np.all(np.isfinite(encoder)) and np.allclose(encoder, exact, rtol=0.5)
+
+
 FAMILY = "families/silk-shantung-alpha-beta.npz"
 
 

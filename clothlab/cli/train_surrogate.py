@@ -145,10 +145,6 @@ def run(args) -> int:
 
     if args.output is None:
         raise ConfigError("give the output directory with -o DIR", field="-o")
-    if args.vary and (args.residual or args.residual_input):
-        raise ConfigError("--residual / --residual-input are not supported with --vary (the Fig. 8 interpolation "
-                          "and the fast material fit would need the reflectance model between materials)",
-                          field="--residual")
     out = Path(args.output)
     if out.exists() and any(out.iterdir()) and not args.resume:
         if not args.force:

@@ -35,14 +35,19 @@ def latent_interpolation(surrogate, model, row_a: int, row_b: int, params_a: dic
     t_values = np.linspace(0.0, 1.0, steps)
     latent, encoder, exact, params = [], [], [], []
     for t in t_values:
-        latent.append(surrogate.query_latent((1 - t) * z_a + t * z_b, centre, size, wi, wo).sum(axis=1))
-        encoder.append(surrogate.query(centre, size, wi, wo, material=(1 - t) * m_a + t * m_b).sum(axis=1))
         p = dict(params_a)
         for k in differing:
             i = list(names).index(k)
             p[k] = unit_to_parameter(table[k], (1 - t) * m_a[i] + t * m_b[i])
         params.append({k: p[k] for k in differing})
         comps = model.components(wi, wo, p, warn=False)
+        # a residual network corrects the reflectance model: R at the interpolated parameters
+        reference = (np.stack([np.asarray(comps[c], dtype=np.float64).reshape(-1) for c in surrogate.component_names],
+                              axis=1) if surrogate.residual else None)
+        latent.append(surrogate.query_latent((1 - t) * z_a + t * z_b, centre, size, wi, wo,
+                                             reference=reference).sum(axis=1))
+        encoder.append(surrogate.query(centre, size, wi, wo, material=(1 - t) * m_a + t * m_b,
+                                       reference=reference).sum(axis=1))
         exact.append(sum(np.asarray(comps[c]) for c in model.component_names))
     return {"t": t_values.tolist(), "pairs": [[list(a), list(b)] for a, b in zip(wi, wo, strict=True)],
             "params": params, "latent": np.array(latent).tolist(), "encoder": np.array(encoder).tolist(),
