@@ -81,7 +81,9 @@ def number_type(low: float | None = None, high: float | None = None):
         except ConfigError as exc:
             raise argparse.ArgumentTypeError(exc.detail) from None
         if (low is not None and value < low) or (high is not None and value > high):
-            raise argparse.ArgumentTypeError(f"{value:g} is outside [{low:g}, {high:g}]")
+            lo = "-inf" if low is None else f"{low:g}"
+            hi = "inf" if high is None else f"{high:g}"
+            raise argparse.ArgumentTypeError(f"{value:g} is outside [{lo}, {hi}]")
         return value
 
     return parse
