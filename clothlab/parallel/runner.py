@@ -12,6 +12,7 @@ completion order, e.g. to write each result to a file as soon as it exists.
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import os
 import traceback
@@ -107,8 +108,9 @@ class _Counts:
         self.bar.close()
 
 
-class Runner:
-    """Where tasks run.  Subclasses provide ``_submit(call) -> handle`` and ``_next() -> (handle, outcome)``."""
+class Runner(abc.ABC):
+    """Where tasks run.  Subclasses provide ``_begin(fn, shared) -> handle``, ``_submit(handle, item) -> key``
+    and ``_next(pending) -> (key, outcome)``."""
 
     workers: int = 1
     dashboard: str | None = None
@@ -161,20 +163,25 @@ class Runner:
         return Shared(value)
 
     # backend hooks ------------------------------------------------------------------------------------
+    @abc.abstractmethod
     def _begin(self, fn, shared):
-        raise NotImplementedError  # pragma: no cover - abstract
+        """Prepare ``fn`` (and ``shared``) for submission; returns what :meth:`_submit` takes."""
 
+    @abc.abstractmethod
     def _submit(self, handle, item):
-        raise NotImplementedError  # pragma: no cover - abstract
+        """Start one task; returns its key in ``pending``."""
 
+    @abc.abstractmethod
     def _next(self, pending: dict):
-        raise NotImplementedError  # pragma: no cover - abstract
+        """Wait for the next finished task of ``pending``: (key, outcome)."""
 
     def _cancel(self, keys: list) -> None:
-        """Drop unfinished tasks (after an interrupt or an error in ``on_result``)."""
+        """Drop unfinished tasks (after an interrupt or an error in ``on_result``); default: nothing to drop."""
+        return None
 
     def close(self) -> None:
         """Release the cluster (nothing for the in-process runner)."""
+        return None
 
     def __enter__(self) -> Runner:
         return self
