@@ -17,7 +17,9 @@ def add_parser(sub):
     p = sub.add_parser("train-surrogate", help="train the neural footprint surrogate of one fabric",
                        description="Label footprint queries (Table 2 sampling of Chen, Wang & Wang 2024) and "
                                    "train the numpy encoder/decoder surrogate within a CPU budget.")
-    p.add_argument("source", help="preset:<name>, a .wv file or a fabric.yaml")
+    p.add_argument("source", help="preset:<name>, pattern:<name>, a .wv file or a fabric.yaml; several weaves "
+                                  "separated by commas (e.g. pattern:plain,pattern:twill-3x3): one network over the "
+                                  "materials of all of them")
     add_output(p, "output directory (data, checkpoint, surrogate.npz/json, training.json, PNGs)", metavar="DIR")
     p.add_argument("--target", choices=tuple(TARGETS), default="im",
                    help="the model whose footprint averages are learnt (default im: Irawan-Marschner texture)")
@@ -52,6 +54,18 @@ def add_parser(sub):
                    help="a multi-material network: N values of parameter NAME from LO to HI (geometric for "
                         "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
                         "between neighbouring values are labelled too and held out (unseen materials)")
+    p.add_argument("--draw", type=int, default=None, metavar="N",
+                   help="a multi-material network: N parameter sets per weave drawn at random (seeded by --seed) "
+                        "from Table 2 of Chen, Wang & Wang 2024 (--target surface: per yarn type psi in {-30, 0, "
+                        "30} deg, umax U(15, 45) deg, alpha U(0.1, 1), beta U(0, 2)); a seeded --heldout-share of "
+                        "each weave's are labelled and held out (unseen materials)")
+    p.add_argument("--heldout-share", type=float, default=0.2, metavar="F",
+                   help="with --draw: the share of each trained weave's materials held out (default 0.2; at least "
+                        "one when N >= 2)")
+    p.add_argument("--heldout-pattern", default=None, metavar="WEAVE",
+                   help="a weave (e.g. pattern:twill-5x5) not in SOURCE whose materials (--draw / --vary, as the "
+                        "others) are labelled and never trained on: scored apart as the unseen pattern "
+                        "(metrics.heldout_pattern)")
     add_force(p, "output directory")
     add_parallel(p, "the labelling chunks (one task per chunk; identical data)")
     return p
@@ -131,6 +145,48 @@ def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
     return sets + held, list(range(len(sets), len(sets) + len(held)))
 
 
+def _weave_specs(args) -> tuple[list[str], str | None]:
+    """The weave specs of SOURCE (comma-separated) and of --heldout-pattern; ConfigError naming the option
+    for an empty list or a held-out weave that is also trained."""
+    from clothlab.errors import ConfigError
+
+    specs = [t.strip() for t in str(args.source).split(",") if t.strip()]
+    if not specs:
+        raise ConfigError("give at least one weave (preset:<name>, pattern:<name>, a .wv file or a fabric.yaml)",
+                          field="source")
+    held = args.heldout_pattern.strip() if args.heldout_pattern else None
+    if args.heldout_pattern is not None and not held:
+        raise ConfigError("give a weave, e.g. pattern:twill-5x5", field="--heldout-pattern")
+    return specs, held
+
+
+def _resolve(spec: str, target: str, option: str):
+    """(weave, model, params) of one weave spec; a bad spec is a ConfigError naming ``option``."""
+    from clothlab.errors import ConfigError
+
+    try:
+        return _model(spec, target)
+    except ConfigError as exc:
+        raise ConfigError(f"{spec!r}: {exc}", field=option) from None
+
+
+def material_draw(weave_name: str, base: dict, n: int, share: float, seed: int, *, heldout_all: bool = False):
+    """``n`` surface parameter sets of Table 2 for one weave (seeded by (seed, weave name)) and the indices of
+    the held-out ones: a seeded ``share`` of them (at least one when n >= 2), or all with ``heldout_all``."""
+    import zlib
+
+    import numpy as np
+
+    from clothlab.models.surface.parameters import draw_table2
+
+    rng = np.random.default_rng([seed, 104723, zlib.crc32(weave_name.encode())])
+    sets = draw_table2(rng, n, base={k: base[k] for k in ("gap", "blend") if k in base})
+    if heldout_all:
+        return sets, list(range(n))
+    k = 0 if n < 2 else min(n - 1, max(1, int(round(share * n))))
+    return sets, sorted(int(i) for i in rng.permutation(n)[:k])
+
+
 def run(args) -> int:
     import json
     import shutil
@@ -145,6 +201,30 @@ def run(args) -> int:
 
     if args.output is None:
         raise ConfigError("give the output directory with -o DIR", field="-o")
+    specs, held_spec = _weave_specs(args)
+    if args.draw is not None:
+        if args.draw < 1:
+            raise ConfigError(f"need N >= 1 materials per weave, got {args.draw}", field="--draw")
+        if args.vary:
+            raise ConfigError("give either --draw (Table 2 at random) or --vary (a grid), not both", field="--draw")
+        if args.target != "surface":
+            raise ConfigError("Table 2's ranges are the surface model's parameters; use --target surface",
+                              field="--draw")
+    if not 0.0 <= args.heldout_share < 1.0:
+        raise ConfigError(f"need 0 <= F < 1, got {args.heldout_share:g}", field="--heldout-share")
+    resolved = [_resolve(spec, args.target, "source") for spec in specs]
+    if held_spec is not None:
+        resolved.append(_resolve(held_spec, args.target, "--heldout-pattern"))
+    weave_names = [w.name for w, _, _ in resolved]
+    if len(set(weave_names[:len(specs)])) < len(specs):
+        raise ConfigError(f"a weave is named twice: {', '.join(weave_names[:len(specs)])}", field="source")
+    if held_spec is not None and weave_names[-1] in weave_names[:-1]:
+        raise ConfigError(f"{held_spec!r} is also a trained weave; the held-out pattern must not be trained on",
+                          field="--heldout-pattern")
+    several = len(resolved) > 1
+    if several and args.yarn_bins:
+        raise ConfigError("yarn features with several weaves are not supported yet (they need the weave of each "
+                          "row); leave --yarn-bins at 0", field="--yarn-bins")
     out = Path(args.output)
     if out.exists() and any(out.iterdir()) and not args.resume:
         if not args.force:
@@ -154,21 +234,46 @@ def run(args) -> int:
     import numpy as np
 
     from clothlab.models.base import ORIENTATION
-
-    weave, model, params = _model(args.source, args.target)
-    p = model.resolve(params)
-    sets, heldout = material_grid(model.params, p, args.vary)
-    labels = [_labels(args.labels, model, q, args.samples, args.seed) for q in sets]
     from clothlab.neural.labels import ModelLabels
 
-    references = [ModelLabels(model, q) for q in sets]  # the far-view metric; what --residual corrects
+    # per weave its materials (trained weaves first, then the held-out pattern's), one list over all
+    sets, heldout, held_pattern, owner = [], [], [], []
+    for i, (weave, model, params) in enumerate(resolved):
+        p = model.resolve(params)
+        is_held = held_spec is not None and i == len(resolved) - 1
+        if args.draw is not None:
+            own, own_held = material_draw(weave.name, p, args.draw, args.heldout_share, args.seed,
+                                          heldout_all=is_held)
+        else:
+            own, own_held = material_grid(model.params, p, args.vary)
+        offset = len(sets)
+        sets += own
+        owner += [i] * len(own)
+        if is_held:
+            held_pattern += list(range(offset, offset + len(own)))
+        else:
+            heldout += [offset + j for j in own_held]
+    labels = [_labels(args.labels, resolved[i][1], q, args.samples, args.seed) for i, q in zip(owner, sets,
+                                                                                                strict=True)]
+    # the far-view metric; what --residual corrects: R of each material on its own weave
+    references = [ModelLabels(resolved[i][1], q) for i, q in zip(owner, sets, strict=True)]
+    weave, model, _ = resolved[0]
+    p = model.resolve(resolved[0][2])
     names = [n for n in model.params.names() if n != ORIENTATION]  # a frame rotation, applied outside the network
-    materials = np.stack([material_vector(weave, q, model.params, names) for q in sets])
+    materials = np.stack([material_vector(resolved[i][0], q, model.params, names)
+                          for i, q in zip(owner, sets, strict=True)])
     encoding = {"parameters": names, "pattern_order": PATTERN_ORDER, "kind": model.kind, "weave": weave.name,
                 "labels": type(labels[0]).__name__, "params": p, "weave_wv": format_wv(weave)}
-    if args.vary:
+    if args.vary or args.draw is not None or several:
         encoding["materials_params"] = [{k: q[k] for k in names} for q in sets]
         encoding["heldout_materials"] = heldout
+    if several:  # additive: a sidecar without these keys has one weave, "weave_wv"
+        encoding["weaves_wv"] = {w.name: format_wv(w) for w, _, _ in resolved}
+        encoding["materials_weave"] = [weave_names[i] for i in owner]
+        encoding["patterns"] = weave_names[:len(specs)]
+    if held_spec is not None:
+        encoding["heldout_pattern"] = held_pattern
+        encoding["heldout_pattern_name"] = weave_names[-1]
     if args.yarn_bins:
         encoding["yarn_extent"] = yarn_extent(p)
     data_spec = DataSpec(pairs=args.pairs, seed=args.seed, small_sizes=args.small_sizes, row_centres=args.row_centres)
@@ -180,11 +285,12 @@ def run(args) -> int:
                                         yarn_bins=args.yarn_bins, residual=args.residual,
                                         residual_input=args.residual_input),
                               budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
-                              heldout_materials=heldout, runner=runner, references=references)
+                              heldout_materials=heldout, runner=runner, references=references,
+                              heldout_pattern=held_pattern)
     from clothlab.neural.run import write_report_page
 
     latent = None
-    if args.vary:  # Fig. 8: between the first and the last grid material
+    if args.vary and not several:  # Fig. 8: between the first and the last grid material
         from clothlab.neural.interpolation import latent_interpolation, plot_latent_interpolation
 
         last = len(sets) - len(heldout) - 1
@@ -195,7 +301,8 @@ def run(args) -> int:
     m = result.metrics
     print(f"{out / 'surrogate.npz'}: {m['steps']} steps, {m['queries']:,} queries, "
           f"{m['label_cpu_s'] + m['cpu_s']:.0f} CPU-s")
-    for key, what in (("heldout_pairs", "held-out pairs"), ("heldout_materials", "unseen materials")):
+    for key, what in (("heldout_pairs", "held-out pairs"), ("heldout_materials", "unseen materials"),
+                      ("heldout_pattern", "unseen pattern")):
         for b in m.get(key, []):
             print(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
                   f"{b['relative_rmse']:.3f} ({b['rows']} queries)")

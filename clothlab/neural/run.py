@@ -26,11 +26,13 @@ LOG = get_logger("neural.run")
 
 def run_training(directory, label_sources, materials, data_spec: DataSpec, train_spec: TrainSpec, *,
                  budget_s: float, label_share: float = 0.5, heldout_materials=(), encoding: dict | None = None,
-                 resume: bool = False, plots: bool = True, runner=None, references=None) -> TrainResult:
+                 resume: bool = False, plots: bool = True, runner=None, references=None,
+                 heldout_pattern=()) -> TrainResult:
     """Label and train within ``budget_s`` CPU seconds; ``label_sources[m]`` and ``materials[m]`` (encoder
     input) describe material m.  Returns the result after writing every file of the directory.  ``runner``
     (:class:`clothlab.parallel.Runner`): the labelling chunks as tasks on its workers, their CPU counted as
-    wall time x workers.  ``references``: per material the reflectance model (residual networks)."""
+    wall time x workers.  ``references``: per material the reflectance model (residual networks).
+    ``heldout_materials`` / ``heldout_pattern``: material indices never trained on (:func:`.train`)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     manifest = directory / "data" / "data.json"
@@ -55,7 +57,8 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
     spec = replace(train_spec, budget_s=max(1.0, budget_s - label_s)) if train_spec.steps is None else train_spec
     encoding = {**(encoding or {}), "data_spec": data_spec.to_dict()}  # the held-out cells follow from it
     result = train(data, names, materials, spec, encoding=encoding, heldout_materials=heldout_materials,
-                   checkpoint=directory / "checkpoint.npz", resume=resume, references=references)
+                   checkpoint=directory / "checkpoint.npz", resume=resume, references=references,
+                   heldout_pattern=heldout_pattern)
     result.metrics["label_cpu_s"] = label_s
     result.metrics["queries"] = int(data.shape[0])
     save_surrogate(result.surrogate, directory / "surrogate.npz", data_hash=sha, metrics=result.metrics)
@@ -82,7 +85,7 @@ def write_plots(directory: Path, result: TrainResult) -> None:
     fig.savefig(directory / "loss.png", dpi=110)
     fig = Figure(figsize=(5, 3.2))
     ax = fig.add_subplot()
-    for key in ("heldout_pairs", "heldout_materials", "train_sample"):
+    for key in ("heldout_pairs", "heldout_materials", "heldout_pattern", "train_sample"):
         bins = result.metrics.get(key)
         if bins:
             centre = [(b["size_lo"] * b["size_hi"]) ** 0.5 for b in bins]
@@ -107,7 +110,8 @@ def write_report_page(directory: Path, metrics: dict, *, latent: dict | None = N
              f"{metrics.get('label_cpu_s', 0.0) + metrics.get('cpu_s', 0.0):.0f} CPU-s in all.</p>",
              "<h2>Loss vs time</h2><img src='loss.png'>", "<h2>Held-out error by footprint size</h2>",
              "<img src='heldout.png'>"]
-    for key, title in (("heldout_pairs", "held-out direction pairs"), ("heldout_materials", "unseen materials")):
+    for key, title in (("heldout_pairs", "held-out direction pairs"), ("heldout_materials", "unseen materials"),
+                       ("heldout_pattern", "unseen pattern")):
         bins = metrics.get(key)
         if bins:
             rows = "".join(f"<tr><td>{b['size_lo']:g}-{b['size_hi']:g}</td><td>{b['relative_rmse']:.3f}</td>"

@@ -3,7 +3,8 @@
 Adam (:mod:`.optimizer`) on the loss of eqs. 9-11 (:mod:`.losses`) with mini-batches drawn from the
 training rows; the step schedule of sec. 5.2 (x 0.2 at 60 % and 90 % of the run) counts in steps or,
 with a budget, in CPU seconds (``time.process_time``).  Rows are split three ways: training, held-out
-direction pairs (the ``heldout_pair`` column) and held-out materials (every row of the materials named).
+direction pairs (the ``heldout_pair`` column), held-out materials (every row of the materials named) and,
+for a network over several patterns, the materials of a held-out pattern (scored apart: "unseen pattern").
 Held-out error by footprint size bin (:data:`SIZE_BINS`, tiles): relative RMSE of f = the sum of the
 components (unit coefficients), sqrt(sum (f_pred - f)^2 / sum f^2), and the MSE.
 A checkpoint (network, Adam moments, step, CPU time, loss curve) makes a run resumable.
@@ -74,13 +75,16 @@ class TrainResult:
     metrics: dict = field(default_factory=dict)
 
 
-def split_rows(data: np.ndarray, heldout_materials=()) -> dict[str, np.ndarray]:
-    """Row indices: ``train``, ``heldout_pairs`` (trained materials) and ``heldout_materials``."""
+def split_rows(data: np.ndarray, heldout_materials=(), heldout_pattern=()) -> dict[str, np.ndarray]:
+    """Row indices: ``train``, ``heldout_pairs`` (trained materials), ``heldout_materials`` and
+    ``heldout_pattern`` (every row of the materials of the held-out pattern; none are trained on)."""
     material = np.asarray(data[:, 0]).astype(np.int64)
     pair = np.asarray(data[:, 10]) > 0.5
     unseen = np.isin(material, np.asarray(list(heldout_materials), dtype=np.int64))
-    return {"train": np.flatnonzero(~pair & ~unseen), "heldout_pairs": np.flatnonzero(pair & ~unseen),
-            "heldout_materials": np.flatnonzero(unseen)}
+    pattern = np.isin(material, np.asarray(list(heldout_pattern), dtype=np.int64)) & ~unseen
+    return {"train": np.flatnonzero(~pair & ~unseen & ~pattern),
+            "heldout_pairs": np.flatnonzero(pair & ~unseen & ~pattern),
+            "heldout_materials": np.flatnonzero(unseen), "heldout_pattern": np.flatnonzero(pattern)}
 
 
 def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict, references=None) -> Surrogate:
@@ -145,17 +149,18 @@ def _load_checkpoint(path: Path, surrogate, optimizer):
 
 def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, encoding: dict | None = None,
           heldout_materials=(), checkpoint: Path | None = None, resume: bool = False,
-          references=None) -> TrainResult:
+          references=None, heldout_pattern=()) -> TrainResult:
     """Train a surrogate on ``data`` (rows of :data:`clothlab.neural.data.COLUMNS` + components ``names``)
     for the materials whose encoder inputs are ``materials`` (M, n_material); ``references``: per material
-    the reflectance model's label source (residual networks)."""
+    the reflectance model's label source (residual networks).  ``heldout_materials`` / ``heldout_pattern``:
+    material indices never trained on, scored as ``metrics["heldout_materials"]`` / ``["heldout_pattern"]``."""
     if spec.steps is None and spec.budget_s is None:
         raise ValueError("give steps or budget_s")
     surrogate = make_surrogate(spec, materials, names, encoding or {}, references)
     specular = is_specular(names)
     weights = column_weights(specular).astype(np.float32)
     optimizer = Adam(surrogate.network.params(), lr=spec.lr, weight_decay=spec.weight_decay)
-    split = split_rows(data, heldout_materials)
+    split = split_rows(data, heldout_materials, heldout_pattern)
     train_rows = split["train"]
     if train_rows.size == 0:
         raise ValueError("no training rows (every row is held out)")
@@ -200,11 +205,13 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
     surrogate.reset()
     metrics = {"steps": step, "cpu_s": cpu, "rows": {k: int(v.size) for k, v in split.items()},
                "train_sample": errors_by_size(surrogate, data, train_rows[:: max(1, train_rows.size // 50000)])}
-    for key in ("heldout_pairs", "heldout_materials"):
+    for key in ("heldout_pairs", "heldout_materials", "heldout_pattern"):
         if split[key].size:
             metrics[key] = errors_by_size(surrogate, data, split[key])
     if surrogate.references:
         metrics["far_view"] = far_view_error(surrogate, data, split["heldout_pairs"])
+        if split["heldout_pattern"].size:
+            metrics["far_view_heldout_pattern"] = far_view_error(surrogate, data, split["heldout_pattern"])
     return TrainResult(surrogate, curve, metrics)
 
 

@@ -44,30 +44,35 @@ FAR_SIZE = 4.5  # tiles
 MIN_FOOTPRINT = 0.01  # tiles
 
 
-def reference_model(sidecar: dict, weave=None):
+def reference_model(sidecar: dict, weave=None, name: str | None = None):
     """The reflectance model a residual surrogate corrects: the sidecar's ``kind`` on ``weave`` (default:
-    the weave recorded in the sidecar, ``encoding["weave_wv"]``)."""
+    the weave recorded in the sidecar, ``encoding["weave_wv"]``, or with ``name`` the weave of that name in
+    ``encoding["weaves_wv"]``, networks over several weaves)."""
     from clothlab.models.registry import build_model
 
     enc = sidecar.get("encoding", {})
     if weave is None:
         from clothlab.weave.wvformat import parse_wv_text
 
-        weave = parse_wv_text(enc["weave_wv"], source="surrogate sidecar")
+        text = enc["weave_wv"] if name is None else enc["weaves_wv"][name]
+        weave = parse_wv_text(text, source="surrogate sidecar")
     return build_model(enc.get("kind", "irawan"), weave)
 
 
 def load_neural(path, weave=None):
     """:func:`clothlab.neural.serialise.load_surrogate` with, for a residual network, the reflectance model
-    of each trained material attached (``references``); returns (surrogate, sidecar)."""
+    of each trained material attached (``references``), each on its own weave (``encoding["materials_weave"]``
+    of a network over several weaves, unless ``weave`` is given); returns (surrogate, sidecar)."""
     from clothlab.neural.labels import ModelLabels
 
     surrogate, sidecar = load_surrogate(Path(path))
     if surrogate.residual or surrogate.residual_input:
         enc = surrogate.encoding
-        model = reference_model(sidecar, weave)
-        surrogate.references = [ModelLabels(model, {k: float(v) for k, v in q.items()})
-                                for q in enc.get("materials_params", [enc.get("params", {})])]
+        sets = enc.get("materials_params", [enc.get("params", {})])
+        owners = (enc.get("materials_weave") if weave is None else None) or [None] * len(sets)
+        models = {name: reference_model(sidecar, weave, name) for name in set(owners)}
+        surrogate.references = [ModelLabels(models[name], {k: float(v) for k, v in q.items()})
+                                for name, q in zip(owners, sets, strict=True)]
     return surrogate, sidecar
 
 

@@ -51,3 +51,24 @@ def weave_parameters(weave) -> dict[str, float]:
             lo, hi = SURFACE_PARAMS[f"{kind}.{name}"].valid
             values[f"{kind}.{name}"] = float(min(max(value, lo), hi))
     return values
+
+
+#: Chen, Wang & Wang 2024, Table 2: the training distribution of the yarn parameters, per yarn type
+TABLE2_PSI = (-30.0, 0.0, 30.0)  # deg, one of
+TABLE2_UNIFORM = {"umax": (15.0, 45.0), "alpha": (0.1, 1.0), "beta": (0.0, 2.0)}  # deg, 1, 1
+
+
+def draw_table2(rng, n: int, base: dict | None = None) -> list[dict[str, float]]:
+    """``n`` parameter sets drawn from Table 2 (Chen, Wang & Wang 2024): per yarn type psi in {-30, 0, 30}
+    deg, umax U(15, 45) deg, alpha U(0.1, 1), beta U(0, 2); the other parameters (gap, blend) from ``base``
+    (default: the declared defaults).  ``rng``: a numpy Generator (the draw is reproducible from its seed)."""
+    fixed = {spec.name: float(spec.default) for spec in SURFACE_PARAMS} | dict(base or {})
+    out = []
+    for _ in range(int(n)):
+        q = dict(fixed)
+        for kind in YARN_KINDS:
+            q[f"{kind}.psi"] = float(rng.choice(TABLE2_PSI))
+            for name, (lo, hi) in TABLE2_UNIFORM.items():
+                q[f"{kind}.{name}"] = float(rng.uniform(lo, hi))
+        out.append(q)
+    return out
