@@ -167,7 +167,7 @@ def _resolve(spec: str, target: str, option: str):
     try:
         return _model(spec, target)
     except ConfigError as exc:
-        raise ConfigError(f"{spec!r}: {exc}", field=option) from None
+        raise ConfigError(f"{spec!r}: {exc.detail}", field=option, path=exc.path) from None
 
 
 def material_draw(weave_name: str, base: dict, n: int, share: float, seed: int, *, heldout_all: bool = False):
