@@ -1,0 +1,112 @@
+"""Fresh-label errors of a network over several weaves (``train-surrogate SRC1,SRC2,... --draw N
+--heldout-pattern WEAVE``, docs/neural.md "The Table-2 network"): relative RMSE of f (the sum of the
+components, unit coefficients) by footprint bin for three groups of materials, each against fresh
+whole-tile-split MC labels (:class:`clothlab.neural.labels.TextureMonteCarloLabels`, another seed than the
+training labels, on held-out direction pairs of the data spec), beside the reflectance model alone on the
+same labels, and the far view (>= 4 tiles: relative RMS difference of the network from the reflectance model).
+
+Groups: ``heldout_pairs`` (trained materials, held-out pairs), ``heldout_materials`` (unseen parameter sets
+of the trained weaves), ``heldout_pattern`` (every material of the weave never trained on).  The queries of a
+bin are spread evenly over the group's materials.
+
+Run: ``python -c "from clothlab.studies.neural_table2 import main; main('PATH.npz')"``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)  # tiles (as clothlab.neural.training.SIZE_BINS)
+GROUPS = ("heldout_pairs", "heldout_materials", "heldout_pattern")
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.sum(np.square(a - b)) / np.sum(np.square(b))))
+
+
+def group_materials(encoding: dict) -> dict[str, list[int]]:
+    """Material indices of each group (module docstring) from a sidecar's encoding."""
+    unseen, pattern = list(encoding.get("heldout_materials", [])), list(encoding.get("heldout_pattern", []))
+    n = len(encoding.get("materials_params", [encoding.get("params")]))
+    trained = [m for m in range(n) if m not in set(unseen) | set(pattern)]
+    return {"heldout_pairs": trained, "heldout_materials": unseen, "heldout_pattern": pattern}
+
+
+def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 21) -> dict:
+    """{group: [{size_lo, size_hi, queries, surrogate, reflectance_model}], group + "_far_view": float,
+    "cpu_s": float} for the network at ``weights`` (.npz, residual or not; R from
+    :func:`clothlab.models.neural.model.load_neural`)."""
+    from clothlab.models.neural.model import load_neural, reference_model
+    from clothlab.neural.data import DataSpec, heldout_queries
+    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+
+    start = time.process_time()
+    surrogate, sidecar = load_neural(weights)
+    enc = sidecar["encoding"]
+    spec = DataSpec(**enc["data_spec"])
+    sets = enc.get("materials_params", [enc.get("params", {})])
+    owners = enc.get("materials_weave") or [None] * len(sets)
+    models = {name: reference_model(sidecar, None, name) for name in set(owners)}
+    out = {}
+    for group, members in group_materials(enc).items():
+        if not members:
+            continue
+        each = -(-per_bin // len(members))
+        rows, far = [], []
+        for i, (lo, hi) in enumerate(zip(BINS[:-1], BINS[1:], strict=True)):
+            f_true, f_pred, f_model = [], [], []
+            for m in members:
+                model, params = models[owners[m]], {k: float(v) for k, v in sets[m].items()}
+                r = ModelLabels(model, params)
+                mc = TextureMonteCarloLabels(model.texture(seed=0), params, samples=samples, seed=seed + 1,
+                                             tile_average=r)
+                q = heldout_queries(spec, each, seed=seed + 100 * i + 7 * m, sizes=(lo, hi), material=m)
+                args = (q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3])
+                f_true.append(mc(*args).sum(axis=1))
+                f_model.append(r(*args).sum(axis=1))
+                f_pred.append(surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10], material=m).sum(axis=1))
+            f_true, f_pred, f_model = (np.concatenate(x) for x in (f_true, f_pred, f_model))
+            rows.append({"size_lo": lo, "size_hi": hi, "queries": int(f_true.size),
+                         "surrogate": _relative(f_pred, f_true), "reflectance_model": _relative(f_model, f_true)})
+            if lo >= 4.0:
+                far.append(_relative(f_pred, f_model))
+        out[group] = rows
+        out[f"{group}_far_view"] = far[0] if far else None
+    out["cpu_s"] = time.process_time() - start
+    return out
+
+
+def table_lines(result: dict, recorded: dict | None = None) -> list[str]:
+    """A markdown table: per bin the three groups (fresh labels; the sidecar's training-label figures in
+    brackets when ``recorded`` = its ``metrics``) and the reflectance model alone on each group's labels."""
+    head = ["footprint"] + [g.replace("heldout_", "") for g in GROUPS if g in result]
+    head += [f"R alone: {g.replace('heldout_', '')}" for g in GROUPS if g in result]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for i, lo_hi in enumerate(zip(BINS[:-1], BINS[1:], strict=True)):
+        cells = [f"{lo_hi[0]:g}-{lo_hi[1]:g}"]
+        for g in GROUPS:
+            if g in result:
+                text = f"{result[g][i]['surrogate']:.3f}"
+                rec = (recorded or {}).get(g)
+                match = [b for b in rec or [] if abs(b["size_lo"] - lo_hi[0]) < 1e-9]
+                cells.append(f"{text} ({match[0]['relative_rmse']:.3f})" if match else text)
+        cells += [f"{result[g][i]['reflectance_model']:.3f}" for g in GROUPS if g in result]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def main(weights, per_bin: int = 150, samples: int = 1024) -> dict:
+    """Print :func:`table_lines` of :func:`fresh_errors` and the far views; returns the result."""
+    from pathlib import Path
+
+    result = fresh_errors(weights, per_bin=per_bin, samples=samples)
+    sidecar = json.loads(Path(weights).with_suffix(".json").read_text(encoding="utf-8"))
+    print("\n".join(table_lines(result, sidecar.get("metrics"))))
+    for g in GROUPS:
+        if result.get(f"{g}_far_view") is not None:
+            print(f"far view {g}: {result[f'{g}_far_view']:.4f}")
+    print(f"CPU {result['cpu_s']:.0f} s")
+    return result
