@@ -21,6 +21,7 @@ import numpy as np
 
 BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)  # tiles (as clothlab.neural.training.SIZE_BINS)
 GROUPS = ("heldout_pairs", "heldout_materials", "heldout_pattern")
+RANGES = ((0.03, 0.12), (0.12, 1.0), (1.0, 5.0))  # tiles: the coarse ranges of the per-weave breakdown
 
 
 def _relative(a: np.ndarray, b: np.ndarray) -> float:
@@ -37,6 +38,7 @@ def group_materials(encoding: dict) -> dict[str, list[int]]:
 
 def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 21) -> dict:
     """{group: [{size_lo, size_hi, queries, surrogate, reflectance_model}], group + "_far_view": float,
+    group + "_by_weave": {weave: [{size_lo, size_hi, surrogate, reflectance_model}] over :data:`RANGES`},
     "cpu_s": float} for the network at ``weights`` (.npz, residual or not; R from
     :func:`clothlab.models.neural.model.load_neural`)."""
     from clothlab.models.neural.model import load_neural, reference_model
@@ -55,7 +57,7 @@ def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 2
         if not members:
             continue
         each = -(-per_bin // len(members))
-        rows, far = [], []
+        rows, far, kept = [], [], []
         for i, (lo, hi) in enumerate(zip(BINS[:-1], BINS[1:], strict=True)):
             f_true, f_pred, f_model = [], [], []
             for m in members:
@@ -68,6 +70,7 @@ def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 2
                 f_true.append(mc(*args).sum(axis=1))
                 f_model.append(r(*args).sum(axis=1))
                 f_pred.append(surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10], material=m).sum(axis=1))
+                kept.append((owners[m], q[:, 3], f_true[-1], f_pred[-1], f_model[-1]))
             f_true, f_pred, f_model = (np.concatenate(x) for x in (f_true, f_pred, f_model))
             rows.append({"size_lo": lo, "size_hi": hi, "queries": int(f_true.size),
                          "surrogate": _relative(f_pred, f_true), "reflectance_model": _relative(f_model, f_true)})
@@ -75,6 +78,14 @@ def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 2
                 far.append(_relative(f_pred, f_model))
         out[group] = rows
         out[f"{group}_far_view"] = far[0] if far else None
+        by_weave = {}
+        for name in sorted({k[0] for k in kept}, key=str):
+            parts = [np.concatenate(x) for x in zip(*[k[1:] for k in kept if k[0] == name], strict=True)]
+            size, f_t, f_p, f_m = parts
+            sel = [(lo, hi, (size >= lo) & (size < hi)) for lo, hi in RANGES]
+            by_weave[str(name)] = [{"size_lo": lo, "size_hi": hi, "surrogate": _relative(f_p[k], f_t[k]),
+                                    "reflectance_model": _relative(f_m[k], f_t[k])} for lo, hi, k in sel]
+        out[f"{group}_by_weave"] = by_weave
     out["cpu_s"] = time.process_time() - start
     return out
 
@@ -108,5 +119,9 @@ def main(weights, per_bin: int = 150, samples: int = 1024) -> dict:
     for g in GROUPS:
         if result.get(f"{g}_far_view") is not None:
             print(f"far view {g}: {result[f'{g}_far_view']:.4f}")
+    for g in GROUPS:
+        for name, ranges in result.get(f"{g}_by_weave", {}).items():
+            print(f"{g} {name}: " + ", ".join(f"{r['size_lo']:g}-{r['size_hi']:g}: {r['surrogate']:.3f} "
+                                              f"(R {r['reflectance_model']:.3f})" for r in ranges))
     print(f"CPU {result['cpu_s']:.0f} s")
     return result
