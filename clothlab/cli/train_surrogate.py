@@ -276,6 +276,15 @@ def run(args) -> int:
         encoding["heldout_pattern_name"] = weave_names[-1]
     if args.yarn_bins:
         encoding["yarn_extent"] = yarn_extent(p)
+    # the chunks of material m are labelled with sets[m] on its weave: a resume must not relabel others
+    described = json.dumps({"weaves": [weave_names[i] for i in owner], "params": sets}, sort_keys=True)
+    record = out / "materials.json"
+    if args.resume and record.exists() and record.read_text(encoding="utf-8") != described:
+        raise ConfigError(f"the data in {out} was labelled for other materials or weaves ({record}); resume with "
+                          "the same SOURCE, --heldout-pattern, --draw / --vary and --seed, or start a new directory",
+                          field="--resume")
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(record, described.encode())
     data_spec = DataSpec(pairs=args.pairs, seed=args.seed, small_sizes=args.small_sizes, row_centres=args.row_centres)
     from clothlab.cli.options import parallel_requested, runner_of
 
