@@ -32,16 +32,20 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
                      = camera distance / fabric.kang.view_distance_mm.
 
-- ``neural-lod``     the IM texture model where the pixel resolves the yarns' cross-sections, the neural
-                     footprint surrogate (Chen, Wang & Wang 2024, sec. 4.3; ``kind: neural``, the weave's shipped
-                     weights) for the footprints of a pixel from there to a few tiles, the IM reflectance model
-                     beyond: texture weight 1 - b_n, b_n = lod_weight(f, *NEURAL_TEXTURE_RANGE); of the rest a
-                     share b_r = lod_weight(f, *NEURAL_REFLECTANCE_RANGE) reflectance, 1 - b_r network.  The
-                     network is queried once per pixel, for a box footprint of side f (tiles) at the mean (u, v)
-                     of the pixel's samples with its first sample's directions: the query *is* the pixel's
-                     filtered value (eq. 3), so it needs no supersampling.  Texture samples as im-lod's
-                     (:func:`blend_texture_samples`).  The scene's IM parameters and coefficients are used; a
-                     parameter set other than the trained one goes through the network's encoder.
+- ``neural-lod``     the IM texture model where the pixel resolves yarns, the neural footprint surrogate
+                     (Chen, Wang & Wang 2024, sec. 4.3; ``kind: neural``, the weave's shipped weights) where
+                     the pixel covers part of a tile, the IM reflectance model beyond: texture weight 1 - b_n,
+                     b_n = lod_weight(f, *NEURAL_TEXTURE_RANGE); of the rest a share
+                     b_r = lod_weight(f, *NEURAL_REFLECTANCE_RANGE) reflectance, 1 - b_r network.  The network
+                     is queried once per pixel, for a box footprint of side f (tiles) at the mean (u, v) of the
+                     pixel's samples with its first sample's directions: the query *is* the pixel's filtered
+                     value (eq. 3), so it needs no supersampling.  The reflectance model runs once per such
+                     pixel and is both the reflectance part and the base of a residual network.  Texture
+                     samples as im-lod's (:func:`blend_texture_samples`).  The scene's IM parameters and
+                     coefficients are used; a parameter set other than the trained one goes through the
+                     network's encoder.  The networks learn the noise-free texture: with ``fabric.noise``
+                     on, network pixels lack the per-segment intensity noise (as im-lod's reflectance part
+                     does).  Ranges: :data:`NEURAL_TEXTURE_RANGE`, :data:`NEURAL_REFLECTANCE_RANGE`.
 
 Skipping (nothing runs that the scene does not need): a component whose coefficient is zero in every
 channel, or whose yarn type covers no cell of the weave, is not computed (``need=``).
@@ -246,7 +250,7 @@ def texture_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.nda
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     comps = counter.run("texture", len(s.u), fabric.texture.components, s.u, s.v, s.wi, s.wo, fabric.params,
-                        need=fabric.need, warn=False)
+                        need=fabric.need, noise=fabric.spec.noise, warn=False)
     return combine(comps, fabric.coefficients)
 
 
@@ -327,11 +331,16 @@ def im_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) 
     return out
 
 
-#: footprints (tiles) of the texture -> network blend of neural-lod (the network's error falls below the
-#: supersampled texture's from ~0.03 tile on; docs/neural.md) and of the network -> reflectance blend (from
-#: ~2 tiles the reflectance model is within a few per cent of the footprint average)
-NEURAL_TEXTURE_RANGE = (0.02, 0.045)
-NEURAL_REFLECTANCE_RANGE = (2.0, 4.0)
+#: footprints (tiles) of the texture -> network blend of neural-lod and of the network -> reflectance blend.
+#: Measured on the receding plane (noise-free cotton denim, 64 x 48 px, distances 5-120 mm; relative L1 per
+#: pixel against im-texture at 256 samples, binned by the pixel footprint; docs/neural.md "neural-lod"):
+#: the network beats the 4-sample texture from ~0.12 tile on (0.055 against 0.060 at 0.12-0.15, 0.061
+#: against 0.090 at 0.2-0.3) and the reflectance model up to ~0.7 tile (0.040 against 0.050 at 0.4-0.5,
+#: 0.030 against 0.036 at 0.5-0.7); from 0.5 tile on im-lod is the reflectance model alone, one cheap
+#: evaluation per pixel, which a network query (~1.3 us) cannot match in time, so the network hands over to
+#: it by im-lod's f1.
+NEURAL_TEXTURE_RANGE = (0.16, 0.22)
+NEURAL_REFLECTANCE_RANGE = (0.35, 0.5)
 
 
 def neural_model(fabric: FabricModels):
@@ -349,31 +358,46 @@ def neural_model(fabric: FabricModels):
     return cached
 
 
-def neural_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
-    """The network's f_r (M, C), one query per pixel (module docstring) shared by the pixel's samples."""
-    if not fabric.need or len(s.u) == 0:
-        return _zeros(fabric, len(s.u))
-    model = neural_model(fabric)
-    order, starts, group = pixel_groups(s.pixel)
-    count = np.diff(np.append(starts, len(s.u)))
-    back = np.empty(len(s.u), dtype=np.intp)
-    back[order] = group
-    centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
-    first = order[starts]
-    comps = counter.run("neural", len(first), model.query, centre, s.footprint[first], s.wi[first], s.wo[first],
-                        fabric.params)
-    return combine({k: comps[k] for k in fabric.need}, fabric.coefficients)[back]
-
-
 def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
-    """neural-lod (module docstring): texture, network or reflectance by the pixel footprint, blended."""
+    """neural-lod (module docstring): texture, network or reflectance by the pixel footprint, blended.
+
+    The reflectance model runs once per pixel with network or reflectance weight (at its first such sample)
+    and serves both as the reflectance part and as the base R of a residual network (``reference=``), so a
+    network pixel costs one R and one decoder pass."""
     b_n = lod_weight(s.footprint, *NEURAL_TEXTURE_RANGE)
+    if not np.any(b_n > 0.0):  # the whole view resolves yarns (as im-lod there)
+        return texture_values(fabric, s, counter)
     b_r = lod_weight(s.footprint, *NEURAL_REFLECTANCE_RANGE)
+    if np.all(b_r >= 1.0):  # the whole view beyond the network's range (as im-lod there)
+        return reflectance_values(fabric, s, counter)
     out = _zeros(fabric, len(s.u))
-    for weight, values in ((b_n * b_r, reflectance_values), (b_n * (1.0 - b_r), neural_pixel_values)):
-        some = np.flatnonzero(weight > 0.0)
-        if some.size:
-            out[some] += weight[some, None] * values(fabric, s.take(some), counter)
+    some = np.flatnonzero(b_n > 0.0)
+    if some.size and fabric.need:
+        order, starts, group = pixel_groups(s.pixel[some])
+        back = np.empty(some.size, dtype=np.intp)
+        back[order] = group
+        first = some[order[starts]]
+        names = fabric.reflectance.component_names
+        comps = counter.run("reflectance", first.size, fabric.reflectance.components, s.wi[first], s.wo[first],
+                            fabric.params, need=fabric.need, warn=False)
+        w_r = (b_n * b_r)[some]
+        pixel_value = combine(comps, fabric.coefficients)[back] * w_r[:, None]
+        w_n = (b_n * (1.0 - b_r))[some]
+        net_pixels = np.flatnonzero(np.bincount(back, w_n > 0.0, minlength=first.size))
+        if net_pixels.size:
+            model = neural_model(fabric)
+            count = np.bincount(back, minlength=first.size)[net_pixels]
+            centre = np.column_stack([np.bincount(back, s.u[some], minlength=first.size)[net_pixels] / count,
+                                      np.bincount(back, s.v[some], minlength=first.size)[net_pixels] / count])
+            q = first[net_pixels]
+            reference = np.column_stack([comps[k][net_pixels] if k in comps else np.zeros(net_pixels.size)
+                                         for k in names])
+            net = counter.run("neural", q.size, model.query, centre, s.footprint[q], s.wi[q], s.wo[q],
+                              fabric.params, reference=reference)
+            value = np.zeros((first.size, len(fabric.channels)))
+            value[net_pixels] = combine({k: net[k] for k in fabric.need}, fabric.coefficients)
+            pixel_value += value[back] * w_n[:, None]
+        out[some] = pixel_value
     index, weight = blend_texture_samples(s.pixel, b_n)
     if index.size:
         out[index] += weight[:, None] * texture_values(fabric, s.take(index), counter)

@@ -151,10 +151,13 @@ class NeuralModel(Model):
             result.params = {k: fitted[k] for k in free}
         return fitted, result
 
-    def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
-        """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles."""
-        material, reference = self._material(params), None
-        if not isinstance(material, int) and (self.surrogate.residual or self.surrogate.residual_input):
+    def query(self, centre, size, wi, wo, params: dict | None = None, *, reference=None) -> dict[str, np.ndarray]:
+        """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles.  ``reference``:
+        the reflectance model's components (N, C) at the queries, when the caller has them (a residual
+        network's base R; computed here otherwise)."""
+        material = self._material(params)
+        if (reference is None and not isinstance(material, int)
+                and (self.surrogate.residual or self.surrogate.residual_input)):
             reference = self.surrogate_reference(params)(wi, wo, centre, size)
         values = self.surrogate.query(centre, size, wi, wo, material=material, reference=reference)
         return {name: values[:, i] for i, name in enumerate(COMPONENTS)}
