@@ -92,6 +92,9 @@ class NeuralModel(Model):
     default_free = ("alpha", "beta")
     has_texture = True
     texture_filters = True
+    #: the texture's ``footprint`` is a box footprint's side (tiles) and its value the box average (eq. 3):
+    #: ``clothlab eval`` with a footprint column asks the network instead of averaging its texture
+    footprint_queries = True
     #: options naming files: resolved against fabric.yaml's directory by config validation
     path_options = ("weights",)
 
@@ -142,6 +145,14 @@ class NeuralModel(Model):
         """The parameters a fit frees by default for ``options``: those the network was trained over."""
         weights = (options or {}).get("weights")
         return trained_free(read_sidecar(weights)) if weights else cls.default_free
+
+    @classmethod
+    def describe_settings(cls, settings: dict) -> str:
+        """The recorded options in a few words: the weights by file name (the path is in fit.json)."""
+        options = dict(settings.get("options") or {})
+        if options.get("weights"):
+            options["weights"] = Path(str(options["weights"])).name
+        return ", ".join(f"{k}={v}" for k, v in options.items()) or "defaults (shipped weights)"
 
     def exact_model(self):
         """The model the network learnt (the sidecar's kind on this weave; :func:`reference_model`): R of a
