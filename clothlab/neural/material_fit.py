@@ -36,13 +36,15 @@ from clothlab.neural.losses import decode_outputs, encode_targets
 @dataclass
 class MaterialFit:
     """``params``: the fitted free parameters (declared units); ``unit``: their m entries; ``coefficients``
-    (C,) by component; ``rms``: root-mean-square residual; ``steps``: Adam steps over all starts."""
+    (C,) by component; ``rms``: root-mean-square residual; ``steps``: Adam steps over all starts; ``fast``:
+    the fast fit's results when an exact refinement replaced them."""
 
     params: dict
     unit: dict
     coefficients: dict
     rms: float
     steps: int
+    fast: dict | None = None  # after an exact refinement: the fast fit's params, coefficients and rms
 
 
 def _design(surrogate, m: np.ndarray, spatial, angular, train: bool, t_reference=None):
@@ -124,14 +126,9 @@ class MaterialObjective:
         return float(res ** 2 / n), grad
 
 
-def fit_material(surrogate, wi, wo, values, base_vector: np.ndarray, free_index: dict, *, size: float = 4.5,
-                 steps: int = 150, lr: float = 0.05, starts: int = 3, reference=None) -> MaterialFit:
-    """Fit the entries ``free_index`` ({name: position in m}) of ``base_vector`` (the encoder input of the
-    start material) to ``values`` (N,) at fabric-frame directions (N, 3); ``size``: footprint (tiles) of the
-    queries, centre (0.5, 0.5).  ``starts`` per free parameter: a grid of starting values in (0, 1).
-    ``reference``: R of the exact model at the free entries x, for a residual network
-    (:class:`MaterialObjective`)."""
-    objective = MaterialObjective(surrogate, wi, wo, values, base_vector, free_index, size=size, reference=reference)
+def fit_material(objective: MaterialObjective, *, steps: int = 150, lr: float = 0.05, starts: int = 3) -> MaterialFit:
+    """Minimise ``objective`` (:class:`MaterialObjective`) over its free entries in [0, 1] by projected Adam
+    from a grid of ``starts`` values per free entry; the best end point is returned."""
     grid = (np.arange(starts) + 0.5) / starts
     best, total = None, 0
     for start in itertools.product(grid, repeat=len(objective.names)):
@@ -148,7 +145,7 @@ def fit_material(surrogate, wi, wo, values, base_vector: np.ndarray, free_index:
             best = (value, x.copy(), c)
     value, x, c = best
     return MaterialFit(params={}, unit=dict(zip(objective.names, x.tolist(), strict=True)),
-                       coefficients=dict(zip(surrogate.component_names, c.tolist(), strict=True)),
+                       coefficients=dict(zip(objective.surrogate.component_names, c.tolist(), strict=True)),
                        rms=float(np.sqrt(value)), steps=total)
 
 

@@ -182,16 +182,11 @@ class NeuralModel(Model):
         names = self._encoding.get("parameters", self._material_names())
         return np.concatenate([normalised_parameters(self.resolve(params), self.params, names), self._pattern])
 
-    def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
-                     **options):
-        """Fast approximate fit of the ``free`` parameters (default ``default_free``) through the encoder
-        (:func:`clothlab.neural.material_fit.fit_material`) to far-view values (N,) at directions (N, 3),
-        starting from ``params``; returns (fitted parameters, the :class:`MaterialFit`).  A residual network
-        (g = T(R) + net, docs/neural.md) evaluates R of the exact model at every trial parameter set.
-        ``refine``: then refine with the exact model the network learnt (:meth:`exact_model`;
-        :func:`~clothlab.neural.material_fit.refine_material`), whose coefficients and RMS replace the fast
-        fit's."""
-        from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
+    def material_objective(self, wi, wo, values, free=None, params: dict | None = None):
+        """The fast fit's objective (:class:`clothlab.neural.material_fit.MaterialObjective`) of the ``free``
+        parameters (default ``default_free``) through the encoder, far view, from ``params``; a residual
+        network (g = T(R) + net, docs/neural.md) evaluates R of :meth:`exact_model` at each trial."""
+        from clothlab.neural.material_fit import MaterialObjective, unit_to_parameter
 
         if self.surrogate.residual_input:
             raise ConfigError("the fast material fit cannot take a network trained with --residual-input (T(R) "
@@ -212,13 +207,29 @@ class NeuralModel(Model):
                 p = {**start, **{k: unit_to_parameter(self.params[k], t) for k, t in zip(free, unit, strict=True)}}
                 c = exact.components(wi, wo, p, warn=False)
                 return np.column_stack([np.asarray(c[n], dtype=np.float64).reshape(-1) for n in self.component_names])
-        result = fit_material(self.surrogate, wi, wo, values, self.material_vector(start),
-                              {k: names.index(k) for k in free}, size=FAR_SIZE, reference=reference, **options)
-        fitted = {**start, **{k: unit_to_parameter(self.params[k], t) for k, t in result.unit.items()}}
-        result.params = {k: fitted[k] for k in free}
+        return MaterialObjective(self.surrogate, wi, wo, values, self.material_vector(start),
+                                 {k: names.index(k) for k in free}, size=FAR_SIZE, reference=reference)
+
+    def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
+                     **options):
+        """Fast approximate fit of the ``free`` parameters (default ``default_free``) through the encoder
+        (:meth:`material_objective`, :func:`clothlab.neural.material_fit.fit_material`; ``options``: its
+        steps, lr, starts) to far-view values (N,) at directions (N, 3), starting from ``params``; returns
+        (fitted parameters, the :class:`MaterialFit`).  ``refine``: then refine with the exact model the
+        network learnt (:meth:`exact_model`; :func:`~clothlab.neural.material_fit.refine_material`), whose
+        parameters, coefficients and RMS replace the fast fit's (kept in ``fast``)."""
+        from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
+
+        objective = self.material_objective(wi, wo, values, free, params)
+        result = fit_material(objective, **options)
+        fitted = {**self.resolve(params), **{k: unit_to_parameter(self.params[k], t) for k, t in result.unit.items()}}
+        result.params = {k: fitted[k] for k in objective.names}
         if refine:
-            fitted, result.coefficients, result.rms = refine_material(self.exact_model(), wi, wo, values, fitted, free)
-            result.params = {k: fitted[k] for k in free}
+            result.fast = {"params": dict(result.params), "coefficients": dict(result.coefficients),
+                           "rms": result.rms}
+            fitted, result.coefficients, result.rms = refine_material(self.exact_model(), wi, wo, values, fitted,
+                                                                      objective.names)
+            result.params = {k: fitted[k] for k in objective.names}
         return fitted, result
 
     def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
