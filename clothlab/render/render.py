@@ -22,12 +22,12 @@ from clothlab.render.camera import PinholeCamera
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Scene, check_render_memory
 from clothlab.render.shade import (
-    NEURAL_TEXTURE_RANGE,
     SHADERS,
     Counter,
     FabricModels,
     Samples,
     lod_weight,
+    network_samples,
     shade,
 )
 
@@ -129,8 +129,9 @@ def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> d
     shaded_pixels = np.unique(samples.pixel)
     n = max(shaded_pixels.size, 1)
     if shader in ("im-lod", "surface-lod", "neural-lod"):
-        b = (lod_weight(samples.footprint, *NEURAL_TEXTURE_RANGE) if shader == "neural-lod"
-             else lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1))
+        b = lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1)
+        if shader == "neural-lod":  # network pixels run no texture sample
+            b = np.where(network_samples(samples), 1.0, b)
         texture_pixels = np.unique(samples.pixel[b < 1.0]).size
         reflectance_only = n - np.unique(samples.pixel[b < 1.0]).size if shaded_pixels.size else 0
         blend_pixels = np.unique(samples.pixel[(b > 0.0) & (b < 1.0)]).size

@@ -302,8 +302,8 @@ def neural_lod_benchmark(quick: bool = False, *, figures_dir=None, resolution=No
 
 #: shading-time tolerance of "equal or lower time" (the CPU times of two renders wander by ~10 %)
 TIME_SLACK = 0.1
-#: samples per pixel tried for im-lod at equal time (square: stratified)
-EQUAL_TIME_SPP = (9, 16, 25, 36, 49, 64)
+#: samples per pixel tried for im-lod at equal time (square counts are stratified, others jittered at random)
+EQUAL_TIME_SPP = (5, 6, 8, 9, 12, 16, 25, 36, 49, 64)
 
 
 def equal_time_im_lod(scene, distance: float, seconds: float, spp: int, reference_spp: int, repeats: int,
