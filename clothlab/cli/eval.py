@@ -14,7 +14,8 @@ def add_parser(sub):
                        description="Evaluate the model of a fit directory or a fabric.yaml at the directions of a "
                                    "CSV (with u, v columns: the model's texture model at those points; with a "
                                    "footprint column too: the texture averaged over a box footprint of that side "
-                                   "in tiles centred at (u, v), Chen, Wang & Wang 2024, eqs. 3-5).")
+                                   "in tiles centred at (u, v), Chen, Wang & Wang 2024, eqs. 3-5; kind neural "
+                                   "answers it with the network's footprint input).")
     p.add_argument("source", type=Path, help="a fit directory (fits/<name>) or a fabric.yaml")
     p.add_argument("directions", type=Path, help="CSV with theta_i, phi_i, theta_o, phi_o in degrees")
     add_output(p, "output CSV (default: stdout)", metavar="CSV")

@@ -222,9 +222,12 @@ class _Validator:
                                   field=dotted(p + (exc.field,))) from None
             # the measurement itself is unreadable: loading it reports that, naming the file
 
-    def model_options(self, kind: str, options: dict, p: tuple) -> None:
+    def model_options(self, kind: str, options: dict, p: tuple) -> dict:
         """``model.options`` checked against the model's keyword-only constructor arguments: the name, and
-        the type of the default where it has one."""
+        the type of the default where it has one; options the model names in ``path_options`` (files) are
+        resolved against the yaml's directory and must exist.  Returns the options so resolved."""
+        resolved = copy.deepcopy(options)
+        path_options = getattr(model_class(kind), "path_options", ())
         declared = {q.name: q.default for q in inspect.signature(model_class(kind).__init__).parameters.values()
                     if q.kind == q.KEYWORD_ONLY}
         for name, value in options.items():
@@ -248,6 +251,12 @@ class _Validator:
                     check(name, value)
                 except ConfigError as exc:
                     raise at.error(exc.detail) from None
+            if name in path_options and value is not None:
+                path = self.resolve(as_str(value, at), at)
+                if not self.is_there(path, need_file=True):
+                    raise at.error(f"file not found: {path} (from {value!r}, relative to {self.base_dir})")
+                resolved[name] = str(path)
+        return resolved
 
     def model(self, value: Any) -> ModelConfig:
         p = ("model",)
@@ -266,7 +275,12 @@ class _Validator:
         params = m.get("params", {}) or {}
         if not isinstance(params, dict):
             raise self.at(p + ("params",)).error(f"expected a mapping, got {shown(params)}")
-        table = _param_table(kind)
+        options = m.get("options", {}) or {}
+        if not isinstance(options, dict):
+            raise self.at(p + ("options",)).error(f"expected a mapping, got {shown(options)}")
+        check_plain_data(options, self.at(p + ("options",)))
+        options = self.model_options(kind, options, p + ("options",))
+        table = self.declared(kind, options)
         if table is None:
             check_plain_data(params, self.at(p + ("params",)))
             checked = copy.deepcopy(params)
@@ -278,13 +292,18 @@ class _Validator:
                 at = self.at(p + ("params", name))
                 as_number(v, at)
                 checked[name] = _check_parameter(table, name, v, at)
-        options = m.get("options", {}) or {}
-        if not isinstance(options, dict):
-            raise self.at(p + ("options",)).error(f"expected a mapping, got {shown(options)}")
-        check_plain_data(options, self.at(p + ("options",)))
-        self.model_options(kind, options, p + ("options",))
         return ModelConfig(kind=kind, weave=weave, quadrature=QuadratureConfig(rule, nodes), params=checked,
                            options=copy.deepcopy(options))
+
+    def declared(self, kind: str, options: dict):
+        """The parameter declarations of ``kind`` for these (resolved) ``model.options`` (e.g. kind neural:
+        its network's target kind's); a ConfigError of the model is reported at the option it names."""
+        try:
+            return model_class(kind).declared_parameters(options)
+        except ConfigError as exc:
+            option = (exc.field or "").removeprefix("model.options.")
+            at = self.at(("model", "options", option)) if option in options else self.at(("model", "options"))
+            raise at.error(exc.detail) from None
 
     def weave(self, value: Any, at: Location) -> str:
         """``preset:<name>`` (spelled as clothlab.weave.presets accepts it) -> ``preset:<key>``; a .wv file ->
@@ -325,8 +344,10 @@ class _Validator:
         f = self.section(value, p, ("free", "bounds", "metric", "optimizer", "posterior", "cv_folds",
                                     "cv_scheme", "cv_refit", "loss", "loss_scale", "valid_geometry",
                                     "orientation_average"))
-        table = _param_table(model.kind)
-        free = self.free(f.get("free", list(model_class(model.kind).default_free)), table)
+        table = self.declared(model.kind, model.options)
+        cls = model_class(model.kind)
+        default_free = cls.declared_free(model.options) if hasattr(cls, "declared_free") else cls.default_free
+        free = self.free(f.get("free", list(default_free)), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
         for name in free:  # explicit bounds were checked against the start above; the declared ones here
             if table is not None and name not in bounds and name in model.params:
@@ -483,11 +504,6 @@ class _Validator:
                 at = self.at(p + (key,))
                 dirs[key] = self.resolve(as_str(o[key], at), at)
         return OutputConfig(**dirs)
-
-
-def _param_table(kind: str):
-    """The parameter declarations of model ``kind`` (the registry's class)."""
-    return model_class(kind).declared_parameters()
 
 
 def _check_parameter(table, name: str, value: float, at: Location) -> float:

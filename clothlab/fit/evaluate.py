@@ -7,7 +7,9 @@ texture model of Irawan & Marschner 2012, sec. 7.2) is evaluated at those points
 model.  With u, v an optional column ``footprint`` (a box footprint's side in tiles, > 0) gives the texture
 model's components averaged over the footprint centred at (u, v) instead (Chen, Wang & Wang 2024, eqs. 3-5;
 :func:`clothlab.models.footprint.footprint_components`: periodic summed-area tables of the noise-free texture
-by default, or stratified Monte Carlo).  Other columns are ignored.
+by default, or stratified Monte Carlo); a model that answers box-footprint queries itself
+(``footprint_queries``: ``kind: neural``, the network's footprint input, Chen, Wang & Wang 2024, sec. 4.2)
+is asked directly and the footprint method options do not apply.  Other columns are ignored.
 Output CSV: the four angles (and u, v, footprint), then the BRDF
 (1/sr) per channel for a fit directory, and with ``components`` one column ``<component>_<channel>`` per
 component and channel (the component times its fitted coefficient).  A fabric.yaml has no fitted
@@ -121,7 +123,9 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
             with_texture = [kind for kind in MODEL_KINDS if model_class(kind).has_texture]
             raise InputError(f"u, v columns need a model with a texture model ({', '.join(with_texture)}); model "
                              f"kind {model.kind!r} has none", path=directions, field="u")
-        if FOOTPRINT in angles:
+        if FOOTPRINT in angles and getattr(model, "footprint_queries", False):  # kind neural: the network's own
+            comps = model.texture().components(angles["u"], angles["v"], wi, wo, params, footprint=angles[FOOTPRINT])
+        elif FOOTPRINT in angles:
             from clothlab.models.footprint import footprint_components
 
             comps = footprint_components(model.texture(), params, wi, wo, np.column_stack([angles["u"], angles["v"]]),

@@ -6,7 +6,8 @@
 1. the problem (:func:`clothlab.fit.problem.build_problem`): measurement, weave, model; the free parameters
    start from fabric.yaml ``model.params`` (else the weave's values);
 2. the optimisation (:func:`clothlab.fit.optimize.multistart_minimize`): seeded global + local starts, then
-   the polish - or, with no free parameter, one NNLS solve of the linear coefficients;
+   the polish - or, with no free parameter, one NNLS solve of the linear coefficients; a ``kind: neural``
+   fit with ``model.options.refine`` then polishes with the exact model (:mod:`clothlab.fit.refine`);
 3. at the optimum: the coefficients as albedos (kd, ks_j), the relative-error percentiles (Irawan &
    Marschner 2012, sec. 8), at-bound and geometry notes, Gauss-Newton standard errors
    (:mod:`clothlab.fit.uncertainty`);
@@ -30,6 +31,7 @@ from clothlab.fit.metrics import error_percentiles
 from clothlab.fit.optimize import multistart_minimize, polish
 from clothlab.fit.periodic import release_periodic_bounds
 from clothlab.fit.problem import FitProblem, Solution, build_problem, collinearity_notes, evaluation_speed
+from clothlab.fit.refine import refine_exact
 from clothlab.fit.store import (
     checkpoint_path,
     fit_summary,
@@ -74,6 +76,7 @@ class FitResult(Reportable):
     posterior: object = None  # PosteriorResult (clothlab.fit.posterior) when sampled
     timings: dict = field(default_factory=dict)  # seconds per stage: optimisation, cross_validation, posterior
     uncertainty: dict | None = None  # Gauss-Newton standard errors and correlations (clothlab.fit.uncertainty)
+    refinement: dict | None = None  # kind neural with refine: the exact model's polish (clothlab.fit.refine)
 
     @property
     def name(self) -> str:
@@ -156,6 +159,10 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
     log.debug("%s: %d free parameters, %d values, start objective %.6g", config.name, len(problem.free),
               problem.y.size, start_objective)
     optimum = release_periodic_bounds(problem, multistart_minimize(problem, x0, opt, progress))
+    refinement = None
+    if getattr(problem.model, "refine", False) and problem.free:  # kind neural: the exact model from there
+        optimum, refinement = refine_exact(problem, optimum, opt, progress)
+        optimum = release_periodic_bounds(problem, optimum)
     params = problem.from_unit(optimum.x)
     solution = problem.solve(params, normalised=True)
     coefficients = {coefficient_name(n): solution.coefficients[i] for i, n in enumerate(problem.component_names)}
@@ -163,8 +170,13 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
                                problem.measurement.channels)
     notes = _notes_at_optimum(problem, params, optimum, coefficients)
     optimised = time.perf_counter() - started
+    if refinement is not None:
+        before, after = refinement["encoder"]["objective_exact"], refinement["refined"]["objective_exact"]
+        notes.append(f"parameters refined with the exact {refinement['kind']} model from the fit through the "
+                     f"network's encoder ({refinement['evaluations']} evaluations): its objective {before:.6g} -> "
+                     f"{after:.6g}; the coefficients and errors are the network's at the refined parameters")
     result = FitResult(config, problem, params, solution, coefficients, optimum, errors, start_objective,
-                       optimised, notes, timings={"optimisation_s": optimised})
+                       optimised, notes, timings={"optimisation_s": optimised}, refinement=refinement)
     log.debug("%s: optimisation %d evaluations, %.1f s, objective %.6g", config.name, optimum.nevals, optimised,
               optimum.fun)
     tic = time.perf_counter()

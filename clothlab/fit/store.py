@@ -215,6 +215,7 @@ def fit_summary(result) -> dict:
                       "max_evals": cfg.fit.optimizer.max_evals, "status": getattr(opt, "message", "")},
         "warnings": list(result.warnings),
         "uncertainty": result.uncertainty,
+        **({"refinement": result.refinement} if getattr(result, "refinement", None) else {}),
         "cross_validation": result.cross_validation,
         "evaluation_speed": result.evaluation_speed,
         "posterior": None if result.posterior is None else {

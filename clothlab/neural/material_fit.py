@@ -14,8 +14,12 @@ derivative in c vanishes, so this is the gradient of the profile objective), bac
 decoder and encoder by the network's own backward pass (:meth:`SurrogateNetwork.backward`).  Several starts
 (a grid over [0, 1]) guard against local minima; the best is returned.  Only meaningful for a network
 trained over a range of the free parameters (``clothlab train-surrogate --vary``); a per-fabric network has
-seen one material and its encoder does not constrain them.  Refine with the exact model by a fit of that
-kind started at the result (docs/neural.md).
+seen one material and its encoder does not constrain them.
+
+A residual network (``--residual``) outputs g = T(R(params)) + net(m(params)) (docs/neural.md "Residual over
+the reflectance model"): the gradient then also has the term dT(R)/dx, by central finite differences of the
+exact model R (cheap next to the network's backward pass) in x, the parameter's normalised internal
+coordinate.  :func:`refine_material` then fits the exact model from the fast fit's result.
 """
 
 from __future__ import annotations
@@ -26,69 +30,123 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import nnls
 
-from clothlab.neural.losses import decode_outputs
+from clothlab.neural.losses import decode_outputs, encode_targets
 
 
 @dataclass
 class MaterialFit:
     """``params``: the fitted free parameters (declared units); ``unit``: their m entries; ``coefficients``
-    (C,) by component; ``rms``: root-mean-square residual; ``steps``: Adam steps over all starts."""
+    (C,) by component; ``rms``: root-mean-square residual; ``steps``: Adam steps over all starts; ``fast``:
+    the fast fit's results when an exact refinement replaced them."""
 
     params: dict
     unit: dict
     coefficients: dict
     rms: float
     steps: int
+    fast: dict | None = None  # after an exact refinement: the fast fit's params, coefficients and rms
 
 
-def _design(surrogate, m: np.ndarray, spatial, angular, train: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Components (N, C) at material vector m, and the network outputs they were decoded from."""
+def _design(surrogate, m: np.ndarray, spatial, angular, train: bool, t_reference=None):
+    """Components (N, C) at material vector m, and the loss-space values g they were decoded from (g = the
+    network's outputs, + T(R) for a residual network)."""
     net = surrogate.network
     index = np.zeros(spatial.shape[0], dtype=np.int64)
-    out = net.forward(m[None].astype(net.dtype), index, spatial, angular, train=train).astype(np.float64)
-    return decode_outputs(out, surrogate._specular, surrogate.k), out
+    g = net.forward(m[None].astype(net.dtype), index, spatial, angular, train=train).astype(np.float64)
+    if t_reference is not None:
+        g = g + t_reference
+    return decode_outputs(g, surrogate._specular, surrogate.k), g
 
 
-def fit_material(surrogate, wi, wo, values, base_vector: np.ndarray, free_index: dict, *, size: float = 4.5,
-                 steps: int = 150, lr: float = 0.05, starts: int = 3) -> MaterialFit:
-    """Fit the entries ``free_index`` ({name: position in m}) of ``base_vector`` (the encoder input of the
-    start material) to ``values`` (N,) at fabric-frame directions (N, 3); ``size``: footprint (tiles) of the
-    queries, centre (0.5, 0.5).  ``starts`` per free parameter: a grid of starting values in (0, 1)."""
-    wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
-    y = np.asarray(values, dtype=np.float64).reshape(-1)
-    n = y.size
-    spatial, angular = surrogate.features(np.full((n, 2), 0.5), np.full(n, size), wi, wo)
-    names = list(free_index)
-    pos = np.array([free_index[k] for k in names], dtype=np.int64)
-    specular = surrogate._specular
+class MaterialObjective:
+    """The profile objective F(x) = min over c >= 0 of mean_n (sum_k c_k f_k(x; wi_n, wo_n) - y_n)^2 of the
+    free entries x of the material vector (module docstring), and its gradient.
+
+    ``reference``: for a residual network (g = T(R) + net, docs/neural.md "Residual over the reflectance
+    model"), a callable x -> R (N, C) of the exact model at the parameters of x; dT(R)/dx by central finite
+    differences of step ``step`` in x (x is affine in each parameter's internal, possibly log, coordinate),
+    one-sided at the bounds 0 and 1."""
+
+    def __init__(self, surrogate, wi, wo, values, base_vector: np.ndarray, free_index: dict, *, size: float = 4.5,
+                 reference=None, step: float = 1e-4):
+        if surrogate.residual_input:
+            raise ValueError("a network with T(R) as an input (--residual-input) has no material gradient here")
+        if surrogate.residual and reference is None:
+            raise ValueError("a residual network needs `reference`: the exact model's values at trial parameters")
+        self.surrogate, self.step = surrogate, float(step)
+        self.reference = reference if surrogate.residual else None
+        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+        self.y = np.asarray(values, dtype=np.float64).reshape(-1)
+        n = self.y.size
+        self.spatial, self.angular = surrogate.features(np.full((n, 2), 0.5), np.full(n, size), wi, wo)
+        self.names = list(free_index)
+        self.pos = np.array([free_index[k] for k in self.names], dtype=np.int64)
+        self.base = np.array(base_vector, dtype=np.float64)
+
+    def _vector(self, x) -> np.ndarray:
+        m = self.base.copy()
+        m[self.pos] = x
+        return m
+
+    def _t_reference(self, x) -> np.ndarray | None:
+        if self.reference is None:
+            return None
+        return encode_targets(np.asarray(self.reference(np.asarray(x, dtype=np.float64)), dtype=np.float64),
+                              self.surrogate._specular, self.surrogate.k)
+
+    def solve(self, x) -> tuple[float, np.ndarray, np.ndarray]:
+        """(F(x), NNLS coefficients (C,), components (N, C)) without gradient."""
+        comps, _ = _design(self.surrogate, self._vector(x), self.spatial, self.angular, False, self._t_reference(x))
+        c, res = nnls(comps, self.y)
+        return float(res ** 2 / self.y.size), c, comps
+
+    def __call__(self, x) -> float:
+        return self.solve(x)[0]
+
+    def value_and_gradient(self, x) -> tuple[float, np.ndarray]:
+        """F(x) and dF/dx (c held at its NNLS optimum: the profile objective's gradient, envelope theorem):
+        back-propagated through decoder and encoder, plus dT(R)/dx for a residual network."""
+        x = np.asarray(x, dtype=np.float64)
+        sur, n = self.surrogate, self.y.size
+        t_ref = self._t_reference(x)
+        comps, g = _design(sur, self._vector(x), self.spatial, self.angular, True, t_ref)
+        c, res = nnls(comps, self.y)
+        r = comps @ c - self.y
+        d_comp = 2.0 * r[:, None] * c[None, :] / n
+        # d comp / d g: exp(g) / k where the specular decoding (exp(g) - 1) / k is positive, 1 for diffuse
+        d_g = np.where(sur._specular, d_comp * np.exp(g) / sur.k * (g > 0.0), d_comp)
+        grad = sur.network.backward(d_g.astype(sur.network.dtype))[0, self.pos].astype(np.float64)
+        if t_ref is not None:
+            for j in range(x.size):
+                lo, hi = max(0.0, x[j] - self.step), min(1.0, x[j] + self.step)
+                xl, xh = x.copy(), x.copy()
+                xl[j], xh[j] = lo, hi
+                d_t = (self._t_reference(xh) - self._t_reference(xl)) / (hi - lo)
+                grad[j] += float(np.sum(d_g * d_t))
+        return float(res ** 2 / n), grad
+
+
+def fit_material(objective: MaterialObjective, *, steps: int = 150, lr: float = 0.05, starts: int = 3) -> MaterialFit:
+    """Minimise ``objective`` (:class:`MaterialObjective`) over its free entries in [0, 1] by projected Adam
+    from a grid of ``starts`` values per free entry; the best end point is returned."""
     grid = (np.arange(starts) + 0.5) / starts
     best, total = None, 0
-    for start in itertools.product(grid, repeat=len(names)):
+    for start in itertools.product(grid, repeat=len(objective.names)):
         x = np.array(start, dtype=np.float64)
         m1, m2 = np.zeros_like(x), np.zeros_like(x)
         for t in range(1, steps + 1):
-            m = np.array(base_vector, dtype=np.float64)
-            m[pos] = x
-            comps, out = _design(surrogate, m, spatial, angular, train=True)
-            c, _ = nnls(comps, y)
-            r = comps @ c - y
-            d_comp = 2.0 * r[:, None] * c[None, :] / n
-            d_out = np.where(specular, d_comp * np.exp(out) / surrogate.k * (out > 0.0), d_comp)
-            g = surrogate.network.backward(d_out.astype(surrogate.network.dtype))[0, pos].astype(np.float64)
+            _, g = objective.value_and_gradient(x)
             m1 = 0.9 * m1 + 0.1 * g  # Adam (bias-corrected), projected onto [0, 1]
             m2 = 0.999 * m2 + 0.001 * g * g
             x = np.clip(x - lr * (m1 / (1 - 0.9 ** t)) / (np.sqrt(m2 / (1 - 0.999 ** t)) + 1e-12), 0.0, 1.0)
         total += steps
-        m = np.array(base_vector, dtype=np.float64)
-        m[pos] = x
-        comps, _ = _design(surrogate, m, spatial, angular, train=False)
-        c, res = nnls(comps, y)
-        if best is None or res < best[0]:
-            best = (res, x.copy(), c)
-    res, x, c = best
-    return MaterialFit(params={}, unit=dict(zip(names, x.tolist(), strict=True)),
-                       coefficients=dict(zip(surrogate.component_names, c.tolist(), strict=True)),
-                       rms=float(res / np.sqrt(n)), steps=total)
+        value, c, _ = objective.solve(x)
+        if best is None or value < best[0]:
+            best = (value, x.copy(), c)
+    value, x, c = best
+    return MaterialFit(params={}, unit=dict(zip(objective.names, x.tolist(), strict=True)),
+                       coefficients=dict(zip(objective.surrogate.component_names, c.tolist(), strict=True)),
+                       rms=float(np.sqrt(value)), steps=total)
 
 
 def unit_to_parameter(spec, t: float) -> float:

@@ -25,6 +25,7 @@ from clothlab.neural.encodings import BLOB_BINS, direction_features, spatial_fea
 from clothlab.neural.inference import DecoderPlan
 from clothlab.neural.losses import K_SPECULAR, decode_outputs, encode_targets, is_specular
 from clothlab.neural.network import SurrogateNetwork
+from clothlab.neural.threads import one_blas_thread
 
 CHUNK = 2048
 
@@ -167,9 +168,10 @@ class Surrogate:
         plan = self._plan(material)
         n = spatial.shape[0]
         out = np.empty((n, len(self.component_names)), dtype=self.network.dtype)
-        for start in range(0, n, chunk):
-            stop = min(n, start + chunk)
-            out[start:stop] = plan(spatial[start:stop], angular[start:stop])
+        with one_blas_thread():
+            for start in range(0, n, chunk):
+                stop = min(n, start + chunk)
+                out[start:stop] = plan(spatial[start:stop], angular[start:stop])
         return out
 
     def query(self, centre, size, wi, wo, material=0, chunk: int = CHUNK, reference=None) -> np.ndarray:

@@ -22,12 +22,12 @@ from clothlab.render.camera import PinholeCamera
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Scene, check_render_memory
 from clothlab.render.shade import (
-    NEURAL_TEXTURE_RANGE,
     SHADERS,
     Counter,
     FabricModels,
     Samples,
     lod_weight,
+    network_samples,
     shade,
 )
 
@@ -129,8 +129,9 @@ def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> d
     shaded_pixels = np.unique(samples.pixel)
     n = max(shaded_pixels.size, 1)
     if shader in ("im-lod", "surface-lod", "neural-lod"):
-        b = (lod_weight(samples.footprint, *NEURAL_TEXTURE_RANGE) if shader == "neural-lod"
-             else lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1))
+        b = lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1)
+        if shader == "neural-lod":  # network pixels run no texture sample
+            b = np.where(network_samples(samples), 1.0, b)
         texture_pixels = np.unique(samples.pixel[b < 1.0]).size
         reflectance_only = n - np.unique(samples.pixel[b < 1.0]).size if shaded_pixels.size else 0
         blend_pixels = np.unique(samples.pixel[(b > 0.0) & (b < 1.0)]).size
@@ -226,7 +227,7 @@ REFERENCE_SHADER = {"im": "im-texture", "kang": "kang-texture", "neural": "im-te
 
 def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
                 reference_spp: int = 64, repeats: int = 1, repeat_budget_s: float = float("inf"),
-                warmup: bool = True, fabric: FabricModels | None = None) -> list[dict]:
+                warmup: bool = True, fabric: FabricModels | None = None, reference_check: bool = False) -> list[dict]:
     """Render ``scene`` with the camera moved to each distance (mm from its look-at point, same direction):
     per shader family the supersampled texture-level shader (im-texture or kang-texture at ``reference_spp``
     stratified samples) as the antialiasing reference, and each shader at ``spp``.  Per distance and shader:
@@ -235,7 +236,10 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
     process; less disturbed by other load), seconds per model - the relative L1
     error vs its family's reference over fully covered pixels, the model evaluations (deterministic: the
     same scene gives the same counts), texture / blend pixel fractions; and the footprint range of the view
-    (tiles).  ``warmup``: one small render per shader first, so compilation and caches are not timed."""
+    (tiles).  ``warmup``: one small render per shader first, so compilation and caches are not timed.
+    ``reference_check``: also ``<family>_reference_error``, the relative L1 difference between the reference
+    and a second one from another seed (about sqrt 2 times the reference's own error: errors of that size
+    are below what the comparison resolves)."""
     for shader in shaders:
         _check(shader, spp)
     fabric = fabric or FabricModels.build(scene.fabric)
@@ -256,6 +260,9 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
             reference = references[name]
             row[f"{family}_reference_seconds"] = reference.timings["total"]
             mask = reference.coverage >= 1.0
+            if reference_check and f"{family}_reference_error" not in row:
+                second = render(s, shader=name, spp=reference_spp, fabric=fabric, seed=s.seed + 1)
+                row[f"{family}_reference_error"] = relative_error(second.image, reference.image, mask)
             best, spent, runs = None, 0.0, 0
             while runs < max(1, repeats) and (runs == 0 or spent < repeat_budget_s):
                 result = render(s, shader=shader, spp=spp, fabric=fabric)
@@ -271,8 +278,9 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
                            "texture_evaluations": st["texture_evaluations"],
                            "reflectance_evaluations": st["reflectance_evaluations"],
                            "kang_evaluations": st["kang_evaluations"],
+                           "neural_evaluations": st["neural_evaluations"],
                            "model_evaluations": (st["texture_evaluations"] + st["reflectance_evaluations"]
-                                                 + st["kang_evaluations"]),
+                                                 + st["kang_evaluations"] + st["neural_evaluations"]),
                            **{f"{m}_{k}": best.timings.get(f"{m}_{k}", 0.0)
                               for m in ("texture", "reflectance", "kang") for k in ("seconds", "cpu_seconds")}}
             row.setdefault("pixels", int(mask.sum()))

@@ -30,6 +30,8 @@ fabric:
   channels: [R, G, B]
   fit: null                   # a fit directory (kind irawan): its weave, parameters, coefficients, channels
   seed: 0                     # texture noise realisation
+  noise: true                 # the IM texture noise of sec. 7.2.1 (false: the noise-free texture that the
+                              # neural surrogate learns; im-texture / im-lod / neural-lod compare on it)
   kang:                       # the Kang shader in the same scene (optional)
     fit: null                 # a fit directory of kind kang, or:
     params: {}                # Kang parameters (defaults otherwise)
@@ -142,6 +144,7 @@ class Fabric:
     channels: tuple[str, ...] = DEFAULT_CHANNELS
     fit: Path | None = None
     seed: int = 0
+    noise: bool = True
     kang: KangSpec = field(default_factory=KangSpec)
     base_dir: Path = field(default_factory=Path.cwd)
 
@@ -376,7 +379,7 @@ def scene_from_dict(data: dict, *, source=None, base_dir=None) -> Scene:
 
 
 def _fabric(r: _Reader, d: dict, base_dir) -> Fabric:
-    r.known(d, "fabric", ("weave", "params", "coefficients", "channels", "fit", "seed", "kang"))
+    r.known(d, "fabric", ("weave", "params", "coefficients", "channels", "fit", "seed", "noise", "kang"))
     weave = d.get("weave", "preset:cotton-denim")
     if not isinstance(weave, str) or not weave.strip():
         raise r.error("fabric.weave", f"expected 'preset:<name>' or a .wv path, got {weave!r}")
@@ -396,6 +399,9 @@ def _fabric(r: _Reader, d: dict, base_dir) -> Fabric:
     kang_params = k.get("params") or {}
     if not isinstance(kang_params, dict):
         raise r.error("fabric.kang.params", f"expected a mapping of parameter -> value, got {kang_params!r}")
+    noise = d.get("noise", True)
+    if not isinstance(noise, bool):
+        raise r.error("fabric.noise", f"expected true or false, got {noise!r}")
     prefilter = k.get("prefilter", False)
     if not isinstance(prefilter, bool):
         raise r.error("fabric.kang.prefilter", f"expected true or false, got {prefilter!r}")
@@ -408,7 +414,8 @@ def _fabric(r: _Reader, d: dict, base_dir) -> Fabric:
         fit=_path(base_dir, k["fit"], r, "fabric.kang.fit") if k.get("fit") is not None else None,
     )
     return Fabric(weave=weave.strip(), params=dict(params), coefficients=coefficients, channels=tuple(channels),
-                  fit=fit, seed=r.integer(d, "fabric", "seed", 0, minimum=0), kang=kang, base_dir=Path(base_dir))
+                  fit=fit, seed=r.integer(d, "fabric", "seed", 0, minimum=0), noise=noise, kang=kang,
+                  base_dir=Path(base_dir))
 
 
 def load_scene(path) -> Scene:

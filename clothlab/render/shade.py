@@ -32,16 +32,20 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
                      (adaptive prefiltering) when fabric.kang.prefilter is set, with view distance
                      = camera distance / fabric.kang.view_distance_mm.
 
-- ``neural-lod``     the IM texture model where the pixel resolves the yarns' cross-sections, the neural
-                     footprint surrogate (Chen, Wang & Wang 2024, sec. 4.3; ``kind: neural``, the weave's shipped
-                     weights) for the footprints of a pixel from there to a few tiles, the IM reflectance model
-                     beyond: texture weight 1 - b_n, b_n = lod_weight(f, *NEURAL_TEXTURE_RANGE); of the rest a
-                     share b_r = lod_weight(f, *NEURAL_REFLECTANCE_RANGE) reflectance, 1 - b_r network.  The
-                     network is queried once per pixel, for a box footprint of side f (tiles) at the mean (u, v)
-                     of the pixel's samples with its first sample's directions: the query *is* the pixel's
-                     filtered value (eq. 3), so it needs no supersampling.  Texture samples as im-lod's
-                     (:func:`blend_texture_samples`).  The scene's IM parameters and coefficients are used; a
-                     parameter set other than the trained one goes through the network's encoder.
+- ``neural-lod``     im-lod, except where the pixel covers part of a tile: there the neural footprint
+                     surrogate (Chen, Wang & Wang 2024, sec. 4.3; ``kind: neural``, the weave's shipped
+                     weights) shades the pixel, queried once per pixel for a box footprint of side f (tiles) at
+                     the mean (u, v) of the pixel's samples with its first sample's directions: the query *is*
+                     the pixel's filtered value (eq. 3), so it needs no supersampling; the reflectance model at
+                     the same directions is the base of a residual network.  The network's share w =
+                     :func:`network_weight` (f) rises over :data:`NEURAL_RISE` and falls over
+                     :data:`NEURAL_FALL`; where 0 < w < 1 a pixel is the network's when its dither threshold
+                     (:func:`dither`, a low-discrepancy sequence over the pixel index) is below w, else
+                     im-lod's: a stochastic transition (the expected image is the blend) that runs one of the
+                     two per pixel, not both.  The scene's IM parameters and coefficients are used; a
+                     parameter set other than the trained one goes through the network's encoder.  The networks
+                     learn the noise-free texture: with ``fabric.noise`` on, network pixels lack the
+                     per-segment intensity noise (as im-lod's reflectance part does).
 
 Skipping (nothing runs that the scene does not need): a component whose coefficient is zero in every
 channel, or whose yarn type covers no cell of the weave, is not computed (``need=``).
@@ -246,7 +250,7 @@ def texture_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.nda
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     comps = counter.run("texture", len(s.u), fabric.texture.components, s.u, s.v, s.wi, s.wo, fabric.params,
-                        need=fabric.need, warn=False)
+                        need=fabric.need, noise=fabric.spec.noise, warn=False)
     return combine(comps, fabric.coefficients)
 
 
@@ -327,11 +331,40 @@ def im_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) 
     return out
 
 
-#: footprints (tiles) of the texture -> network blend of neural-lod (the network's error falls below the
-#: supersampled texture's from ~0.03 tile on; docs/neural.md) and of the network -> reflectance blend (from
-#: ~2 tiles the reflectance model is within a few per cent of the footprint average)
-NEURAL_TEXTURE_RANGE = (0.02, 0.045)
-NEURAL_REFLECTANCE_RANGE = (2.0, 4.0)
+#: footprints (tiles) over which neural-lod's network takes over from im-lod (rising) and hands back to it
+#: (falling; im-lod is the reflectance model alone from its f1 = 0.5 on).  Measured on the receding plane
+#: (noise-free cotton denim, 64 x 48 px, distances 5-120 mm; relative L1 per pixel against im-texture at 256
+#: samples, binned by the pixel footprint; docs/neural.md "neural-lod"): the network beats the 4-sample
+#: texture from ~0.12 tile on (0.055 against 0.060 at 0.12-0.15, 0.061 against 0.090 at 0.2-0.3) and the
+#: reflectance model up to ~0.7 tile (0.040 against 0.050 at 0.4-0.5, 0.030 against 0.036 at 0.5-0.7); a
+#: network query (~1.3 us) costs about four texture samples, so it takes over where im-lod's own blend is
+#: weakest and hands back where im-lod is one cheap reflectance evaluation per pixel.
+NEURAL_RISE = (0.12, 0.16)
+NEURAL_FALL = (0.4, 0.5)
+
+
+def network_weight(footprint) -> np.ndarray:
+    """Share of neural-lod's network at pixel footprints (tiles): 0 -> 1 over :data:`NEURAL_RISE`, 1 -> 0
+    over :data:`NEURAL_FALL` (smoothsteps in log footprint, :func:`lod_weight`)."""
+    return lod_weight(footprint, *NEURAL_RISE) * (1.0 - lod_weight(footprint, *NEURAL_FALL))
+
+
+def dither(pixel: np.ndarray) -> np.ndarray:
+    """Per pixel index a threshold in [0, 1): the additive recurrence frac((p + 0.5) / golden ratio) (the R1
+    low-discrepancy sequence), so that in a band where the weight is w about a share w of neighbouring pixels
+    falls below it, evenly spread."""
+    return np.mod((np.asarray(pixel, dtype=np.float64) + 0.5) * 0.6180339887498949, 1.0)
+
+
+def network_samples(s: Samples) -> np.ndarray:
+    """Which samples neural-lod shades with the network (bool, M): all samples of the pixels whose dither
+    threshold lies below the network weight of the pixel's footprint (at its first sample)."""
+    order, starts, group = pixel_groups(s.pixel)
+    first = order[starts]
+    chosen = dither(s.pixel[first]) < network_weight(s.footprint[first])
+    out = np.empty(len(s.pixel), dtype=bool)
+    out[order] = chosen[group]
+    return out
 
 
 def neural_model(fabric: FabricModels):
@@ -349,34 +382,40 @@ def neural_model(fabric: FabricModels):
     return cached
 
 
-def neural_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
-    """The network's f_r (M, C), one query per pixel (module docstring) shared by the pixel's samples."""
+def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
+    """The network's f_r (M, C), one query per pixel shared by its samples: a box footprint of the pixel's
+    side at the mean (u, v) of its samples, its first sample's directions, and the reflectance model's
+    components there as the base of a residual network (computed once per pixel)."""
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     model = neural_model(fabric)
     order, starts, group = pixel_groups(s.pixel)
-    count = np.diff(np.append(starts, len(s.u)))
     back = np.empty(len(s.u), dtype=np.intp)
     back[order] = group
+    count = np.diff(np.append(starts, len(s.u)))
     centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
     first = order[starts]
-    comps = counter.run("neural", len(first), model.query, centre, s.footprint[first], s.wi[first], s.wo[first],
-                        fabric.params)
-    return combine({k: comps[k] for k in fabric.need}, fabric.coefficients)[back]
+    wi, wo = s.wi[first], s.wo[first]
+    comps = counter.run("reflectance", first.size, fabric.reflectance.components, wi, wo, fabric.params,
+                        need=fabric.need, warn=False)
+    reference = np.column_stack([comps[k] if k in comps else np.zeros(first.size)
+                                 for k in fabric.reflectance.component_names])
+    net = counter.run("neural", first.size, model.query, centre, s.footprint[first], wi, wo, fabric.params,
+                      reference=reference)
+    return combine({k: net[k] for k in fabric.need}, fabric.coefficients)[back]
 
 
-def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
-    """neural-lod (module docstring): texture, network or reflectance by the pixel footprint, blended."""
-    b_n = lod_weight(s.footprint, *NEURAL_TEXTURE_RANGE)
-    b_r = lod_weight(s.footprint, *NEURAL_REFLECTANCE_RANGE)
+def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) -> np.ndarray:
+    """neural-lod (module docstring): per pixel the network or im-lod, chosen by the footprint."""
+    chosen = network_samples(s)
+    if not chosen.any():
+        return im_lod_values(fabric, s, counter, lod)
+    if chosen.all():
+        return network_pixel_values(fabric, s, counter)
     out = _zeros(fabric, len(s.u))
-    for weight, values in ((b_n * b_r, reflectance_values), (b_n * (1.0 - b_r), neural_pixel_values)):
-        some = np.flatnonzero(weight > 0.0)
-        if some.size:
-            out[some] += weight[some, None] * values(fabric, s.take(some), counter)
-    index, weight = blend_texture_samples(s.pixel, b_n)
-    if index.size:
-        out[index] += weight[:, None] * texture_values(fabric, s.take(index), counter)
+    for mask, values in ((chosen, network_pixel_values), (~chosen, lambda f, t, c: im_lod_values(f, t, c, lod))):
+        index = np.flatnonzero(mask)
+        out[index] = values(fabric, s.take(index), counter)
     return out
 
 
@@ -409,5 +448,5 @@ def shade(shader: str, fabric: FabricModels, samples: Samples, lod: Lod, counter
     if shader == "surface-texture":
         return texture_values(surface_models(fabric), samples, counter)
     if shader == "neural-lod":
-        return neural_lod_values(fabric, samples, counter)
+        return neural_lod_values(fabric, samples, counter, lod)
     raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")

@@ -1,46 +1,54 @@
 """The neural surrogate as a model (``kind: neural``; Chen, Wang & Wang 2024, sec. 4.3).
 
-A per-fabric surrogate (:mod:`clothlab.neural`, trained by ``clothlab train-surrogate``) answers footprint
-queries of the Irawan-Marschner texture model.  As a model:
+A surrogate (:mod:`clothlab.neural`, trained by ``clothlab train-surrogate``) answers footprint queries of
+the texture model of its *target kind*, the sidecar's ``encoding.kind`` (:data:`TARGET_KINDS`: ``irawan``,
+or ``surface``, the Chen et al. model).  As a model:
 
+* parameters, components and the linear coefficients' meaning are the target kind's (IM: ``diffuse``,
+  ``specular_warp``, ``specular_weft``; surface: ``diffuse_warp``, ``diffuse_weft``, ``specular_warp``,
+  ``specular_weft``; 1/sr), set per instance from the sidecar (:meth:`NeuralModel.declared_parameters`
+  gives config validation the same table from ``model.options.weights``);
 * :meth:`NeuralModel.components` is the far view: the footprint of :data:`FAR_SIZE` tiles (the largest of
-  Table 2's range, where the footprint average is the tile average, i.e. the reflectance model).
+  Table 2's range, where the footprint average is the tile average, i.e. the reflectance model);
 * :meth:`NeuralModel.texture` is a filtering texture model (``texture_filters``): the query centre is the
   texture point (u, v) and the footprint size is ``footprint`` (tiles; :data:`MIN_FOOTPRINT` when None).
 
-A residual network (``--residual``; :mod:`clothlab.neural.surrogate`) adds its outputs to the transformed
-reflectance model T(R(wi, wo)) of the sidecar's ``kind`` at the queried parameters (the trained ones, or
-``params`` for another material): :func:`load_neural` attaches it, and each query evaluates it.
-
-Options: ``weights`` (the ``.npz`` written by ``clothlab train-surrogate``; default: the shipped weights of
-the weave's preset, :data:`SHIPPED`, where there are some).  Parameters are those
-of the target model (the Irawan-Marschner table); a parameter set other than the trained one goes through
-the encoder (a fast approximation, exact only near the trained materials).  Components as the target's:
-``diffuse``, ``specular_warp``, ``specular_weft`` (1/sr), coefficients linear as always.
+A trained material is answered from its stored latent; any other parameter set goes through the encoder
+(a fast approximation, exact only near the trained materials; meaningful for a ``--vary`` network over
+the varied parameters, which a fit frees by default).  A residual network (``--residual``;
+:mod:`clothlab.neural.surrogate`) adds its outputs to the transformed reflectance model T(R(wi, wo)) of the
+target kind at the queried parameters: :func:`load_neural` attaches R of the trained materials, and a query
+at other parameters evaluates it (:meth:`NeuralModel.exact_model`).
 
 ==========  =================================================================================
 option      meaning
 ==========  =================================================================================
-weights     path of the surrogate ``.npz`` (its ``.json`` sidecar beside it); default shipped
+weights     path of the surrogate ``.npz`` (its ``.json`` sidecar beside it; relative to fabric.yaml);
+            default: the shipped weights of the weave's preset (:data:`SHIPPED`), IM networks
+refine      ``clothlab fit``: after the fit through the encoder, refine the free parameters with the exact
+            target model (:mod:`clothlab.fit.refine`); default false
 ==========  =================================================================================
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
-from clothlab.errors import ConfigError
+from clothlab.errors import ConfigError, InputError
 from clothlab.models.base import ORIENTATION, Model, as_directions
 from clothlab.models.irawan.integrals import COMPONENTS
-from clothlab.models.irawan.parameters import IRAWAN_PARAMS, weave_parameters
+from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 from clothlab.neural.encodings import normalised_parameters, pattern_descriptor
 from clothlab.neural.serialise import load_surrogate
 
 SHIPPED = Path(__file__).parent / "data"
 """Shipped per-fabric weights, ``<preset>.npz`` + ``.json`` (docs/neural.md says how they were trained)."""
 FAR_SIZE = 4.5  # tiles
+TARGET_KINDS = ("irawan", "surface")
+"""Target kinds of a network that ``kind: neural`` takes (the sidecar's ``encoding.kind``)."""
 MIN_FOOTPRINT = 0.01  # tiles
 
 
@@ -77,18 +85,29 @@ def load_neural(path, weave=None):
 
 
 class NeuralModel(Model):
-    """A trained surrogate of the IM texture model's footprint averages, for one weave."""
+    """A trained surrogate of the footprint averages of the texture model of its sidecar's ``kind`` (irawan
+    or surface), for one weave: parameters, components and reflectance model R are those of that kind."""
 
     kind = "neural"
+    #: class-level declarations: those of the shipped per-preset networks (Irawan-Marschner); an instance
+    #: (and :meth:`declared_parameters` given ``weights``) takes its network's target kind's
     params = IRAWAN_PARAMS
     component_names = COMPONENTS
-    coefficient_meaning = "kd: diffuse albedo; ks_<kind>: mean specular albedo of that segment type (as irawan)"
+    coefficient_meaning = "as the network's target kind (irawan: kd diffuse albedo, ks_<kind> mean specular albedo)"
     default_free = ("alpha", "beta")
     has_texture = True
     texture_filters = True
+    #: the texture's ``footprint`` is a box footprint's side (tiles) and its value the box average (eq. 3):
+    #: ``clothlab eval`` with a footprint column asks the network instead of averaging its texture
+    footprint_queries = True
+    #: options naming files: resolved against fabric.yaml's directory by config validation
+    path_options = ("weights",)
 
-    def __init__(self, weave, *, weights: str | None = None):
-        super().__init__(weave, weights=weights)
+    def __init__(self, weave, *, weights: str | None = None, refine: bool = False):
+        super().__init__(weave, weights=weights, refine=refine)
+        if not isinstance(refine, bool):
+            raise ConfigError(f"refine must be true or false, got {refine!r}", field="model.options.refine")
+        self.refine = refine
         if not weights:
             weights = SHIPPED / f"{weave.name}.npz"
             if not weights.exists():
@@ -96,10 +115,21 @@ class NeuralModel(Model):
                 raise ConfigError(f"no shipped surrogate for weave {weave.name!r} (shipped: {shipped}); give "
                                   "model.options.weights: a .npz written by clothlab train-surrogate",
                                   field="model.options.weights")
-        self.surrogate, self.sidecar = load_neural(weights, weave)
-        if tuple(self.surrogate.component_names) != COMPONENTS:
-            raise ConfigError(f"{weights}: components {self.surrogate.component_names}, expected {COMPONENTS} "
-                              "(an Irawan-Marschner target)", field="model.options.weights")
+        target = target_class(read_sidecar(weights))  # ConfigError naming the file first
+        try:
+            self.surrogate, self.sidecar = load_neural(weights, weave)
+        except InputError as exc:
+            raise ConfigError(f"model.options.weights: {exc}", field="model.options.weights") from None
+        if tuple(self.surrogate.component_names) != tuple(target.component_names):
+            raise ConfigError(f"{weights}: components {list(self.surrogate.component_names)}, expected "
+                              f"{list(target.component_names)} of its target kind {target.kind!r}",
+                              field="model.options.weights")
+        self.target = target.kind
+        self.params = target.declared_parameters()
+        self.component_names = tuple(target.component_names)
+        self.coefficient_meaning = target.coefficient_meaning
+        self.quarter_turn_swaps = target.quarter_turn_swaps
+        self.default_free = trained_free(self.sidecar)
         self._encoding = self.surrogate.encoding
         self._trained = {k: float(v) for k, v in self._encoding.get("params", {}).items()}
         # the trained materials' parameters by row (a multi-material network lists them all)
@@ -108,8 +138,36 @@ class NeuralModel(Model):
         self._reference = None
         self._pattern = pattern_descriptor(weave, self._encoding.get("pattern_order", 2))  # the encoder's pattern part
 
+    @classmethod
+    def declared_parameters(cls, options: dict | None = None):
+        """The declarations of the target kind of ``options["weights"]`` (its sidecar's ``encoding.kind``);
+        without weights those of the shipped per-preset networks (Irawan-Marschner)."""
+        weights = (options or {}).get("weights")
+        return target_class(read_sidecar(weights)).declared_parameters() if weights else cls.params
+
+    @classmethod
+    def declared_free(cls, options: dict | None = None) -> tuple:
+        """The parameters a fit frees by default for ``options``: those the network was trained over."""
+        weights = (options or {}).get("weights")
+        return trained_free(read_sidecar(weights)) if weights else cls.default_free
+
+    @classmethod
+    def describe_settings(cls, settings: dict) -> str:
+        """The recorded options in a few words: the weights by file name (the path is in fit.json)."""
+        options = dict(settings.get("options") or {})
+        if options.get("weights"):
+            options["weights"] = Path(str(options["weights"])).name
+        return ", ".join(f"{k}={v}" for k, v in options.items()) or "defaults (shipped weights)"
+
+    def exact_model(self):
+        """The model the network learnt (the sidecar's kind on this weave; :func:`reference_model`): R of a
+        residual network, the refinement of a fit (``refine``)."""
+        if self._reference is None:
+            self._reference = reference_model(self.sidecar, self.weave)
+        return self._reference
+
     def default_parameters(self) -> dict[str, float]:
-        return {**weave_parameters(self.weave), **self._trained}
+        return {**self.exact_model().default_parameters(), **self._trained}
 
     def _material(self, params: dict | None):
         """The trained material's row (0) for its own parameters, else the encoder input of ``params``."""
@@ -129,40 +187,66 @@ class NeuralModel(Model):
         names = self._encoding.get("parameters", self._material_names())
         return np.concatenate([normalised_parameters(self.resolve(params), self.params, names), self._pattern])
 
+    def material_objective(self, wi, wo, values, free=None, params: dict | None = None):
+        """The fast fit's objective (:class:`clothlab.neural.material_fit.MaterialObjective`) of the ``free``
+        parameters (default ``default_free``) through the encoder, far view, from ``params``; a residual
+        network (g = T(R) + net, docs/neural.md) evaluates R of :meth:`exact_model` at each trial."""
+        from clothlab.neural.material_fit import MaterialObjective, unit_to_parameter
+
+        if self.surrogate.residual_input:
+            raise ConfigError("the fast material fit cannot take a network trained with --residual-input (T(R) "
+                              "is a decoder input whose derivative the network does not return); fit the exact "
+                              f"kind {self.target} instead", field="model.options.weights")
+        names = list(self._encoding.get("parameters", self._material_names()))
+        free = list(free or self.default_free)
+        for k in free:
+            if k not in names:
+                raise ConfigError(f"{k!r} is not an encoder input of this network (inputs: {', '.join(names)})",
+                                  field="fit.free")
+        start = self.resolve(params)
+        reference = None
+        if self.surrogate.residual:
+            exact = self.exact_model()
+
+            def reference(unit):
+                p = {**start, **{k: unit_to_parameter(self.params[k], t) for k, t in zip(free, unit, strict=True)}}
+                c = exact.components(wi, wo, p, warn=False)
+                return np.column_stack([np.asarray(c[n], dtype=np.float64).reshape(-1) for n in self.component_names])
+        return MaterialObjective(self.surrogate, wi, wo, values, self.material_vector(start),
+                                 {k: names.index(k) for k in free}, size=FAR_SIZE, reference=reference)
+
     def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
                      **options):
         """Fast approximate fit of the ``free`` parameters (default ``default_free``) through the encoder
-        (:func:`clothlab.neural.material_fit.fit_material`) to far-view values (N,) at directions (N, 3),
-        starting from ``params``; returns (fitted parameters, the :class:`MaterialFit`).  ``refine``: then
-        refine with the exact model the network learnt (the sidecar's ``kind``;
-        :func:`~clothlab.neural.material_fit.refine_material`), whose coefficients and RMS replace the fast
-        fit's."""
-        from clothlab.models.registry import build_model
+        (:meth:`material_objective`, :func:`clothlab.neural.material_fit.fit_material`; ``options``: its
+        steps, lr, starts) to far-view values (N,) at directions (N, 3), starting from ``params``; returns
+        (fitted parameters, the :class:`MaterialFit`).  ``refine``: then refine with the exact model the
+        network learnt (:meth:`exact_model`; :func:`~clothlab.neural.material_fit.refine_material`), whose
+        parameters, coefficients and RMS replace the fast fit's (kept in ``fast``)."""
         from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
 
-        if self.surrogate.residual or self.surrogate.residual_input:
-            raise ConfigError("the fast material fit needs a network without --residual (the reflectance model's "
-                              "parameters are not inputs of the encoder); fit kind irawan instead",
-                              field="model.options.weights")
-        names = list(self._encoding.get("parameters", self._material_names()))
-        free = list(free or self.default_free)
-        result = fit_material(self.surrogate, wi, wo, values, self.material_vector(params),
-                              {k: names.index(k) for k in free}, size=FAR_SIZE, **options)
+        objective = self.material_objective(wi, wo, values, free, params)
+        result = fit_material(objective, **options)
         fitted = {**self.resolve(params), **{k: unit_to_parameter(self.params[k], t) for k, t in result.unit.items()}}
-        result.params = {k: fitted[k] for k in free}
+        result.params = {k: fitted[k] for k in objective.names}
         if refine:
-            exact = build_model(self._encoding.get("kind", "irawan"), self.weave)
-            fitted, result.coefficients, result.rms = refine_material(exact, wi, wo, values, fitted, free)
-            result.params = {k: fitted[k] for k in free}
+            result.fast = {"params": dict(result.params), "coefficients": dict(result.coefficients),
+                           "rms": result.rms}
+            fitted, result.coefficients, result.rms = refine_material(self.exact_model(), wi, wo, values, fitted,
+                                                                      objective.names)
+            result.params = {k: fitted[k] for k in objective.names}
         return fitted, result
 
-    def query(self, centre, size, wi, wo, params: dict | None = None) -> dict[str, np.ndarray]:
-        """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles."""
-        material, reference = self._material(params), None
-        if not isinstance(material, int) and (self.surrogate.residual or self.surrogate.residual_input):
+    def query(self, centre, size, wi, wo, params: dict | None = None, *, reference=None) -> dict[str, np.ndarray]:
+        """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles.  ``reference``:
+        the reflectance model's components (N, C) at the queries, when the caller has them (a residual
+        network's base R; computed here otherwise)."""
+        material = self._material(params)
+        if (reference is None and not isinstance(material, int)
+                and (self.surrogate.residual or self.surrogate.residual_input)):
             reference = self.surrogate_reference(params)(wi, wo, centre, size)
         values = self.surrogate.query(centre, size, wi, wo, material=material, reference=reference)
-        return {name: values[:, i] for i, name in enumerate(COMPONENTS)}
+        return {name: values[:, i] for i, name in enumerate(self.component_names)}
 
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
                    warn: bool = True) -> dict[str, np.ndarray]:
@@ -176,23 +260,66 @@ class NeuralModel(Model):
         """The reflectance model at ``params`` as a label source (what a residual network corrects)."""
         from clothlab.neural.labels import ModelLabels
 
-        if self._reference is None:
-            self._reference = reference_model(self.sidecar, self.weave)
-        return ModelLabels(self._reference, self.resolve(params))
+        return ModelLabels(self.exact_model(), self.resolve(params))
 
     def texture(self, *, seed: int = 0):
         return NeuralTexture(self)
+
+
+def read_sidecar(weights) -> dict:
+    """The ``.json`` sidecar of surrogate weights ``weights`` (.npz or .json); ConfigError at
+    ``model.options.weights`` when a file is missing or it is not a surrogate's."""
+    from clothlab.neural.serialise import FORMAT
+
+    path = Path(weights)
+    for p in (path.with_suffix(".npz"), path.with_suffix(".json")):
+        if not p.is_file():
+            raise ConfigError(f"surrogate file not found: {p} (a .npz and its .json sidecar written by clothlab "
+                              "train-surrogate)", field="model.options.weights")
+    sidecar_path = path.with_suffix(".json")
+    try:
+        sidecar = json.loads(sidecar_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{sidecar_path} is not a surrogate sidecar (not valid JSON: {exc})",
+                          field="model.options.weights") from None
+    if not isinstance(sidecar, dict) or sidecar.get("format") != FORMAT:
+        found = sidecar.get("format") if isinstance(sidecar, dict) else type(sidecar).__name__
+        raise ConfigError(f"{sidecar_path} is not a surrogate sidecar (format {found!r}, expected {FORMAT!r})",
+                          field="model.options.weights")
+    return sidecar
+
+
+def target_class(sidecar: dict):
+    """The model class the network learnt (the sidecar's ``encoding.kind``, irawan for older files)."""
+    from clothlab.models.registry import model_class
+
+    kind = (sidecar.get("encoding") or {}).get("kind", "irawan")
+    if kind not in TARGET_KINDS:
+        raise ConfigError(f"surrogate target kind {kind!r}: kind neural takes networks of {', '.join(TARGET_KINDS)}",
+                          field="model.options.weights")
+    return model_class(kind)
+
+
+def trained_free(sidecar: dict) -> tuple:
+    """The parameters a fit frees by default: those that differ between the network's materials (a
+    ``--vary`` grid), else ``alpha`` / ``beta`` for an IM network and the target's own for another kind."""
+    materials = (sidecar.get("encoding") or {}).get("materials_params") or []
+    varied = tuple(k for k in (materials[0] if materials else {})
+                   if len({float(q[k]) for q in materials if k in q}) > 1)
+    if varied:
+        return varied
+    target = target_class(sidecar)
+    return NeuralModel.default_free if target.kind == "irawan" else tuple(target.default_free)
 
 
 class NeuralTexture:
     """The surrogate at texture points: footprint centre (u, v), size ``footprint`` tiles (filters itself)."""
 
     kind = "neural-texture"
-    params = IRAWAN_PARAMS
-    component_names = COMPONENTS
 
     def __init__(self, model: NeuralModel):
         self.model, self.weave = model, model.weave
+        self.params, self.component_names = model.params, model.component_names
 
     def resolve(self, params: dict | None) -> dict[str, float]:
         return self.model.resolve(params)
