@@ -196,3 +196,25 @@ def test_shipped_table2_network_agrees_with_fresh_labels(table2, which):
         pred = surrogate.query(centre, size, wi, wo, material=unseen)
         bound = max(b["relative_rmse"] for b in recorded if b["size_lo"] >= lo - 1e-9 and b["size_hi"] <= hi + 1e-9)
         assert _relative_rmse(pred, fresh) <= 1.5 * bound, (lo, hi)
+
+
+def test_kind_neural_uses_a_stored_latent_only_on_that_materials_own_weave(table2):
+    """A trained material's parameters on its own pattern are answered from its stored row; the same
+    parameters on another pattern go through the encoder with that pattern's descriptor (material vector)."""
+    from clothlab.models.registry import build_model
+    from clothlab.weave.patterns import get_pattern
+
+    _, sidecar = table2
+    enc = sidecar["encoding"]
+    from clothlab.models.neural.model import SHIPPED
+
+    row = 0
+    own = enc["materials_weave"][row]
+    other = next(p for p in enc["patterns"] if p != own)
+    params = enc["materials_params"][row]
+    on_own = build_model("neural", get_pattern(own), weights=str(SHIPPED / f"{TABLE2}.npz"))
+    on_other = build_model("neural", get_pattern(other), weights=str(SHIPPED / f"{TABLE2}.npz"))
+    assert on_own._material(params) == row
+    vector = on_other._material(params)
+    assert not isinstance(vector, int)
+    np.testing.assert_allclose(vector, on_other.material_vector(params))

@@ -170,9 +170,13 @@ class NeuralModel(Model):
         return {**self.exact_model().default_parameters(), **self._trained}
 
     def _material(self, params: dict | None):
-        """The trained material's row (0) for its own parameters, else the encoder input of ``params``."""
+        """The trained material's row for its own parameters on its own weave (``materials_weave`` of a
+        network over several weaves, else the sidecar's ``weave``), else the encoder input of ``params``."""
         p = self.resolve(params)
+        owners = self._encoding.get("materials_weave") or [self._encoding.get("weave")] * len(self._materials)
         for row, trained in enumerate(self._materials):
+            if owners[row] not in (None, self.weave.name):
+                continue
             if all(abs(p[k] - v) <= 1e-12 * max(1.0, abs(v)) for k, v in trained.items()):
                 return row
         return self.material_vector(p)
