@@ -32,6 +32,7 @@ from clothlab.neural.losses import column_weights, encode_targets, is_specular, 
 from clothlab.neural.network import Architecture, SurrogateNetwork
 from clothlab.neural.optimizer import Adam, step_schedule
 from clothlab.neural.surrogate import Surrogate
+from clothlab.neural.threads import one_blas_thread
 from clothlab.progress import Progress, get_logger
 
 LOG = get_logger("neural.training")
@@ -182,7 +183,7 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         return max(parts)
 
     total = spec.steps if spec.steps is not None else None
-    with Progress(total, "training the surrogate", unit="step") as bar:
+    with Progress(total, "training the surrogate", unit="step") as bar, one_blas_thread():
         bar.update(step)
         while fraction() < 1.0:
             pick = np.sort(rng.choice(train_rows, size=min(spec.batch, train_rows.size), replace=False))
