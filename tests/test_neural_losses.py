@@ -102,3 +102,23 @@ def test_training_with_highlight_weights_records_the_scale_and_lowers_the_strong
         assert result.surrogate.encoding["highlight_scale"] == scale
         errors[scale] = errors_by_size(result.surrogate, data, np.arange(n), bins=(0.01, 1.0))[0]["relative_rmse"]
     assert errors[1.0] < 0.75 * errors[None]
+
+
+def test_cli_records_the_highlight_scale_and_refuses_a_non_positive_one(tmp_path, capsys):
+    """``train-surrogate --highlight-scale X`` reaches the training spec and the sidecar; X <= 0 is a
+    one-line usage error naming the option."""
+    import json
+
+    from clothlab.cli.main import main
+
+    out = tmp_path / "run"
+    args = ["train-surrogate", "preset:silk-shantung", "-o", str(out), "--budget", "0.02", "--labels", "model",
+            "--pairs", "4", "--width", "8", "--spatial", "8", "-q", "--residual"]
+    assert main([*args, "--highlight-scale", "2"]) == 0
+    assert json.loads((out / "surrogate.json").read_text())["encoding"]["highlight_scale"] == 2.0
+    assert json.loads((out / "training.json").read_text())["train_spec"]["highlight_scale"] == 2.0
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main([*args, "--force", "--highlight-scale", "0"])
+    assert exc.value.code == 2
+    assert "--highlight-scale" in capsys.readouterr().err
