@@ -50,6 +50,9 @@ def add_parser(sub):
                         "9-11 (g = T(R) + net): whole-tile footprints become exact (default: off, as the paper)")
     p.add_argument("--residual-input", action="store_true",
                    help="also give T(R) of the reflectance model to the angular decoder as an input")
+    p.add_argument("--highlight-scale", type=number_type(1e-6, 1e6), default=None, metavar="X",
+                   help="weight each specular loss term by 1 + (label / X)^2 (X in 1/sr): strong highlights count "
+                        "as in linear space (default: off, the log loss of eqs. 9-11 as the paper)")
     p.add_argument("--vary", action="append", default=[], metavar="NAME=LO:HI:N",
                    help="a multi-material network: N values of parameter NAME from LO to HI (geometric for "
                         "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
@@ -292,7 +295,8 @@ def run(args) -> int:
         result = run_training(out, labels, materials, data_spec,
                               TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed,
                                         yarn_bins=args.yarn_bins, residual=args.residual,
-                                        residual_input=args.residual_input),
+                                        residual_input=args.residual_input,
+                                        highlight_scale=args.highlight_scale),
                               budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
                               heldout_materials=heldout, runner=runner, references=references,
                               heldout_pattern=held_pattern)

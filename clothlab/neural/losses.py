@@ -36,9 +36,22 @@ def column_weights(specular: np.ndarray) -> np.ndarray:
     return np.where(specular, LAMBDA_SPECULAR, LAMBDA_DIFFUSE)
 
 
-def loss_and_gradient(outputs: np.ndarray, targets: np.ndarray, weights: np.ndarray):
-    """Eq. 11 on encoded targets: (loss, d loss / d outputs), loss = sum_c w_c mean_b (y - t)^2."""
+def highlight_weights(values: np.ndarray, specular: np.ndarray, scale: float | None) -> np.ndarray | None:
+    """(B, C) row weights 1 + (x / scale)^2 of the specular columns (x: the label, 1/sr, clipped at 0), 1 for
+    diffuse (module docstring); None when ``scale`` is None (the paper's loss)."""
+    if scale is None:
+        return None
+    if not scale > 0.0:
+        raise ValueError(f"highlight scale must be > 0 (1/sr), got {scale}")
+    x = np.maximum(np.asarray(values, dtype=np.float64), 0.0) / scale
+    return np.where(specular, 1.0 + x * x, 1.0)
+
+
+def loss_and_gradient(outputs: np.ndarray, targets: np.ndarray, weights: np.ndarray, row_weights=None):
+    """Eq. 11 on encoded targets: (loss, d loss / d outputs), loss = sum_c w_c mean_b r_bc (y - t)^2, with
+    ``row_weights`` r (B, C) (:func:`highlight_weights`; None: 1)."""
     r = outputs - targets
     n = r.shape[0]
-    loss = float(np.sum(weights * np.mean(np.square(r, dtype=np.float64), axis=0)))
-    return loss, (r * (2.0 / n) * weights).astype(outputs.dtype)
+    wr = r if row_weights is None else r * np.asarray(row_weights, dtype=r.dtype)
+    loss = float(np.sum(weights * np.mean(np.multiply(r, wr, dtype=np.float64), axis=0)))
+    return loss, (wr * (2.0 / n) * weights).astype(outputs.dtype)

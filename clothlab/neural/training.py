@@ -28,7 +28,7 @@ from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError
 from clothlab.neural.data import COLUMNS
 from clothlab.neural.encodings import BLOB_BINS, n_direction_features, n_yarn_features
-from clothlab.neural.losses import column_weights, encode_targets, is_specular, loss_and_gradient
+from clothlab.neural.losses import column_weights, encode_targets, highlight_weights, is_specular, loss_and_gradient
 from clothlab.neural.network import Architecture, SurrogateNetwork
 from clothlab.neural.optimizer import Adam, step_schedule
 from clothlab.neural.surrogate import Surrogate
@@ -54,6 +54,7 @@ class TrainSpec:
     yarn_bins: int = 0
     residual: bool = False
     residual_input: bool = False
+    highlight_scale: float | None = None  # 1/sr: losses.highlight_weights (None: eqs. 9-11 as the paper)
     batch: int = 4096
     lr: float = 3e-3
     weight_decay: float = 1e-6
@@ -100,7 +101,7 @@ def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict
     return Surrogate(SurrogateNetwork(arch, seed=spec.seed), tuple(names), np.asarray(materials, dtype=np.float64),
                      {**encoding, "half_vector": spec.half_vector, "position_bins": spec.position_bins,
                       "size_bins": spec.size_bins, "yarn_bins": spec.yarn_bins, "residual": spec.residual,
-                      "residual_input": spec.residual_input},
+                      "residual_input": spec.residual_input, "highlight_scale": spec.highlight_scale},
                      references=list(references) if references else None)
 
 
@@ -187,11 +188,13 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         bar.update(step)
         while fraction() < 1.0:
             pick = np.sort(rng.choice(train_rows, size=min(spec.batch, train_rows.size), replace=False))
-            index, spatial, angular, targets = _batch(surrogate, data[pick], specular,
+            rows = data[pick]
+            index, spatial, angular, targets = _batch(surrogate, rows, specular,
                                                       None if t_reference is None else t_reference[pick])
             lr = step_schedule(spec.lr, fraction(), spec.milestones, spec.gamma)
             out = net.forward(surrogate.materials, index, spatial, angular, train=True)
-            loss, d_out = loss_and_gradient(out, targets, weights)
+            loss, d_out = loss_and_gradient(out, targets, weights,
+                                            highlight_weights(rows[:, N_QUERY:], specular, spec.highlight_scale))
             net.backward(d_out)
             optimizer.step(net.grads(), lr)
             step += 1
