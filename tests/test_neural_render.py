@@ -185,3 +185,15 @@ def test_in_its_footprint_range_the_network_beats_im_lod_on_the_noise_free_reced
     err_neural = relative_error(neural.image, reference.image, mask)
     err_im = relative_error(im_lod.image, reference.image, mask)
     assert err_neural < 0.8 * err_im, (err_neural, err_im)
+
+
+def test_forget_directions_drops_the_memos_a_repeated_render_would_reuse():
+    """Benchmarks time every render cold: after FabricModels.forget_directions the IM reflectance model keeps
+    no direction memo (it would make a repeat of the same view cheaper), and the image is unchanged."""
+    scene = head_on(5.5)
+    fabric = FabricModels.build(scene.fabric)
+    first = render(scene, shader="neural-lod", spp=4, fabric=fabric)
+    assert fabric.reflectance._directions is not None
+    fabric.forget_directions()
+    assert fabric.reflectance._directions is None and not fabric.reflectance._memo
+    np.testing.assert_array_equal(render(scene, shader="neural-lod", spp=4, fabric=fabric).image, first.image)

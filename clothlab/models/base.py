@@ -388,6 +388,12 @@ class Model(abc.ABC):
         model that integrates nothing returns itself."""
         return self
 
+    def forget_directions(self) -> None:
+        """Drop what the model keeps of the last directions it evaluated (models that memoise the
+        parameter-free work of a direction set for fits override this); benchmarks call it so that each
+        timed evaluation starts cold.  Nothing to drop here."""
+        return None
+
     def texture(self, *, seed: int = 0):
         """The texture model of this model's weave and settings (module docstring); ``seed`` selects its
         noise realisation.  ConfigError for a model without one (:attr:`has_texture` False)."""

@@ -236,7 +236,9 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
     process; less disturbed by other load), seconds per model - the relative L1
     error vs its family's reference over fully covered pixels, the model evaluations (deterministic: the
     same scene gives the same counts), texture / blend pixel fractions; and the footprint range of the view
-    (tiles).  ``warmup``: one small render per shader first, so compilation and caches are not timed.
+    (tiles).  ``warmup``: one small render per shader first, so compilation is not timed; the models'
+    direction memos are dropped before every timed render (a repeat would otherwise reuse its predecessor's
+    reflectance work at the same directions).
     ``reference_check``: also ``<family>_reference_error``, the relative L1 difference between the reference
     and a second one from another seed (about sqrt 2 times the reference's own error: errors of that size
     are below what the comparison resolves)."""
@@ -265,6 +267,7 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
                 row[f"{family}_reference_error"] = relative_error(second.image, reference.image, mask)
             best, spent, runs = None, 0.0, 0
             while runs < max(1, repeats) and (runs == 0 or spent < repeat_budget_s):
+                fabric.forget_directions()  # each render cold: repeats must not reuse the last one's memo
                 result = render(s, shader=shader, spp=spp, fabric=fabric)
                 spent, runs = spent + result.timings["total"], runs + 1
                 if best is None or result.timings["shading_cpu"] < best.timings["shading_cpu"]:

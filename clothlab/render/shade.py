@@ -150,6 +150,16 @@ class FabricModels:
         need = tuple(name for name in texture.component_names if _needed(name, coefficients, weave))
         return cls(spec, weave, model, texture, params, coefficients, tuple(channels), need)
 
+    def forget_directions(self) -> None:
+        """Drop the direction memos of the scene's reflectance models (im-*, surface-*, neural-lod), so that
+        a timed render starts cold (:meth:`clothlab.models.base.Model.forget_directions`)."""
+        for models in (self, getattr(self, "_surface", None)):
+            if models is not None:
+                models.reflectance.forget_directions()
+        neural = getattr(self, "_neural", None)
+        if neural is not None:
+            neural.forget_directions()
+
     def kang(self):
         """(texture model, params, coefficients) of the scene's self-filtering shader (``fabric.kang``): the
         fit's (``fabric.kang.fit``: a model whose texture model takes the pixel footprint), else the

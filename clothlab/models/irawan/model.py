@@ -172,6 +172,11 @@ class IrawanModel(Model):
         self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._at; see _integrals
         self._directions: dict | None = None  # the parameter-free quantities of the last directions; see _at
 
+    def forget_directions(self) -> None:
+        """Drop the memo of the last directions (:meth:`_at`)."""
+        self._directions = None
+        self._memo.clear()
+
     def _at(self, wi, wo) -> dict:
         """What does not depend on the parameters at (wi, wo): -wi.wo (eq. 7), the front-facing mask and, per
         segment type, :class:`.integrals.YarnTerms` (made when first needed); kept for the last direction set.

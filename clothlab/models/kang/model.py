@@ -157,6 +157,10 @@ class KangModel(Model):
                                       float(p["fibre_curvature"]), x_gl, w_gl, most)
         return g * a.reshape(g.shape)
 
+    def forget_directions(self) -> None:
+        """Drop the memo of the last directions (:meth:`_at`)."""
+        self._directions = None
+
     def _at(self, wi, wo) -> dict:
         """What the peak rule's tile average needs that does not depend on the parameters, for the last direction
         set (a fit evaluates the same directions every time): per yarn type the yarn-frame half vectors and

@@ -169,6 +169,12 @@ class NeuralModel(Model):
     def default_parameters(self) -> dict[str, float]:
         return {**self.exact_model().default_parameters(), **self._trained}
 
+    def forget_directions(self) -> None:
+        """Forget the direction memos of the exact model and of the residual references."""
+        for model in [self._reference, *(getattr(r, "model", None) for r in self.surrogate.references or ())]:
+            if model is not None:
+                model.forget_directions()
+
     def _material(self, params: dict | None):
         """The trained material's row for its own parameters on its own weave (``materials_weave`` of a
         network over several weaves, else the sidecar's ``weave``), else the encoder input of ``params``."""
