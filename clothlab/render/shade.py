@@ -417,6 +417,8 @@ def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> 
 
 def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) -> np.ndarray:
     """neural-lod (module docstring): per pixel the network or im-lod, chosen by the footprint."""
+    if not np.any((s.footprint > NEURAL_RISE[0]) & (s.footprint < NEURAL_FALL[1])):  # no network weight
+        return im_lod_values(fabric, s, counter, lod)
     chosen = network_samples(s)
     if not chosen.any():
         return im_lod_values(fabric, s, counter, lod)
