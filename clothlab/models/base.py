@@ -29,6 +29,7 @@ member                   meaning
 ``fitted_weave``         the weave with fitted parameters applied (for the ``.wv`` export)
 ``geometry_warnings``    notes on parameter sets outside the model's valid geometry (empty by default)
 ``with_quadrature``      a copy integrating with another rule / node count (itself if it integrates nothing)
+``forget_directions``    drop the memo of the last directions evaluated (benchmarks time cold; no-op by default)
 ``has_texture``          True when :meth:`texture` gives a texture model (capability)
 ``texture``              the texture model: components at texture points (u, v) whose tile average is
                          :meth:`components`; ConfigError for models without one
