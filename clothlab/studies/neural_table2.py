@@ -9,7 +9,7 @@ Groups: ``heldout_pairs`` (trained materials, held-out pairs), ``heldout_materia
 of the trained weaves), ``heldout_pattern`` (every material of the weave never trained on).  The queries of a
 bin are spread evenly over the group's materials.
 
-Run: ``python -c "from clothlab.studies.neural_table2 import main; main('PATH.npz')"``.
+Run: ``python -c "from clothlab.studies.neural_table2 import evaluate; print(chr(10).join(evaluate('PATH.npz')[1]))"``.
 """
 
 from __future__ import annotations
@@ -109,19 +109,19 @@ def table_lines(result: dict, recorded: dict | None = None) -> list[str]:
     return lines
 
 
-def main(weights, per_bin: int = 150, samples: int = 1024) -> dict:
-    """Print :func:`table_lines` of :func:`fresh_errors` and the far views; returns the result."""
+def evaluate(weights, per_bin: int = 150, samples: int = 1024) -> tuple[dict, list[str]]:
+    """:func:`fresh_errors` of ``weights`` and its lines: :func:`table_lines`, the far views, the per-weave
+    breakdown and the CPU time (the caller prints them)."""
     from pathlib import Path
 
     result = fresh_errors(weights, per_bin=per_bin, samples=samples)
     sidecar = json.loads(Path(weights).with_suffix(".json").read_text(encoding="utf-8"))
-    print("\n".join(table_lines(result, sidecar.get("metrics"))))
-    for g in GROUPS:
-        if result.get(f"{g}_far_view") is not None:
-            print(f"far view {g}: {result[f'{g}_far_view']:.4f}")
+    lines = table_lines(result, sidecar.get("metrics"))
+    lines += [f"far view {g}: {result[f'{g}_far_view']:.4f}" for g in GROUPS
+              if result.get(f"{g}_far_view") is not None]
     for g in GROUPS:
         for name, ranges in result.get(f"{g}_by_weave", {}).items():
-            print(f"{g} {name}: " + ", ".join(f"{r['size_lo']:g}-{r['size_hi']:g}: {r['surrogate']:.3f} "
-                                              f"(R {r['reflectance_model']:.3f})" for r in ranges))
-    print(f"CPU {result['cpu_s']:.0f} s")
-    return result
+            lines.append(f"{g} {name}: " + ", ".join(f"{r['size_lo']:g}-{r['size_hi']:g}: {r['surrogate']:.3f} "
+                                                     f"(R {r['reflectance_model']:.3f})" for r in ranges))
+    lines.append(f"CPU {result['cpu_s']:.0f} s")
+    return result, lines
