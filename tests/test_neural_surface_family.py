@@ -5,15 +5,10 @@ It is a residual network (``--residual``): it corrects the surface reflectance m
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
+from neural_fresh import assert_agrees_with_fresh_labels
 
 SURFACE_FAMILY = "families/surface-twill-3x3-alpha-beta"
-
-
-def _relative_rmse(pred: np.ndarray, label: np.ndarray) -> float:
-    f, g = pred.sum(axis=1), label.sum(axis=1)  # f: the components summed (unit coefficients)
-    return float(np.sqrt(np.sum((f - g) ** 2) / np.sum(g ** 2)))
 
 
 @pytest.fixture(scope="module")
@@ -47,22 +42,10 @@ def test_shipped_surface_family_agrees_with_fresh_labels_of_an_unseen_material(f
     the largest error the sidecar records for unseen materials in those bins (the queries differ, and the
     held-out pairs are harder than the sidecar's mix of pairs)."""
     from clothlab.models.registry import build_model
-    from clothlab.neural.data import DataSpec, heldout_queries
-    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
     from clothlab.weave.presets import resolve_weave
 
     surrogate, sidecar = family
     enc = sidecar["encoding"]
     model = build_model("surface", resolve_weave("pattern:twill-3x3", "."))
     params = {**enc["params"], **enc["materials_params"][unseen]}
-    labels = TextureMonteCarloLabels(model.texture(seed=0), params, samples=256, seed=11,
-                                     tile_average=ModelLabels(model, params))
-    spec = DataSpec(**enc["data_spec"])
-    recorded = sidecar["metrics"]["heldout_materials"]
-    for lo, hi in ((0.12, 1.0), (1.0, 5.0)):
-        q = heldout_queries(spec, 150, seed=5, sizes=(lo, hi), material=unseen)
-        wi, wo, centre, size = q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3]
-        fresh = labels(wi, wo, centre, size)
-        pred = surrogate.query(centre, size, wi, wo, material=unseen)
-        bound = max(b["relative_rmse"] for b in recorded if b["size_lo"] >= lo - 1e-9 and b["size_hi"] <= hi + 1e-9)
-        assert _relative_rmse(pred, fresh) <= 1.5 * bound, (lo, hi)
+    assert_agrees_with_fresh_labels(surrogate, sidecar, unseen, model, params, sidecar["metrics"]["heldout_materials"])

@@ -11,15 +11,11 @@ import json
 
 import numpy as np
 import pytest
+from neural_fresh import assert_agrees_with_fresh_labels
 
 TABLE2 = "families/surface-table2"
 TINY = ["--target", "surface", "--labels", "model", "--pairs", "2", "--width", "8", "--spatial", "8",
         "--residual", "--budget", "0.05", "-q"]
-
-
-def _relative_rmse(pred: np.ndarray, label: np.ndarray) -> float:
-    f, g = pred.sum(axis=1), label.sum(axis=1)  # f: the components summed (unit coefficients)
-    return float(np.sqrt(np.sum((f - g) ** 2) / np.sum(g ** 2)))
 
 
 def test_table2_draw_follows_its_ranges_and_is_seeded():
@@ -176,26 +172,14 @@ def test_shipped_table2_network_agrees_with_fresh_labels(table2, which):
     material of a trained pattern / of the unseen pattern; relative RMSE of f at 0.12-1 and 1-5 tiles within
     1.5x the largest error the sidecar records for that group in those bins."""
     from clothlab.models.registry import build_model
-    from clothlab.neural.data import DataSpec, heldout_queries
-    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
     from clothlab.weave.patterns import get_pattern
 
     surrogate, sidecar = table2
     enc = sidecar["encoding"]
     unseen = enc[which][0]
     model = build_model("surface", get_pattern(enc["materials_weave"][unseen]))
-    params = enc["materials_params"][unseen]
-    labels = TextureMonteCarloLabels(model.texture(seed=0), params, samples=256, seed=11,
-                                     tile_average=ModelLabels(model, params))
-    spec = DataSpec(**enc["data_spec"])
-    recorded = sidecar["metrics"][which]
-    for lo, hi in ((0.12, 1.0), (1.0, 5.0)):
-        q = heldout_queries(spec, 150, seed=5, sizes=(lo, hi), material=unseen)
-        wi, wo, centre, size = q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3]
-        fresh = labels(wi, wo, centre, size)
-        pred = surrogate.query(centre, size, wi, wo, material=unseen)
-        bound = max(b["relative_rmse"] for b in recorded if b["size_lo"] >= lo - 1e-9 and b["size_hi"] <= hi + 1e-9)
-        assert _relative_rmse(pred, fresh) <= 1.5 * bound, (lo, hi)
+    assert_agrees_with_fresh_labels(surrogate, sidecar, unseen, model, enc["materials_params"][unseen],
+                                    sidecar["metrics"][which])
 
 
 def test_kind_neural_uses_a_stored_latent_only_on_that_materials_own_weave(table2):

@@ -282,15 +282,21 @@ def pixel_groups(pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return order, starts, group
 
 
+def pixel_runs(pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first, back): the index of each pixel's first sample (in :func:`pixel_groups` order) and, per sample,
+    the position of its pixel in ``first`` - per-pixel values ``v`` (P,) spread to the samples are ``v[back]``."""
+    order, starts, group = pixel_groups(pixel)
+    back = np.empty(len(order), dtype=np.intp)
+    back[order] = group
+    return order[starts], back
+
+
 def reflectance_values(fabric: FabricModels, s: Samples, counter: Counter, *, per_pixel: bool = True) -> np.ndarray:
     """IM reflectance model f_r (M, C); with ``per_pixel`` evaluated at the first sample of each pixel."""
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     if per_pixel:
-        order, starts, group = pixel_groups(s.pixel)
-        first = order[starts]
-        back = np.empty(len(s.u), dtype=np.intp)
-        back[order] = group
+        first, back = pixel_runs(s.pixel)
         wi, wo = s.wi[first], s.wo[first]
     else:
         back, wi, wo = slice(None), s.wi, s.wo
@@ -369,12 +375,8 @@ def dither(pixel: np.ndarray) -> np.ndarray:
 def network_samples(s: Samples) -> np.ndarray:
     """Which samples neural-lod shades with the network (bool, M): all samples of the pixels whose dither
     threshold lies below the network weight of the pixel's footprint (at its first sample)."""
-    order, starts, group = pixel_groups(s.pixel)
-    first = order[starts]
-    chosen = dither(s.pixel[first]) < network_weight(s.footprint[first])
-    out = np.empty(len(s.pixel), dtype=bool)
-    out[order] = chosen[group]
-    return out
+    first, back = pixel_runs(s.pixel)
+    return (dither(s.pixel[first]) < network_weight(s.footprint[first]))[back]
 
 
 def neural_model(fabric: FabricModels):
@@ -399,12 +401,9 @@ def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> 
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     model = neural_model(fabric)
-    order, starts, group = pixel_groups(s.pixel)
-    back = np.empty(len(s.u), dtype=np.intp)
-    back[order] = group
-    count = np.diff(np.append(starts, len(s.u)))
+    first, back = pixel_runs(s.pixel)
+    count = np.bincount(back)
     centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
-    first = order[starts]
     wi, wo = s.wi[first], s.wo[first]
     comps = counter.run("reflectance", first.size, fabric.reflectance.components, wi, wo, fabric.params,
                         need=fabric.need, warn=False)
@@ -417,17 +416,15 @@ def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> 
 
 def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) -> np.ndarray:
     """neural-lod (module docstring): per pixel the network or im-lod, chosen by the footprint."""
-    if not np.any((s.footprint > NEURAL_RISE[0]) & (s.footprint < NEURAL_FALL[1])):  # no network weight
-        return im_lod_values(fabric, s, counter, lod)
-    chosen = network_samples(s)
-    if not chosen.any():
+    chosen = network_samples(s) if np.any(network_weight(s.footprint) > 0.0) else None  # per pixel only if needed
+    if chosen is None or not chosen.any():
         return im_lod_values(fabric, s, counter, lod)
     if chosen.all():
         return network_pixel_values(fabric, s, counter)
     out = _zeros(fabric, len(s.u))
-    for mask, values in ((chosen, network_pixel_values), (~chosen, lambda f, t, c: im_lod_values(f, t, c, lod))):
-        index = np.flatnonzero(mask)
-        out[index] = values(fabric, s.take(index), counter)
+    network, rest = np.flatnonzero(chosen), np.flatnonzero(~chosen)
+    out[network] = network_pixel_values(fabric, s.take(network), counter)
+    out[rest] = im_lod_values(fabric, s.take(rest), counter, lod)
     return out
 
 

@@ -271,10 +271,10 @@ def neural_lod_benchmark(quick: bool = False, *, figures_dir=None, resolution=No
     reference_spp = reference_spp or (64 if quick else 256)
     repeats = repeats or (3 if quick else 5)
     distances = tuple(distances or (QUICK_NEURAL_DISTANCES if quick else NEURAL_DISTANCES))
+    fabric = FabricModels.build(scene.fabric)  # one set of models (and one network load) for every render
     nested = compare_lod(scene, distances, shaders=NEURAL_SHADERS, spp=spp, reference_spp=reference_spp,
-                         repeats=repeats, repeat_budget_s=1.5, reference_check=True)
+                         repeats=repeats, repeat_budget_s=1.5, reference_check=True, fabric=fabric)
     rows = flat_rows(nested, NEURAL_SHADERS)
-    fabric = FabricModels.build(scene.fabric)
     for r in rows:
         err_n, err_i = r["neural_lod_relative_error"], r["im_lod_relative_error"]
         t_n, t_i = r["neural_lod_shading_cpu_seconds"], r["im_lod_shading_cpu_seconds"]

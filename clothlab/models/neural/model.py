@@ -171,7 +171,7 @@ class NeuralModel(Model):
 
     def forget_directions(self) -> None:
         """Forget the direction memos of the exact model and of the residual references."""
-        for model in [self._reference, *(getattr(r, "model", None) for r in self.surrogate.references or ())]:
+        for model in [self._reference, *(r.model for r in self.surrogate.references or ())]:
             if model is not None:
                 model.forget_directions()
 
@@ -312,14 +312,16 @@ def target_class(sidecar: dict):
 
 def trained_free(sidecar: dict) -> tuple:
     """The parameters a fit frees by default: those that differ between the network's materials (a
-    ``--vary`` grid), else ``alpha`` / ``beta`` for an IM network and the target's own for another kind."""
+    ``--vary`` grid), else ``alpha`` / ``beta`` where the target declares them (IM) and the target's own
+    otherwise."""
     materials = (sidecar.get("encoding") or {}).get("materials_params") or []
     varied = tuple(k for k in (materials[0] if materials else {})
                    if len({float(q[k]) for q in materials if k in q}) > 1)
     if varied:
         return varied
     target = target_class(sidecar)
-    return NeuralModel.default_free if target.kind == "irawan" else tuple(target.default_free)
+    declared = set(target.declared_parameters().names())
+    return NeuralModel.default_free if declared.issuperset(NeuralModel.default_free) else tuple(target.default_free)
 
 
 class NeuralTexture:
