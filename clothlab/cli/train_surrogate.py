@@ -53,6 +53,10 @@ def add_parser(sub):
     p.add_argument("--highlight-scale", type=number_type(1e-6, 1e6), default=None, metavar="X",
                    help="weight each specular loss term by 1 + (label / X)^2 (X in 1/sr): strong highlights count "
                         "as in linear space (default: off, the log loss of eqs. 9-11 as the paper)")
+    p.add_argument("--probe-points", type=count_type(0, 8), default=0, metavar="N",
+                   help="give the decoder the noise-free texture at the N x N midpoints of each footprint (N = 1: its "
+                        "centre) as an input, which locates the yarn highlights in small footprints; each query then "
+                        "costs N^2 texture evaluations more (default 0: none, as the paper)")
     p.add_argument("--vary", action="append", default=[], metavar="NAME=LO:HI:N",
                    help="a multi-material network: N values of parameter NAME from LO to HI (geometric for "
                         "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
@@ -237,7 +241,7 @@ def run(args) -> int:
     import numpy as np
 
     from clothlab.models.base import ORIENTATION
-    from clothlab.neural.labels import ModelLabels
+    from clothlab.neural.labels import ModelLabels, TextureProbe
 
     # per weave its materials (trained weaves first, then the held-out pattern's), one list over all
     sets, heldout, held_pattern, owner = [], [], [], []
@@ -260,6 +264,12 @@ def run(args) -> int:
                                                                                                 strict=True)]
     # the far-view metric; what --residual corrects: R of each material on its own weave
     references = [ModelLabels(resolved[i][1], q) for i, q in zip(owner, sets, strict=True)]
+    probes = None
+    if args.probe_points:
+        if not all(m.has_texture for _, m, _ in resolved):
+            raise ConfigError("the texture probe needs a model with a texture", field="--probe-points")
+        textures = [m.texture(seed=args.seed) for _, m, _ in resolved]
+        probes = [TextureProbe(textures[i], q, args.probe_points) for i, q in zip(owner, sets, strict=True)]
     weave, model, _ = resolved[0]
     p = model.resolve(resolved[0][2])
     names = [n for n in model.params.names() if n != ORIENTATION]  # a frame rotation, applied outside the network
@@ -296,10 +306,10 @@ def run(args) -> int:
                               TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed,
                                         yarn_bins=args.yarn_bins, residual=args.residual,
                                         residual_input=args.residual_input,
-                                        highlight_scale=args.highlight_scale),
+                                        highlight_scale=args.highlight_scale, probe_points=args.probe_points),
                               budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
                               heldout_materials=heldout, runner=runner, references=references,
-                              heldout_pattern=held_pattern)
+                              heldout_pattern=held_pattern, probes=probes)
     from clothlab.neural.run import write_report_page
 
     latent = None

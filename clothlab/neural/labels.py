@@ -15,6 +15,10 @@ Three implementations; each takes the model objects it uses (this package sits b
 * :class:`FootprintLabels`: a footprint estimator with the signature of
   ``clothlab.models.footprint.footprint_components(texture, params, wi, wo, centre, size, *, method, samples,
   seed, ...)`` (summed-area tables where the box kernel allows them, MC elsewhere), handed in by the caller.
+
+:class:`TextureProbe` has the same call signature but is an *input* of the network, not a label: the
+noise-free texture at the midpoints of an n x n grid over the footprint (the midpoint rule; n = 1 is the
+footprint centre), which locates the yarn highlights the footprint covers (docs/neural.md, "Texture probe").
 """
 
 from __future__ import annotations
@@ -112,3 +116,33 @@ class FootprintLabels:
     def __call__(self, wi, wo, centre, size) -> np.ndarray:
         comps = self.estimate(self.texture, self.params, wi, wo, centre, size, **self.options)
         return _stack(comps, self.component_names)
+
+
+class TextureProbe:
+    """The noise-free texture components at the n x n midpoints of each box footprint, (N, n^2 C): point by
+    point (row-major over (i, j), i along u), each point's C components in ``component_names`` order.  The
+    points are (centre + ((i + 0.5) / n - 0.5) size, ...): n = 1 is the centre alone, n = 2 the centres of
+    the four quarters.  An input of the surrogate (``encoding["probe_points"]``), not a label."""
+
+    def __init__(self, texture, params: dict | None = None, points: int = 1):
+        if int(points) < 1:
+            raise ValueError(f"need at least 1 probe point per side, got {points}")
+        self.texture, self.params, self.points = texture, dict(params or {}), int(points)
+        self.component_names = tuple(texture.component_names)
+
+    def offsets(self) -> np.ndarray:
+        """(n^2, 2) point offsets in units of the footprint side."""
+        t = (np.arange(self.points) + 0.5) / self.points - 0.5
+        return np.stack(np.meshgrid(t, t, indexing="ij"), axis=-1).reshape(-1, 2)
+
+    def __call__(self, wi, wo, centre, size) -> np.ndarray:
+        centre = np.atleast_2d(np.asarray(centre, dtype=np.float64))
+        size = np.atleast_1d(np.asarray(size, dtype=np.float64))
+        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+        n, k = centre.shape[0], self.points * self.points
+        points = centre[:, None, :] + size[:, None, None] * self.offsets()[None]
+        rows = np.repeat(np.arange(n), k)
+        comps = self.texture.components(points[..., 0].reshape(-1), points[..., 1].reshape(-1),
+                                        wi[rows] if wi.shape[0] == n else wi, wo[rows] if wo.shape[0] == n else wo,
+                                        self.params, noise=False, warn=False)
+        return _stack(comps, self.component_names).reshape(n, -1)

@@ -27,11 +27,12 @@ LOG = get_logger("neural.run")
 def run_training(directory, label_sources, materials, data_spec: DataSpec, train_spec: TrainSpec, *,
                  budget_s: float, label_share: float = 0.5, heldout_materials=(), encoding: dict | None = None,
                  resume: bool = False, plots: bool = True, runner=None, references=None,
-                 heldout_pattern=()) -> TrainResult:
+                 heldout_pattern=(), probes=None) -> TrainResult:
     """Label and train within ``budget_s`` CPU seconds; ``label_sources[m]`` and ``materials[m]`` (encoder
     input) describe material m.  Returns the result after writing every file of the directory.  ``runner``
     (:class:`clothlab.parallel.Runner`): the labelling chunks as tasks on its workers, their CPU counted as
-    wall time x workers.  ``references``: per material the reflectance model (residual networks).
+    wall time x workers.  ``references``: per material the reflectance model (residual networks);
+    ``probes``: per material the texture probe (probing networks).
     ``heldout_materials`` / ``heldout_pattern``: material indices never trained on (:func:`.train`)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -58,7 +59,7 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
     encoding = {**(encoding or {}), "data_spec": data_spec.to_dict()}  # the held-out cells follow from it
     result = train(data, names, materials, spec, encoding=encoding, heldout_materials=heldout_materials,
                    checkpoint=directory / "checkpoint.npz", resume=resume, references=references,
-                   heldout_pattern=heldout_pattern)
+                   heldout_pattern=heldout_pattern, probes=probes)
     result.metrics["label_cpu_s"] = label_s
     result.metrics["queries"] = int(data.shape[0])
     save_surrogate(result.surrogate, directory / "surrogate.npz", data_hash=sha, metrics=result.metrics)

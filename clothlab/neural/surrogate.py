@@ -13,6 +13,12 @@ diffuse (:func:`clothlab.neural.losses.encode_targets`).  ``encoding["residual_i
 T(R) to the direction features.  R comes from ``references`` (one label source per trained material, e.g.
 :class:`clothlab.neural.labels.ModelLabels`; attached by the caller, this package does not build models)
 or, for another material, from the ``reference`` values handed to :meth:`Surrogate.query`.
+
+Texture probe (``encoding["probe_points"]`` = n > 0; not in the paper): T of the noise-free texture at the
+n x n midpoints of the footprint (:class:`clothlab.neural.labels.TextureProbe`) is appended to the direction
+features.  It tells the decoder where the yarn highlights lie in the footprint, which the position one-blob
+of 8 bins cannot resolve below ~0.12 tile (docs/neural.md, "Texture probe").  The values come from
+``probes`` (one per trained material, attached by the caller) or from ``probe`` handed to :meth:`query`.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from clothlab.neural.network import SurrogateNetwork
 from clothlab.neural.threads import one_blas_thread
 
 CHUNK = 2048
+OUTPUT_MARGIN = float(np.log(2.0))  # loss-space margin of the output cap above the largest training target
 
 
 @dataclass
@@ -41,6 +48,7 @@ class Surrogate:
     encoding: dict = field(default_factory=dict)
     k: float = K_SPECULAR
     references: list | None = None  # per trained material: (wi, wo, centre, size) -> (N, C) R (residual only)
+    probes: list | None = None  # per trained material: (wi, wo, centre, size) -> (N, n^2 C) texture (probe only)
 
     def __post_init__(self):
         self._specular = is_specular(self.component_names)
@@ -75,6 +83,25 @@ class Surrogate:
     def residual_input(self) -> bool:
         """T(R) is also an input of the angular decoder (files without the setting: False)."""
         return bool(self.encoding.get("residual_input", False))
+
+    @property
+    def probe_points(self) -> int:
+        """Texture probe points per side (0: no probe; files without the setting have none)."""
+        return int(self.encoding.get("probe_points", 0) or 0)
+
+    def transformed_probe(self, centre, size, wi, wo, material=0, probe=None) -> np.ndarray | None:
+        """T of the texture probe (N, n^2 C) float64 (None without a probe): ``probe`` (N, n^2 C) texture values
+        (1/sr) if given, else ``probes[material]`` of a trained row."""
+        n = self.probe_points
+        if not n:
+            return None
+        if probe is None:
+            if not isinstance(material, int | np.integer) or not self.probes:
+                raise ValueError("this surrogate reads a texture probe: attach `probes` "
+                                 "(clothlab.models.neural.model.load_neural) or pass the texture's values as `probe`")
+            probe = self.probes[int(material)](np.atleast_2d(wi), np.atleast_2d(wo), np.atleast_2d(centre),
+                                               np.atleast_1d(size))
+        return encode_targets(np.asarray(probe, dtype=np.float64), np.tile(self._specular, n * n), self.k)
 
     def transformed_reference(self, centre, size, wi, wo, material=0, reference=None) -> np.ndarray | None:
         """T(R) (N, C) float64 of the reflectance model for the queries (None when the network uses no
@@ -111,9 +138,9 @@ class Surrogate:
         """Forget the cached latents and inference plans (after the weights changed)."""
         self._bias, self._plans = None, {}
 
-    def features(self, centre, size, wi, wo, t_reference=None) -> tuple[np.ndarray, np.ndarray]:
+    def features(self, centre, size, wi, wo, t_reference=None, t_probe=None) -> tuple[np.ndarray, np.ndarray]:
         """float32 spatial and direction features of queries (``t_reference``: T(R) (N, C), appended to the
-        direction features when ``residual_input``)."""
+        direction features when ``residual_input``; ``t_probe``: T of the texture probe, appended after it)."""
         dt = self.network.dtype
         centre = np.atleast_2d(centre)
         spatial = spatial_features(centre, np.atleast_1d(size), self.position_bins, self.size_bins)
@@ -125,6 +152,10 @@ class Surrogate:
             if t_reference is None:
                 raise ValueError("this network reads T(R) as an input: give t_reference")
             angular = np.concatenate([angular, t_reference], axis=1)
+        if self.probe_points:
+            if t_probe is None:
+                raise ValueError("this network reads a texture probe as an input: give t_probe")
+            angular = np.concatenate([angular, t_probe], axis=1)
         return spatial.astype(dt), angular.astype(dt)
 
     def latent(self, material) -> np.ndarray:
@@ -133,22 +164,36 @@ class Surrogate:
             return self.network.encode(self.materials[int(material)][None])[0]
         return self.network.encode(np.asarray(material, dtype=np.float64).reshape(1, -1))[0]
 
-    def query_latent(self, z, centre, size, wi, wo, reference=None) -> np.ndarray:
+    def query_latent(self, z, centre, size, wi, wo, reference=None, probe=None) -> np.ndarray:
         """:meth:`query` with the decoder reading latent ``z`` (latent,) directly (Fig. 8's interpolation);
-        a residual network needs the ``reference`` values (N, C) of the material meant."""
+        a residual network needs the ``reference`` values (N, C) of the material meant, a probing one its
+        ``probe`` values."""
         wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
         plan = DecoderPlan(self.network, self.network.fusion_bias(np.asarray(z).reshape(1, -1))[0])
         t_ref = self.transformed_reference(centre, size, wi, wo, material=None, reference=reference)
-        spatial, angular = self.features(centre, size, wi, wo, t_ref)
+        t_probe = self.transformed_probe(centre, size, wi, wo, material=None, probe=probe)
+        spatial, angular = self.features(centre, size, wi, wo, t_ref, t_probe)
         out = np.concatenate([plan(spatial[i:i + CHUNK], angular[i:i + CHUNK]) for i in range(0, len(wi), CHUNK)])
         return self._values(out, t_ref, wi, wo)
 
+    @property
+    def output_cap(self) -> np.ndarray | None:
+        """(C,) upper bound of the loss-space outputs g (``encoding["output_max"]``: the largest T(label) of
+        the training rows per component, recorded by :func:`clothlab.neural.training.train`) plus ln 2, i.e.
+        about twice the largest training label; None for files without it (no cap)."""
+        top = self.encoding.get("output_max")
+        return None if top is None else np.asarray(top, dtype=np.float64) + OUTPUT_MARGIN
+
     def _values(self, out: np.ndarray, t_reference, wi, wo) -> np.ndarray:
-        """Components (N, C) float64 from raw outputs: + T(R) when residual, decoded (eq. 9 inverted),
-        0 for back-facing pairs."""
+        """Components (N, C) float64 from raw outputs: + T(R) when residual, capped (:attr:`output_cap`: an
+        input far outside the training data must not exponentiate to 1e9), decoded (eq. 9 inverted), 0 for
+        back-facing pairs."""
         g = out.astype(np.float64)
         if self.residual:
             g += t_reference
+        cap = self.output_cap
+        if cap is not None:
+            g = np.minimum(g, cap)
         values = decode_outputs(g, self._specular, self.k)
         return np.where(((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))[:, None], values, 0.0)
 
@@ -174,15 +219,17 @@ class Surrogate:
                 out[start:stop] = plan(spatial[start:stop], angular[start:stop])
         return out
 
-    def query(self, centre, size, wi, wo, material=0, chunk: int = CHUNK, reference=None) -> np.ndarray:
+    def query(self, centre, size, wi, wo, material=0, chunk: int = CHUNK, reference=None, probe=None) -> np.ndarray:
         """(N, C) components (1/sr, float64) of box footprints; back-facing pairs give 0.  ``reference``:
-        the reflectance model's (N, C) values for a residual network queried at a material vector."""
+        the reflectance model's (N, C) values for a residual network queried at a material vector; ``probe``:
+        the texture probe's values (N, n^2 C) for a probing network queried at a material vector."""
         wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
         t_ref = self.transformed_reference(centre, size, wi, wo, material, reference)
-        spatial, angular = self.features(centre, size, wi, wo, t_ref)
+        t_probe = self.transformed_probe(centre, size, wi, wo, material, probe)
+        spatial, angular = self.features(centre, size, wi, wo, t_ref, t_probe)
         return self._values(self.outputs(spatial, angular, material, chunk), t_ref, wi, wo)
 
-    def components(self, centre, size, wi, wo, material=0, reference=None) -> dict[str, np.ndarray]:
+    def components(self, centre, size, wi, wo, material=0, reference=None, probe=None) -> dict[str, np.ndarray]:
         """:meth:`query` as a dict of components."""
-        values = self.query(centre, size, wi, wo, material, reference=reference)
+        values = self.query(centre, size, wi, wo, material, reference=reference, probe=probe)
         return {name: values[:, i] for i, name in enumerate(self.component_names)}

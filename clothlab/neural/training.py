@@ -55,6 +55,7 @@ class TrainSpec:
     residual: bool = False
     residual_input: bool = False
     highlight_scale: float | None = None  # 1/sr: losses.highlight_weights (None: eqs. 9-11 as the paper)
+    probe_points: int = 0  # texture probe points per side (surrogate module docstring; 0: none, as the paper)
     batch: int = 4096
     lr: float = 3e-3
     weight_decay: float = 1e-6
@@ -89,39 +90,58 @@ def split_rows(data: np.ndarray, heldout_materials=(), heldout_pattern=()) -> di
             "heldout_materials": np.flatnonzero(unseen), "heldout_pattern": np.flatnonzero(pattern)}
 
 
-def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict, references=None) -> Surrogate:
+def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict, references=None,
+                   probes=None) -> Surrogate:
     """A new (untrained) surrogate of ``spec``; ``references``: per material the reflectance model's label
-    source (needed when ``spec.residual`` or ``spec.residual_input``)."""
+    source (needed when ``spec.residual`` or ``spec.residual_input``); ``probes``: per material the texture
+    probe (:class:`clothlab.neural.labels.TextureProbe`, needed when ``spec.probe_points``)."""
     if (spec.residual or spec.residual_input) and not references:
         raise ValueError("a residual network needs the reflectance model of each material (references)")
+    if spec.probe_points and not probes:
+        raise ValueError("a probing network needs the texture probe of each material (probes)")
     n_spatial = 2 * spec.position_bins + spec.size_bins + n_yarn_features(spec.yarn_bins)
-    n_angular = n_direction_features(spec.half_vector) + (len(names) if spec.residual_input else 0)
+    n_angular = (n_direction_features(spec.half_vector) + (len(names) if spec.residual_input else 0)
+                 + len(names) * spec.probe_points ** 2)
     arch = Architecture(n_material=materials.shape[1], n_spatial=n_spatial, n_angular=n_angular, n_out=len(names),
                         enc_width=spec.enc_width, latent=spec.latent, width=spec.width, spatial=spec.spatial)
     return Surrogate(SurrogateNetwork(arch, seed=spec.seed), tuple(names), np.asarray(materials, dtype=np.float64),
                      {**encoding, "half_vector": spec.half_vector, "position_bins": spec.position_bins,
                       "size_bins": spec.size_bins, "yarn_bins": spec.yarn_bins, "residual": spec.residual,
-                      "residual_input": spec.residual_input, "highlight_scale": spec.highlight_scale},
-                     references=list(references) if references else None)
+                      "residual_input": spec.residual_input, "highlight_scale": spec.highlight_scale,
+                      "probe_points": spec.probe_points},
+                     references=list(references) if references else None, probes=list(probes) if probes else None)
+
+
+def _per_row(transform, data: np.ndarray, width: int) -> np.ndarray:
+    """``transform(centre, size, wi, wo, material)`` (n, width) of every row of ``data``, material by
+    material, as float32 (a constant of each row, computed once before the first step)."""
+    q = np.asarray(data[:, :N_QUERY])
+    out = np.empty((q.shape[0], width), dtype=np.float32)
+    for m in np.unique(q[:, 0]).astype(np.int64):
+        sel = q[:, 0] == m
+        out[sel] = transform(q[sel, 1:3], q[sel, 3], q[sel, 4:7], q[sel, 7:10], int(m))
+    return out
 
 
 def transformed_references(surrogate: Surrogate, data: np.ndarray) -> np.ndarray | None:
     """T(R) (rows, C) float32 of every row of ``data`` (each by its material's reference), or None."""
     if not (surrogate.residual or surrogate.residual_input):
         return None
-    q = np.asarray(data[:, :N_QUERY])
-    out = np.empty((q.shape[0], len(surrogate.component_names)), dtype=np.float32)
-    for m in np.unique(q[:, 0]).astype(np.int64):
-        sel = q[:, 0] == m
-        out[sel] = surrogate.transformed_reference(q[sel, 1:3], q[sel, 3], q[sel, 4:7], q[sel, 7:10], int(m))
-    return out
+    return _per_row(surrogate.transformed_reference, data, len(surrogate.component_names))
 
 
-def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray, t_reference=None):
+def transformed_probes(surrogate: Surrogate, data: np.ndarray) -> np.ndarray | None:
+    """T of the texture probe (rows, n^2 C) float32 of every row of ``data``, or None without a probe."""
+    if not surrogate.probe_points:
+        return None
+    return _per_row(surrogate.transformed_probe, data, len(surrogate.component_names) * surrogate.probe_points ** 2)
+
+
+def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray, t_reference=None, t_probe=None):
     """Material index, features and loss-space targets of a batch; with a residual network the targets are
     T(label) - T(R), the part the network's outputs must supply (g_pred = T(R) + net, eqs. 9-11)."""
     q = np.asarray(rows[:, :N_QUERY])
-    spatial, angular = surrogate.features(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10], t_reference)
+    spatial, angular = surrogate.features(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10], t_reference, t_probe)
     targets = encode_targets(np.asarray(rows[:, N_QUERY:]), specular)
     if surrogate.residual:
         targets = targets - t_reference
@@ -151,14 +171,15 @@ def _load_checkpoint(path: Path, surrogate, optimizer):
 
 def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, encoding: dict | None = None,
           heldout_materials=(), checkpoint: Path | None = None, resume: bool = False,
-          references=None, heldout_pattern=()) -> TrainResult:
+          references=None, heldout_pattern=(), probes=None) -> TrainResult:
     """Train a surrogate on ``data`` (rows of :data:`clothlab.neural.data.COLUMNS` + components ``names``)
     for the materials whose encoder inputs are ``materials`` (M, n_material); ``references``: per material
-    the reflectance model's label source (residual networks).  ``heldout_materials`` / ``heldout_pattern``:
+    the reflectance model's label source (residual networks), ``probes`` its texture probe (probing
+    networks).  ``heldout_materials`` / ``heldout_pattern``:
     material indices never trained on, scored as ``metrics["heldout_materials"]`` / ``["heldout_pattern"]``."""
     if spec.steps is None and spec.budget_s is None:
         raise ValueError("give steps or budget_s")
-    surrogate = make_surrogate(spec, materials, names, encoding or {}, references)
+    surrogate = make_surrogate(spec, materials, names, encoding or {}, references, probes)
     specular = is_specular(names)
     weights = column_weights(specular).astype(np.float32)
     optimizer = Adam(surrogate.network.params(), lr=spec.lr, weight_decay=spec.weight_decay)
@@ -173,7 +194,9 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
     rng = np.random.default_rng([spec.seed, step])
     net = surrogate.network
     start = time.process_time() - cpu_used
-    t_reference = transformed_references(surrogate, data)  # a constant per row (inside the CPU budget)
+    t_reference = transformed_references(surrogate, data)  # constants per row (inside the CPU budget)
+    t_probe = transformed_probes(surrogate, data)
+    surrogate.encoding["output_max"] = output_max(data, train_rows, specular)
 
     def fraction() -> float:
         parts = []
@@ -190,7 +213,8 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
             pick = np.sort(rng.choice(train_rows, size=min(spec.batch, train_rows.size), replace=False))
             rows = data[pick]
             index, spatial, angular, targets = _batch(surrogate, rows, specular,
-                                                      None if t_reference is None else t_reference[pick])
+                                                      None if t_reference is None else t_reference[pick],
+                                                      None if t_probe is None else t_probe[pick])
             lr = step_schedule(spec.lr, fraction(), spec.milestones, spec.gamma)
             out = net.forward(surrogate.materials, index, spatial, angular, train=True)
             loss, d_out = loss_and_gradient(out, targets, weights,
@@ -217,6 +241,16 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         if split["heldout_pattern"].size:
             metrics["far_view_heldout_pattern"] = far_view_error(surrogate, data, split["heldout_pattern"])
     return TrainResult(surrogate, curve, metrics)
+
+
+def output_max(data: np.ndarray, rows: np.ndarray, specular: np.ndarray, block: int = 262_144) -> list[float]:
+    """Per component the largest loss-space target T(label) (eqs. 9-11) over ``rows`` of ``data``: the
+    surrogate's output cap (:attr:`clothlab.neural.surrogate.Surrogate.output_cap`)."""
+    top = np.full(specular.shape, -np.inf)
+    for start in range(0, rows.size, block):
+        labels = np.asarray(data[np.sort(rows[start:start + block]), N_QUERY:])
+        top = np.maximum(top, encode_targets(labels, specular).max(axis=0))
+    return [float(t) for t in top]
 
 
 def far_view_error(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, min_size: float = 4.0) -> dict:

@@ -71,15 +71,20 @@ def load_neural(path, weave=None):
     """:func:`clothlab.neural.serialise.load_surrogate` with, for a residual network, the reflectance model
     of each trained material attached (``references``), each on its own weave (``encoding["materials_weave"]``
     of a network over several weaves, unless ``weave`` is given); returns (surrogate, sidecar)."""
-    from clothlab.neural.labels import ModelLabels
+    from clothlab.neural.labels import ModelLabels, TextureProbe
 
     surrogate, sidecar = load_surrogate(Path(path))
-    if surrogate.residual or surrogate.residual_input:
+    if surrogate.residual or surrogate.residual_input or surrogate.probe_points:
         enc = surrogate.encoding
         sets = enc.get("materials_params", [enc.get("params", {})])
         owners = (enc.get("materials_weave") if weave is None else None) or [None] * len(sets)
         models = {name: reference_model(sidecar, weave, name) for name in set(owners)}
-        surrogate.references = [ModelLabels(models[name], {k: float(v) for k, v in q.items()})
+        sets = [{k: float(v) for k, v in q.items()} for q in sets]
+        if surrogate.residual or surrogate.residual_input:
+            surrogate.references = [ModelLabels(models[name], q) for name, q in zip(owners, sets, strict=True)]
+        if surrogate.probe_points:
+            textures = {name: model.texture() for name, model in models.items()}
+            surrogate.probes = [TextureProbe(textures[name], q, surrogate.probe_points)
                                 for name, q in zip(owners, sets, strict=True)]
     return surrogate, sidecar
 
@@ -136,6 +141,7 @@ class NeuralModel(Model):
         self._materials = [{k: float(v) for k, v in q.items()}
                            for q in self._encoding.get("materials_params", [self._trained])]
         self._reference = None
+        self._probe_texture = None
         self._pattern = pattern_descriptor(weave, self._encoding.get("pattern_order", 2))  # the encoder's pattern part
 
     @classmethod
@@ -203,6 +209,10 @@ class NeuralModel(Model):
         network (g = T(R) + net, docs/neural.md) evaluates R of :meth:`exact_model` at each trial."""
         from clothlab.neural.material_fit import MaterialObjective, unit_to_parameter
 
+        if self.surrogate.probe_points:
+            raise ConfigError("the fast material fit cannot take a network trained with --probe-points (the texture "
+                              "probe is a decoder input whose derivative the network does not return); fit the exact "
+                              f"kind {self.target} instead", field="model.options.weights")
         if self.surrogate.residual_input:
             raise ConfigError("the fast material fit cannot take a network trained with --residual-input (T(R) "
                               "is a decoder input whose derivative the network does not return); fit the exact "
@@ -255,7 +265,10 @@ class NeuralModel(Model):
         if (reference is None and not isinstance(material, int)
                 and (self.surrogate.residual or self.surrogate.residual_input)):
             reference = self.surrogate_reference(params)(wi, wo, centre, size)
-        values = self.surrogate.query(centre, size, wi, wo, material=material, reference=reference)
+        probe = None
+        if self.surrogate.probe_points and not isinstance(material, int):
+            probe = self.surrogate_probe(params)(wi, wo, centre, size)
+        values = self.surrogate.query(centre, size, wi, wo, material=material, reference=reference, probe=probe)
         return {name: values[:, i] for i, name in enumerate(self.component_names)}
 
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
@@ -271,6 +284,15 @@ class NeuralModel(Model):
         from clothlab.neural.labels import ModelLabels
 
         return ModelLabels(self.exact_model(), self.resolve(params))
+
+    def surrogate_probe(self, params: dict | None):
+        """The texture probe at ``params`` (:class:`clothlab.neural.labels.TextureProbe` of the exact model's
+        texture), the input of a probing network (``encoding["probe_points"]``) at a material it did not store."""
+        from clothlab.neural.labels import TextureProbe
+
+        if self._probe_texture is None:
+            self._probe_texture = self.exact_model().texture()
+        return TextureProbe(self._probe_texture, self.resolve(params), self.surrogate.probe_points)
 
     def texture(self, *, seed: int = 0):
         return NeuralTexture(self)
