@@ -327,8 +327,10 @@ def run(args) -> int:
     for key, what in (("heldout_pairs", "held-out pairs"), ("heldout_materials", "unseen materials"),
                       ("heldout_pattern", "unseen pattern")):
         for b in m.get(key, []):
+            interval = b.get("relative_rmse_interval")
+            spread = f", 90 % bootstrap {interval[0]:.3f}-{interval[1]:.3f}" if interval else ""
             print(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
-                  f"{b['relative_rmse']:.3f} ({b['rows']} queries)")
+                  f"{b['relative_rmse']:.3f} ({b['rows']} queries{spread})")
     if m.get("far_view", {}).get("rows"):
         print(f"  far view (>= 4 tiles, held-out pairs): {m['far_view']['relative_rms_vs_reflectance']:.3f} "
               "relative RMS from the reflectance model")

@@ -14,6 +14,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import ConfigError
 from clothlab.neural.data import DataSpec, assemble, generate
@@ -90,12 +92,23 @@ def write_plots(directory: Path, result: TrainResult) -> None:
         bins = result.metrics.get(key)
         if bins:
             centre = [(b["size_lo"] * b["size_hi"]) ** 0.5 for b in bins]
-            ax.loglog(centre, [b["relative_rmse"] for b in bins], marker="o", label=key.replace("_", " "))
+            value = np.array([b["relative_rmse"] for b in bins])
+            interval = np.array([b.get("relative_rmse_interval") or [v, v] for b, v in zip(bins, value, strict=True)])
+            ax.errorbar(centre, value, yerr=np.abs(interval.T - value), marker="o", capsize=2,
+                        label=key.replace("_", " "))
+    ax.set(xscale="log", yscale="log")
     ax.axhline(0.25, color="grey", lw=0.8, ls="--")
-    ax.set(xlabel="footprint size (tiles)", ylabel="relative RMSE of f", title="error by footprint size")
+    ax.set(xlabel="footprint size (tiles)", ylabel="relative RMSE of f (90 % bootstrap)",
+           title="error by footprint size")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(directory / "heldout.png", dpi=110)
+
+
+def _interval(row: dict) -> str:
+    """A bin's bootstrap interval of the relative RMSE as text ('-' for metrics recorded without it)."""
+    interval = row.get("relative_rmse_interval")
+    return f"{interval[0]:.3f}-{interval[1]:.3f}" if interval else "-"
 
 
 def write_report_page(directory: Path, metrics: dict, *, latent: dict | None = None) -> Path:
@@ -116,9 +129,10 @@ def write_report_page(directory: Path, metrics: dict, *, latent: dict | None = N
         bins = metrics.get(key)
         if bins:
             rows = "".join(f"<tr><td>{b['size_lo']:g}-{b['size_hi']:g}</td><td>{b['relative_rmse']:.3f}</td>"
-                           f"<td>{b['mse']:.3g}</td><td>{b['rows']}</td></tr>" for b in bins)
+                           f"<td>{_interval(b)}</td><td>{b['mse']:.3g}</td><td>{b['rows']}</td></tr>" for b in bins)
             parts.append(f"<h3>{html.escape(title)}</h3><table border=1 cellpadding=3><tr><th>footprint (tiles)"
-                         f"</th><th>relative RMSE of f</th><th>MSE</th><th>queries</th></tr>{rows}</table>")
+                         "</th><th>relative RMSE of f</th><th>90 % bootstrap interval</th><th>MSE</th><th>queries"
+                         f"</th></tr>{rows}</table>")
     if latent is not None:
         parts.append("<h2>Latent interpolation (Fig. 8)</h2><img src='latent.png'><p>Decoder at z(t) = (1 - t) "
                      "z_a + t z_b, the surrogate at the interpolated material vector, and the model at the "

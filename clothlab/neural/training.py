@@ -286,5 +286,21 @@ def errors_by_size(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, bin
             continue
         err = np.sum(np.square(f_pred[sel] - f_true[sel]))
         out.append({"size_lo": lo, "size_hi": hi, "rows": int(sel.sum()), "mse": float(err / sel.sum()),
-                    "relative_rmse": float(np.sqrt(err / max(np.sum(np.square(f_true[sel])), 1e-300)))})
+                    "relative_rmse": float(np.sqrt(err / max(np.sum(np.square(f_true[sel])), 1e-300))),
+                    "relative_rmse_interval": relative_rmse_interval(f_pred[sel], f_true[sel])})
     return out
+
+
+def relative_rmse_interval(pred: np.ndarray, truth: np.ndarray, resamples: int = 400, level: float = 0.9,
+                           seed: int = 0) -> list[float]:
+    """Bootstrap percentile interval (``level``, queries resampled with replacement, seeded) of the relative
+    RMSE sqrt(sum (pred - truth)^2 / sum truth^2).  A few strong highlights carry most of a small-footprint
+    bin's error (docs/neural.md), so the bin's figure is uncertain by far more than 1 / sqrt(rows)."""
+    e2, f2 = np.square(np.asarray(pred) - np.asarray(truth)), np.square(np.asarray(truth))
+    rng = np.random.default_rng(seed)
+    stats = np.empty(resamples)
+    for i in range(resamples):
+        pick = rng.integers(0, e2.size, e2.size)
+        stats[i] = np.sqrt(e2[pick].sum() / max(f2[pick].sum(), 1e-300))
+    tail = 50.0 * (1.0 - level)
+    return [float(x) for x in np.percentile(stats, [tail, 100.0 - tail])]

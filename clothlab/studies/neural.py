@@ -168,6 +168,7 @@ def heldout_errors(weights, fresh) -> dict:
     sum of the components) by bin, that of the reflectance model, and the far view (>= 4 tiles): relative RMS
     difference between surrogate and reflectance model."""
     from clothlab.models.neural.model import load_neural
+    from clothlab.neural.training import relative_rmse_interval
 
     surrogate, _ = load_neural(weights)
     rows, far = [], None
@@ -179,6 +180,7 @@ def heldout_errors(weights, fresh) -> dict:
         f = labels.sum(axis=1)
         pred = surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10]).sum(axis=1)
         rows.append({"size_lo": lo, "size_hi": hi, "queries": int(len(q)), "surrogate": rel(pred, f),
+                     "surrogate_interval": relative_rmse_interval(pred, f),
                      "reflectance_model": rel(reflectance.sum(axis=1), f)})
         if lo >= 4.0:
             far = rel(pred, reflectance.sum(axis=1))
