@@ -345,9 +345,7 @@ class _Validator:
                                     "cv_scheme", "cv_refit", "loss", "loss_scale", "valid_geometry",
                                     "orientation_average"))
         table = self.declared(model.kind, model.options)
-        cls = model_class(model.kind)
-        default_free = cls.declared_free(model.options) if hasattr(cls, "declared_free") else cls.default_free
-        free = self.free(f.get("free", list(default_free)), table)
+        free = self.free(f.get("free", list(default_free(model_class(model.kind), model.options))), table)
         bounds = self.bounds(f.get("bounds", {}) or {}, table, free, model.params)
         for name in free:  # explicit bounds were checked against the start above; the declared ones here
             if table is not None and name not in bounds and name in model.params:
@@ -504,6 +502,14 @@ class _Validator:
                 at = self.at(p + (key,))
                 dirs[key] = self.resolve(as_str(o[key], at), at)
         return OutputConfig(**dirs)
+
+
+def default_free(cls, options: dict | None = None) -> tuple:
+    """The parameters a fit of model class ``cls`` frees when fabric.yaml names none: ``cls.declared_free(
+    options)`` where the class has it (kind neural: those its network was trained over, read from
+    ``options["weights"]``), else ``cls.default_free``.  Shared by config validation and ``clothlab select``."""
+    declared = getattr(cls, "declared_free", None)
+    return tuple(declared(options) if declared is not None else cls.default_free)
 
 
 def _check_parameter(table, name: str, value: float, at: Location) -> float:

@@ -13,9 +13,10 @@ Candidates (:func:`candidates`) are the product of
   starts (:func:`orientation_scan`; the objective is multimodal in the orientation, and a reduced budget
   does not find the basin by itself).  Isotropic kinds get one start and do not free it.
 
-The free parameters of a candidate are fabric.yaml's ``fit.free`` that the candidate's kind declares (its
-``default_free`` when none is), its diffuse part's defaults (``sigma``) and ``orientation``; the starts are
-``model.params`` restricted the same way, else the weave's values.
+The free parameters of a candidate are fabric.yaml's ``fit.free`` that the candidate's kind declares (when
+none is, its specular part's defaults by config validation's rule, :func:`clothlab.config.validate.default_free`:
+for kind neural the parameters its network was trained over), its diffuse part's defaults (``sigma``) and
+``orientation``; the starts are ``model.params`` restricted the same way, else the weave's values.
 
 Each candidate is one independent task (:func:`fit_candidate`: a :class:`CandidateTask` in, a
 :class:`CandidateResult` out, nothing shared), so a task scheduler can distribute the list.  A candidate is
@@ -49,6 +50,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from clothlab.config.validate import default_free
 from clothlab.fit.periodic import wrap
 from clothlab.models.base import ORIENTATION
 from clothlab.models.registry import model_class
@@ -184,10 +186,13 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
     and bounds (``orientation``: the start, the box one period about it); budget ``max_evals`` (one start,
     polish max_evals // 4) unless ``optimizer`` is given; CV ``cv_folds``; no posterior unless given."""
     cls = model_class(candidate.kind)
+    specular = getattr(cls, "specular_class", cls)  # a composite passes the options to its specular part
+    options = dict(config.model.options) if cls.kind == config.model.kind or \
+        specular is model_class(config.model.kind) else {}
     table = cls.declared_parameters(config.model.options if cls.kind == config.model.kind else {})
     free = [n for n in config.fit.free if n in table and n != ORIENTATION]
-    if not free:
-        free = list(getattr(cls, "specular_class", cls).default_free)
+    if not free:  # config validation's rule (kind neural: the parameters its network was trained over)
+        free = list(default_free(specular, options))
     diffuse = getattr(cls, "diffuse_class", None)  # a composite's diffuse term brings its own (sigma)
     free += [n for n in (diffuse.default_free if diffuse else ()) if n not in free and n in table]
     params = {k: v for k, v in config.model.params.items() if k in table and k != ORIENTATION}
@@ -201,8 +206,6 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
         params.update({k: float(v) for k, v in start.items() if k in free})
     if optimizer is None:
         optimizer = replace(config.fit.optimizer, max_evals=int(max_evals), starts=1, polish=int(max_evals) // 4)
-    options = dict(config.model.options) if cls.kind == config.model.kind or \
-        getattr(cls, "specular_class", None) is model_class(config.model.kind) else {}
     model = replace(config.model, kind=candidate.kind, weave=candidate.weave, params=params, options=options)
     fit = replace(config.fit, free=tuple(free), bounds=bounds, optimizer=optimizer, posterior=posterior,
                   cv_folds=int(cv_folds))
