@@ -99,3 +99,30 @@ def test_fast_fit_of_the_noisy_table_recovers_the_truth_and_the_shipped_fit():
         assert abs(result.params[k] - truth[k]) < 3 * stderr[k], k
         assert result.params[k] == pytest.approx(shipped["parameters"][k]["value"], rel=1e-5), k
         assert shipped["parameters"][k]["truth"] == pytest.approx(truth[k], rel=1e-15)
+
+
+def test_the_shipped_fit_directory_keeps_its_network_and_evaluates_after_a_move(tmp_path):
+    """fit.json names the copy of the weights in the fit directory (no machine path), the config its path
+    relative to the yaml; the moved directory's model reads its own copy and reproduces the saved predictions."""
+    import shutil
+
+    import numpy as np
+
+    from clothlab.fit.store import load_fitted
+    from clothlab.frames import spherical_to_vector
+    from clothlab.models.components import combine
+
+    src = ROOT / "fits" / "surface-family"
+    fit = json.loads((src / "fit.json").read_text())
+    assert fit["model"]["options"]["weights"] == "weights.npz"
+    assert not Path(fit["config"]["model"]["options"]["weights"]).is_absolute()
+    moved = tmp_path / "moved"
+    shutil.copytree(src, moved)
+    model, params, coefficients, channels = load_fitted(moved)
+    assert Path(model.options["weights"]).parent == moved
+    table = np.genfromtxt(moved / "predictions.csv", delimiter=",", names=True)
+    wi = spherical_to_vector(table["theta_i"], table["phi_i"])
+    wo = spherical_to_vector(table["theta_o"], table["phi_o"])
+    predicted = combine(model.components(wi, wo, params), coefficients)
+    for i, c in enumerate(channels):
+        np.testing.assert_allclose(predicted[:, i], table[f"model_{c}"], rtol=1e-6)

@@ -197,7 +197,7 @@ class Config:
                 "weave": weave,
                 "quadrature": {"rule": model.quadrature.rule, "nodes": model.quadrature.nodes},
                 "params": dict(model.params),
-                "options": dict(model.options),
+                "options": self._relative_options(),
             },
             "fit": {
                 "free": list(fit.free),
@@ -234,6 +234,16 @@ class Config:
         """sha256 (hex) of the canonical JSON of :meth:`canonical` (sorted keys, no whitespace)."""
         text = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":"), allow_nan=False)
         return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+    def _relative_options(self) -> dict:
+        """The model options, file options (the class's ``path_options``) relative to ``base_dir``."""
+        from clothlab.models.registry import model_class
+
+        options = dict(self.model.options)
+        for name in getattr(model_class(self.model.kind), "path_options", ()):
+            if options.get(name):
+                options[name] = self._relative(Path(options[name]))
+        return options
 
     def _relative(self, path: Path) -> str:
         return Path(os.path.relpath(path, self.base_dir)).as_posix()

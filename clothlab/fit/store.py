@@ -25,6 +25,7 @@ import io
 import json
 import math
 import platform
+import shutil
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -36,7 +37,7 @@ from clothlab.atomic import atomic_directory
 from clothlab.errors import InputError, ResultError
 from clothlab.fit.fitreport import Reportable
 from clothlab.frames import spherical_to_vector
-from clothlab.models.registry import build_model
+from clothlab.models.registry import build_model, model_class
 from clothlab.strict import load_json_file
 from clothlab.weave.wvformat import format_wv, parse_wv
 
@@ -91,10 +92,14 @@ def _json_safe(value):
 
 
 def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, trace: dict, config_text: str | None,
-                        weave_text: str | None = None, extra: dict | None = None, force: bool = False) -> Path:
-    """Write the files of a fit result into ``dest`` atomically; refuses an existing dest without ``force``."""
+                        weave_text: str | None = None, extra: dict | None = None, copies: dict | None = None,
+                        force: bool = False) -> Path:
+    """Write the files of a fit result into ``dest`` atomically; refuses an existing dest without ``force``.
+    ``copies``: {name in dest: source file} copied byte for byte (a model's input files, e.g. its weights)."""
     dest = Path(dest)
     with atomic_directory(dest, force=force) as tmp:
+        for name, source in (copies or {}).items():
+            shutil.copyfile(source, tmp / name)
         (tmp / "fit.json").write_text(json.dumps(_json_safe(fit), indent=2, allow_nan=False) + "\n")
         for name, table in (("predictions.csv", predictions), ("slices.csv", slices), ("trace.csv", trace)):
             (tmp / name).write_text(_csv_text(list(table), [np.asarray(v).tolist() for v in table.values()]))
@@ -146,6 +151,9 @@ def load_fitted(fit_dir):
             raise KeyError("coefficients and measurement.channels must not be empty")
         # the model's constructor options as fitted (e.g. kang: alternating, tile_nodes)
         options = dict(fit["model"].get("options") or (fit.get("config") or {}).get("model", {}).get("options") or {})
+        for name in getattr(model_class(kind), "path_options", ()):  # copies in the fit directory
+            if options.get(name) and not Path(options[name]).is_absolute():
+                options[name] = str(fit_dir / options[name])
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise InputError(f"fit.json lacks or mangles a required entry ({exc})", path=fit_dir / "fit.json") from None
     model = build_model(kind, parse_wv(weave_path), (q.get("rule", "trapezoid"), int(q.get("nodes", 11))), **options)
@@ -193,7 +201,7 @@ def fit_summary(result) -> dict:
         "config_hash": cfg.hash,
         "config": cfg.canonical(),
         "model": {"kind": cfg.model.kind, "weave": cfg.canonical()["model"]["weave"],
-                  **problem.model.settings()},  # the quadrature of integrating models, else the options
+                  **_settings_with_copies(problem.model)},  # the quadrature of integrating models, else the options
         "measurement": {"path": cfg.canonical()["measurement"]["path"], "n": m.n, "channels": channels,
                         "provenance": {k: v for k, v in (m.provenance or {}).items()}},
         "parameters": _parameter_entries(result),
@@ -336,6 +344,29 @@ def _slice_directions(slices: dict):
             spherical_to_vector(np.asarray(slices["theta_o"]), np.asarray(slices["phi_o"])))
 
 
+def option_files(model) -> dict[str, list[Path]]:
+    """{option: the files it names} of a model's file options (``path_options``, e.g. kind neural's
+    ``weights``: the .npz and its .json sidecar), which a fit directory keeps copies of."""
+    options = dict(getattr(model, "options", {}) or {})
+    out = {}
+    for name in getattr(model, "path_options", ()):
+        if options.get(name):
+            path = Path(options[name])
+            out[name] = [path] + ([path.with_suffix(".json")] if path.suffix == ".npz" else [])
+    return out
+
+
+def _settings_with_copies(model) -> dict:
+    """``model.settings()`` with each file option naming its copy in the fit directory (``<option>.<ext>``),
+    so fit.json holds no machine-specific path and the directory evaluates anywhere."""
+    settings = model.settings()
+    files = option_files(model)
+    if files:
+        settings = {**settings, "options": {**settings.get("options", {}),
+                                            **{name: f"{name}{paths[0].suffix}" for name, paths in files.items()}}}
+    return settings
+
+
 def save_fit(result, *, force: bool = False, fits_dir=None) -> Path:
     """Write fits/<name>/ for ``result`` (a FitResult) under ``fits_dir`` (default: the configuration's
     ``output.fits``); returns the directory.  Removes the posterior checkpoint the run kept."""
@@ -348,7 +379,9 @@ def save_fit(result, *, force: bool = False, fits_dir=None) -> Path:
     weave = result.problem.model.fitted_weave(result.params)
     out = write_fit_directory(dest, fit=fit_summary(result), predictions=predictions,
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
-                               weave_text=format_wv(weave), extra=extra, force=force)
+                               weave_text=format_wv(weave), extra=extra, force=force,
+                               copies={f"{name}{p.suffix}": p
+                                       for name, paths in option_files(result.problem.model).items() for p in paths})
     if result.posterior is not None:  # the fit directory now holds the result: the checkpoint has served
         checkpoint_path(cfg, fits_dir).unlink(missing_ok=True)
     return out
