@@ -44,6 +44,7 @@ def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 2
     from clothlab.models.neural.model import load_neural, reference_model
     from clothlab.neural.data import DataSpec, heldout_queries
     from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+    from clothlab.neural.training import relative_rmse_interval
 
     start = time.process_time()
     surrogate, sidecar = load_neural(weights)
@@ -73,7 +74,9 @@ def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 2
                 kept.append((owners[m], q[:, 3], f_true[-1], f_pred[-1], f_model[-1]))
             f_true, f_pred, f_model = (np.concatenate(x) for x in (f_true, f_pred, f_model))
             rows.append({"size_lo": lo, "size_hi": hi, "queries": int(f_true.size),
-                         "surrogate": _relative(f_pred, f_true), "reflectance_model": _relative(f_model, f_true)})
+                         "surrogate": _relative(f_pred, f_true),
+                         "surrogate_interval": relative_rmse_interval(f_pred, f_true),
+                         "reflectance_model": _relative(f_model, f_true)})
             if lo >= 4.0:
                 far.append(_relative(f_pred, f_model))
         out[group] = rows
