@@ -99,6 +99,7 @@ def write_fit_directory(dest, *, fit: dict, predictions: dict, slices: dict, tra
     dest = Path(dest)
     with atomic_directory(dest, force=force) as tmp:
         for name, source in (copies or {}).items():
+            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(source, tmp / name)
         (tmp / "fit.json").write_text(json.dumps(_json_safe(fit), indent=2, allow_nan=False) + "\n")
         for name, table in (("predictions.csv", predictions), ("slices.csv", slices), ("trace.csv", trace)):
@@ -356,14 +357,19 @@ def option_files(model) -> dict[str, list[Path]]:
     return out
 
 
+def _copy_name(option: str, path: Path) -> str:
+    """Where a fit directory keeps the copy of a file option's file: ``<option>/<file name>``."""
+    return f"{option}/{path.name}"
+
+
 def _settings_with_copies(model) -> dict:
-    """``model.settings()`` with each file option naming its copy in the fit directory (``<option>.<ext>``),
+    """``model.settings()`` with each file option naming its copy in the fit directory (:func:`_copy_name`),
     so fit.json holds no machine-specific path and the directory evaluates anywhere."""
     settings = model.settings()
     files = option_files(model)
     if files:
         settings = {**settings, "options": {**settings.get("options", {}),
-                                            **{name: f"{name}{paths[0].suffix}" for name, paths in files.items()}}}
+                                            **{name: _copy_name(name, paths[0]) for name, paths in files.items()}}}
     return settings
 
 
@@ -380,7 +386,7 @@ def save_fit(result, *, force: bool = False, fits_dir=None) -> Path:
     out = write_fit_directory(dest, fit=fit_summary(result), predictions=predictions,
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
                                weave_text=format_wv(weave), extra=extra, force=force,
-                               copies={f"{name}{p.suffix}": p
+                               copies={_copy_name(name, p): p
                                        for name, paths in option_files(result.problem.model).items() for p in paths})
     if result.posterior is not None:  # the fit directory now holds the result: the checkpoint has served
         checkpoint_path(cfg, fits_dir).unlink(missing_ok=True)
