@@ -26,6 +26,10 @@ TEXTURE_KINDS = [kind for kind in MODEL_KINDS if model_class(kind).has_texture]
 WEAVE = "cotton-denim"  # a 3 x 6 twill: asymmetric, yarn boundaries at thirds and sixths of the tile
 SHIPPED_ONLY = {"neural": "silk-shantung"}  # a trained surrogate exists only for the weaves it was trained on
 LEARNED = {"neural"}  # fitted to labels, so reciprocal only to its training error
+# a learned texture runs its network in float32: one query's value depends on the other rows of its batch at
+# the float32 rounding of the network's output (BLAS kernels block by row count; measured 2.6e-10 relative on
+# the silk-shantung network on one machine, 0 on another), not to float64 round-off
+BATCH_RTOL = {"neural": 1e-6}
 
 
 def texture_of(kind, weave=WEAVE):
@@ -90,7 +94,9 @@ def test_footprint_components_sat_and_mc_routes(kind):
     got = footprint_components(texture, params, wi[pair], wo[pair], centre, size, resolution=64)
     expected = FootprintTable.build(texture, params, wi, wo, 64).query(centre, size, pair=pair)
     for name in expected:
-        np.testing.assert_allclose(got[name], expected[name], rtol=1e-12, atol=1e-15)
+        # learned: also of the table's scale (a box sum is a difference of cumulative sums)
+        atol = BATCH_RTOL[kind] * float(np.max(np.abs(expected[name]))) if kind in BATCH_RTOL else 1e-15
+        np.testing.assert_allclose(got[name], expected[name], rtol=BATCH_RTOL.get(kind, 1e-12), atol=atol)
     a = footprint_components(texture, params, wi[pair], wo[pair], centre, size, method="mc", samples=16, seed=3)
     b = footprint_components(texture, params, wi[pair], wo[pair], centre, size, method="mc", samples=16, seed=3)
     c = footprint_components(texture, params, wi[pair], wo[pair], centre, size, method="mc", samples=16, seed=4)
@@ -152,7 +158,8 @@ def test_whole_tile_footprints_equal_the_tile_average(kind):
         direct = texture.components(u.ravel(), v.ravel(), np.broadcast_to(wi[k], (u.size, 3)),
                                     np.broadcast_to(wo[k], (u.size, 3)), params, noise=False)
         for name, value in direct.items():
-            np.testing.assert_allclose(got[name][k], value.mean(), rtol=1e-9, atol=1e-12 * np.abs(value).max())
+            np.testing.assert_allclose(got[name][k], value.mean(), rtol=BATCH_RTOL.get(kind, 1e-9),
+                                       atol=1e-12 * np.abs(value).max())
 
 
 def test_im_tile_average_through_the_footprint_path_is_the_reflectance_model():
