@@ -420,3 +420,30 @@ def test_residual_loss_gradient_matches_central_differences_with_the_reference_i
             p[i] = keep
             numeric[i] = (up - down) / (2 * h)
         assert np.linalg.norm(grads[name] - numeric) <= 1e-5 * max(np.linalg.norm(numeric), 1e-12), name
+
+
+def test_bootstrap_interval_of_the_relative_rmse_brackets_it_and_shows_a_heavy_tail():
+    """relative_rmse_interval: seeded, contains the point estimate, narrows ~1 / sqrt(n) for homogeneous
+    errors, and is wide when one query carries most of the error (the small-footprint bins' case)."""
+    from clothlab.neural.training import relative_rmse_interval
+
+    rng = np.random.default_rng(0)
+
+    def rel(p, t):
+        return np.sqrt(np.sum((p - t) ** 2) / np.sum(t ** 2))
+
+    widths = []
+    for n in (400, 6400):
+        truth = rng.uniform(0.5, 1.5, n)
+        pred = truth * (1 + 0.2 * rng.normal(size=n))
+        lo, hi = relative_rmse_interval(pred, truth)
+        assert lo < rel(pred, truth) < hi
+        assert relative_rmse_interval(pred, truth) == [lo, hi]
+        widths.append(hi - lo)
+    assert 2.5 < widths[0] / widths[1] < 6.5  # sqrt(16) = 4
+    truth = np.ones(2000)
+    truth[0] = 100.0
+    pred = truth * 1.05
+    pred[0] = 40.0  # one highlight carries ~95 % of the squared error
+    lo, hi = relative_rmse_interval(pred, truth)
+    assert lo < 0.1 and hi > 0.5
