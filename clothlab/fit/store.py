@@ -345,18 +345,6 @@ def _slice_directions(slices: dict):
             spherical_to_vector(np.asarray(slices["theta_o"]), np.asarray(slices["phi_o"])))
 
 
-def option_files(model) -> dict[str, list[Path]]:
-    """{option: the files it names} of a model's file options (``path_options``, e.g. kind neural's
-    ``weights``: the .npz and its .json sidecar), which a fit directory keeps copies of."""
-    options = dict(getattr(model, "options", {}) or {})
-    out = {}
-    for name in getattr(model, "path_options", ()):
-        if options.get(name):
-            path = Path(options[name])
-            out[name] = [path] + ([path.with_suffix(".json")] if path.suffix == ".npz" else [])
-    return out
-
-
 def _copy_name(option: str, path: Path) -> str:
     """Where a fit directory keeps the copy of a file option's file: ``<option>/<file name>``."""
     return f"{option}/{path.name}"
@@ -366,7 +354,7 @@ def _settings_with_copies(model) -> dict:
     """``model.settings()`` with each file option naming its copy in the fit directory (:func:`_copy_name`),
     so fit.json holds no machine-specific path and the directory evaluates anywhere."""
     settings = model.settings()
-    files = option_files(model)
+    files = model.option_files()
     if files:
         settings = {**settings, "options": {**settings.get("options", {}),
                                             **{name: _copy_name(name, paths[0]) for name, paths in files.items()}}}
@@ -387,7 +375,7 @@ def save_fit(result, *, force: bool = False, fits_dir=None) -> Path:
                                slices=slice_table(result), trace=trace_table(result), config_text=config_text,
                                weave_text=format_wv(weave), extra=extra, force=force,
                                copies={_copy_name(name, p): p
-                                       for name, paths in option_files(result.problem.model).items() for p in paths})
+                                       for name, paths in result.problem.model.option_files().items() for p in paths})
     if result.posterior is not None:  # the fit directory now holds the result: the checkpoint has served
         checkpoint_path(cfg, fits_dir).unlink(missing_ok=True)
     return out

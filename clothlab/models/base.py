@@ -25,6 +25,7 @@ member                   meaning
 ``components_many``      the components for J parameter sets at once, each (J, N) (a loop by default)
 ``evaluate``             f_r (N, C): the components times their coefficients
 ``settings``             what a fit directory records about this model (quadrature or options)
+``option_files``         the files its file options (``path_options``) name; a fit directory keeps copies
 ``describe_settings``    those recorded settings in a few words, for reports (class method)
 ``fitted_weave``         the weave with fitted parameters applied (for the ``.wv`` export)
 ``geometry_warnings``    notes on parameter sets outside the model's valid geometry (empty by default)
@@ -84,6 +85,7 @@ import abc
 import copy
 import functools
 import math
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -376,6 +378,12 @@ class Model(abc.ABC):
     def settings(self) -> dict:
         """What a fit directory records about this model besides kind and weave."""
         return {"options": dict(getattr(self, "options", {}))}
+
+    def option_files(self) -> dict[str, list[Path]]:
+        """{file option: the files it names} of the options in ``path_options`` that are set; by default the
+        option's own file.  A fit directory keeps copies of them."""
+        options = dict(getattr(self, "options", {}) or {})
+        return {name: [Path(options[name])] for name in getattr(self, "path_options", ()) if options.get(name)}
 
     @classmethod
     def describe_settings(cls, settings: dict) -> str:

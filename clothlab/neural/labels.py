@@ -39,6 +39,18 @@ def _stack(components: dict, names) -> np.ndarray:
     return np.stack([np.asarray(components[n], dtype=np.float64).reshape(-1) for n in names], axis=1)
 
 
+def _texture_at(texture, params: dict, points: np.ndarray, wi, wo, noise: bool, names) -> np.ndarray:
+    """(n, k, C) texture components at ``points`` (n, k, 2) (tiles), query i's k points with its directions
+    wi[i], wo[i] ((n, 3), or (1, 3) shared by all)."""
+    n, k = points.shape[:2]
+    wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+    rows = np.repeat(np.arange(n), k)
+    comps = texture.components(points[..., 0].reshape(-1), points[..., 1].reshape(-1),
+                               wi[rows] if wi.shape[0] == n else wi, wo[rows] if wo.shape[0] == n else wo,
+                               params, noise=noise, warn=False)
+    return _stack(comps, names).reshape(n, k, -1)
+
+
 class ModelLabels:
     """The reflectance model's components (the footprint-independent, large-footprint limit)."""
 
@@ -90,10 +102,7 @@ class TextureMonteCarloLabels:
         x = np.where(in_first, whole[:, None] + rest[:, None] * t[..., 0], whole[:, None] * t[..., 0])
         y = np.where(in_first, size[:, None] * t[..., 1], whole[:, None] + rest[:, None] * t[..., 1])
         points = low[:, None, :] + np.stack([x, y], axis=-1)
-        rows = np.repeat(np.arange(n), k)
-        comps = self.texture.components(points[..., 0].reshape(-1), points[..., 1].reshape(-1), wi[rows], wo[rows],
-                                        self.params, noise=self.noise, warn=False)
-        values = _stack(comps, self.component_names).reshape(n, k, -1)
+        values = _texture_at(self.texture, self.params, points, wi, wo, self.noise, self.component_names)
         # each share's mean times its area (the stratum estimator), plus the exact whole-tile part
         n_first = in_first.sum(axis=1)
         mean_first = np.where(in_first[..., None], values, 0.0).sum(axis=1) / np.maximum(n_first, 1)[:, None]
@@ -138,11 +147,6 @@ class TextureProbe:
     def __call__(self, wi, wo, centre, size) -> np.ndarray:
         centre = np.atleast_2d(np.asarray(centre, dtype=np.float64))
         size = np.atleast_1d(np.asarray(size, dtype=np.float64))
-        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
-        n, k = centre.shape[0], self.points * self.points
         points = centre[:, None, :] + size[:, None, None] * self.offsets()[None]
-        rows = np.repeat(np.arange(n), k)
-        comps = self.texture.components(points[..., 0].reshape(-1), points[..., 1].reshape(-1),
-                                        wi[rows] if wi.shape[0] == n else wi, wo[rows] if wo.shape[0] == n else wo,
-                                        self.params, noise=False, warn=False)
-        return _stack(comps, self.component_names).reshape(n, -1)
+        return _texture_at(self.texture, self.params, points, wi, wo, False, self.component_names).reshape(
+            centre.shape[0], -1)

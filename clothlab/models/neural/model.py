@@ -285,6 +285,10 @@ class NeuralModel(Model):
 
         return ModelLabels(self.exact_model(), self.resolve(params))
 
+    def option_files(self) -> dict[str, list[Path]]:
+        """The weights' ``.npz`` and its ``.json`` sidecar (architecture, encodings)."""
+        return {name: [path, path.with_suffix(".json")] for name, (path,) in super().option_files().items()}
+
     def surrogate_probe(self, params: dict | None):
         """The texture probe at ``params`` (:class:`clothlab.neural.labels.TextureProbe` of the exact model's
         texture), the input of a probing network (``encoding["probe_points"]``) at a material it did not store."""
