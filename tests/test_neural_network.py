@@ -75,6 +75,33 @@ def test_material_vector_gradient_matches_central_differences():
     assert np.linalg.norm(d_material - numeric) / np.linalg.norm(numeric) <= 1e-5
 
 
+def test_query_input_gradients_match_central_differences():
+    """backward(inputs=True) also returns d loss / d spatial and angular inputs per row: what the fast fit of a
+    network with material-dependent decoder inputs (texture probe, T(R) as an input) descends on."""
+    rng = np.random.default_rng(5)
+    net = SurrogateNetwork(ARCH, seed=3, dtype=np.float64)
+    for p in net.params().values():
+        p += 0.1 * rng.standard_normal(p.shape)
+    batch = _batch(rng)
+    material, index, spatial, angular, target = batch
+    out = net.forward(material, index, spatial, angular, train=True)
+    d_material, d_spatial, d_angular = net.backward(2.0 * (out - target), inputs=True)
+    np.testing.assert_array_equal(d_material, net.backward(2.0 * (out - target)))
+    h = 1e-6
+    for array, analytic in ((spatial, d_spatial), (angular, d_angular)):
+        numeric = np.zeros_like(array)
+        for i in np.ndindex(array.shape):
+            keep = array[i]
+            array[i] = keep + h
+            up = _loss(net, batch)
+            array[i] = keep - h
+            down = _loss(net, batch)
+            array[i] = keep
+            numeric[i] = (up - down) / (2 * h)
+        assert analytic.shape == array.shape
+        assert np.linalg.norm(analytic - numeric) / np.linalg.norm(numeric) <= 1e-5
+
+
 def test_residual_block_adds_the_skip_before_the_last_activation():
     rng = np.random.default_rng(0)
     block = Residual(4, rng, np.float64)

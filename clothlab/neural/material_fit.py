@@ -19,7 +19,10 @@ seen one material and its encoder does not constrain them.
 A residual network (``--residual``) outputs g = T(R(params)) + net(m(params)) (docs/neural.md "Residual over
 the reflectance model"): the gradient then also has the term dT(R)/dx, by central finite differences of the
 exact model R (cheap next to the network's backward pass) in x, the parameter's normalised internal
-coordinate.  :func:`refine_material` then fits the exact model from the fast fit's result.
+coordinate.  Decoder inputs that depend on the material (T(R) with ``--residual-input``, the texture probe
+with ``--probe-points``) enter the same way: their finite differences times the network's gradient with
+respect to its inputs (:meth:`SurrogateNetwork.backward` with ``inputs=True``).  :func:`refine_material`
+then fits the exact model from the fast fit's result.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import nnls
 
-from clothlab.neural.losses import decode_outputs, encode_targets
+from clothlab.neural.losses import decode_outputs
 
 
 @dataclass
@@ -53,7 +56,7 @@ def _design(surrogate, m: np.ndarray, spatial, angular, train: bool, t_reference
     net = surrogate.network
     index = np.zeros(spatial.shape[0], dtype=np.int64)
     g = net.forward(m[None].astype(net.dtype), index, spatial, angular, train=train).astype(np.float64)
-    if t_reference is not None:
+    if t_reference is not None and surrogate.residual:
         g = g + t_reference
     return decode_outputs(g, surrogate._specular, surrogate.k), g
 
@@ -62,41 +65,63 @@ class MaterialObjective:
     """The profile objective F(x) = min over c >= 0 of mean_n (sum_k c_k f_k(x; wi_n, wo_n) - y_n)^2 of the
     free entries x of the material vector (module docstring), and its gradient.
 
-    ``reference``: for a residual network (g = T(R) + net, docs/neural.md "Residual over the reflectance
-    model"), a callable x -> R (N, C) of the exact model at the parameters of x; dT(R)/dx by central finite
-    differences of step ``step`` in x (x is affine in each parameter's internal, possibly log, coordinate),
-    one-sided at the bounds 0 and 1."""
+    Terms that depend on x outside the network, each differentiated by central finite differences of step
+    ``step`` in x (x is affine in each parameter's internal, possibly log, coordinate; one-sided at the bounds
+    0 and 1), times the network's gradient with respect to them:
+
+    - ``reference``: a callable x -> R (N, C) of the exact model at the parameters of x, for a residual network
+      (g = T(R) + net, docs/neural.md "Residual over the reflectance model") and for one that reads T(R) as a
+      decoder input (``--residual-input``);
+    - ``probe``: a callable x -> the texture probe's values (N, n^2 C) at the parameters of x, for a network
+      that reads the probe as a decoder input (``--probe-points``; docs/neural.md "Texture probe")."""
 
     def __init__(self, surrogate, wi, wo, values, base_vector: np.ndarray, free_index: dict, *, size: float = 4.5,
-                 reference=None, step: float = 1e-4):
-        if surrogate.residual_input:
-            raise ValueError("a network with T(R) as an input (--residual-input) has no material gradient here")
-        if surrogate.residual and reference is None:
-            raise ValueError("a residual network needs `reference`: the exact model's values at trial parameters")
+                 reference=None, probe=None, step: float = 1e-4):
+        if (surrogate.residual or surrogate.residual_input) and reference is None:
+            raise ValueError("a network over the reflectance model (--residual, --residual-input) needs "
+                             "`reference`: the exact model's values at trial parameters")
+        if surrogate.probe_points and probe is None:
+            raise ValueError("a probing network (--probe-points) needs `probe`: the texture probe's values at "
+                             "trial parameters")
         self.surrogate, self.step = surrogate, float(step)
-        self.reference = reference if surrogate.residual else None
-        wi, wo = np.atleast_2d(wi), np.atleast_2d(wo)
+        self.reference = reference if (surrogate.residual or surrogate.residual_input) else None
+        self.probe = probe if surrogate.probe_points else None
+        self.wi, self.wo = np.atleast_2d(wi), np.atleast_2d(wo)
         self.y = np.asarray(values, dtype=np.float64).reshape(-1)
         n = self.y.size
-        self.spatial, self.angular = surrogate.features(np.full((n, 2), 0.5), np.full(n, size), wi, wo)
+        self.centre, self.size = np.full((n, 2), 0.5), np.full(n, size)
         self.names = list(free_index)
         self.pos = np.array([free_index[k] for k in self.names], dtype=np.int64)
         self.base = np.array(base_vector, dtype=np.float64)
+        self.spatial = self.angular = None
+        if self.reference is None and self.probe is None:
+            self.spatial, self.angular = surrogate.features(self.centre, self.size, self.wi, self.wo)
 
     def _vector(self, x) -> np.ndarray:
         m = self.base.copy()
         m[self.pos] = x
         return m
 
-    def _t_reference(self, x) -> np.ndarray | None:
-        if self.reference is None:
-            return None
-        return encode_targets(np.asarray(self.reference(np.asarray(x, dtype=np.float64)), dtype=np.float64),
-                              self.surrogate._specular, self.surrogate.k)
+    def _inputs(self, x):
+        """(T(R) (N, C) or None, T(probe) (N, n^2 C) or None) at x: the x-dependent terms of the network."""
+        x = np.asarray(x, dtype=np.float64)
+        args = (self.centre, self.size, self.wi, self.wo)
+        t_ref = None if self.reference is None else self.surrogate.transformed_reference(
+            *args, material=None, reference=np.asarray(self.reference(x), dtype=np.float64))
+        t_probe = None if self.probe is None else self.surrogate.transformed_probe(
+            *args, material=None, probe=np.asarray(self.probe(x), dtype=np.float64))
+        return t_ref, t_probe
+
+    def _features(self, t_ref, t_probe):
+        if self.angular is not None:
+            return self.spatial, self.angular
+        return self.surrogate.features(self.centre, self.size, self.wi, self.wo, t_ref, t_probe)
 
     def solve(self, x) -> tuple[float, np.ndarray, np.ndarray]:
         """(F(x), NNLS coefficients (C,), components (N, C)) without gradient."""
-        comps, _ = _design(self.surrogate, self._vector(x), self.spatial, self.angular, False, self._t_reference(x))
+        t_ref, t_probe = self._inputs(x)
+        spatial, angular = self._features(t_ref, t_probe)
+        comps, _ = _design(self.surrogate, self._vector(x), spatial, angular, False, t_ref)
         c, res = nnls(comps, self.y)
         return float(res ** 2 / self.y.size), c, comps
 
@@ -105,24 +130,38 @@ class MaterialObjective:
 
     def value_and_gradient(self, x) -> tuple[float, np.ndarray]:
         """F(x) and dF/dx (c held at its NNLS optimum: the profile objective's gradient, envelope theorem):
-        back-propagated through decoder and encoder, plus dT(R)/dx for a residual network."""
+        back-propagated through decoder and encoder, plus the x-dependent terms (T(R), the probe) by their
+        finite differences times their gradient (the residual's d g, the network's d input)."""
         x = np.asarray(x, dtype=np.float64)
         sur, n = self.surrogate, self.y.size
-        t_ref = self._t_reference(x)
-        comps, g = _design(sur, self._vector(x), self.spatial, self.angular, True, t_ref)
+        t_ref, t_probe = self._inputs(x)
+        spatial, angular = self._features(t_ref, t_probe)
+        comps, g = _design(sur, self._vector(x), spatial, angular, True, t_ref)
         c, res = nnls(comps, self.y)
         r = comps @ c - self.y
         d_comp = 2.0 * r[:, None] * c[None, :] / n
         # d comp / d g: exp(g) / k where the specular decoding (exp(g) - 1) / k is positive, 1 for diffuse
         d_g = np.where(sur._specular, d_comp * np.exp(g) / sur.k * (g > 0.0), d_comp)
-        grad = sur.network.backward(d_g.astype(sur.network.dtype))[0, self.pos].astype(np.float64)
-        if t_ref is not None:
-            for j in range(x.size):
-                lo, hi = max(0.0, x[j] - self.step), min(1.0, x[j] + self.step)
-                xl, xh = x.copy(), x.copy()
-                xl[j], xh[j] = lo, hi
-                d_t = (self._t_reference(xh) - self._t_reference(xl)) / (hi - lo)
-                grad[j] += float(np.sum(d_g * d_t))
+        d_material, _, d_angular = sur.network.backward(d_g.astype(sur.network.dtype), inputs=True)
+        grad = d_material[0, self.pos].astype(np.float64)
+        if t_ref is None and t_probe is None:
+            return float(res ** 2 / n), grad
+        # the decoder's x-dependent inputs are the last columns of the angular features: T(R), then T(probe)
+        d_angular = d_angular.astype(np.float64)
+        n_probe = 0 if t_probe is None else t_probe.shape[1]
+        n_ref = t_ref.shape[1] if sur.residual_input else 0
+        first = d_angular.shape[1] - n_probe - n_ref
+        d_ref = (d_g if sur.residual else 0.0) + (d_angular[:, first:first + n_ref] if n_ref else 0.0)
+        d_probe = d_angular[:, first + n_ref:]
+        for j in range(x.size):
+            lo, hi = max(0.0, x[j] - self.step), min(1.0, x[j] + self.step)
+            xl, xh = x.copy(), x.copy()
+            xl[j], xh[j] = lo, hi
+            (ref_h, probe_h), (ref_l, probe_l) = self._inputs(xh), self._inputs(xl)
+            if t_ref is not None:
+                grad[j] += float(np.sum(d_ref * (ref_h - ref_l))) / (hi - lo)
+            if t_probe is not None:
+                grad[j] += float(np.sum(d_probe * (probe_h - probe_l))) / (hi - lo)
         return float(res ** 2 / n), grad
 
 

@@ -118,9 +118,11 @@ class SurrogateNetwork:
             self._cache = (index, z.shape[0])
         return self.decode(z[index], np.asarray(spatial, dtype=dt), np.asarray(angular, dtype=dt), train)
 
-    def backward(self, d_out: np.ndarray) -> np.ndarray:
+    def backward(self, d_out: np.ndarray, inputs: bool = False):
         """Gradients of a scalar loss with d loss / d output = ``d_out`` (B, n_out), after a training forward;
-        returns d loss / d material vectors (M, n_material) (the fast material fit uses it)."""
+        returns d loss / d material vectors (M, n_material) (the fast material fit uses it), and with
+        ``inputs`` also d loss / d the query inputs: (d material, d spatial (B, n_spatial), d angular (B,
+        n_angular))."""
         L = self.layers
         index, n_materials = self._cache
         d = L["ang1"].backward(L["ang_res"].backward(L["ang4"].backward(L["ang5"].backward(d_out))))
@@ -128,7 +130,10 @@ class SurrogateNetwork:
         d_z_rows = d_fused[:, :self.arch.latent]
         d_z = np.zeros((n_materials, self.arch.latent), dtype=d_z_rows.dtype)
         np.add.at(d_z, index, d_z_rows)
-        return L["enc_in"].backward(L["enc_res"].backward(L["enc_out"].backward(d_z)))
+        d_material = L["enc_in"].backward(L["enc_res"].backward(L["enc_out"].backward(d_z)))
+        if inputs:
+            return d_material, d_fused[:, self.arch.latent:], d[:, self.arch.spatial:]
+        return d_material
 
     # ------------------------------------------------------------------ inference
 

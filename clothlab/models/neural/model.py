@@ -205,18 +205,11 @@ class NeuralModel(Model):
 
     def material_objective(self, wi, wo, values, free=None, params: dict | None = None):
         """The fast fit's objective (:class:`clothlab.neural.material_fit.MaterialObjective`) of the ``free``
-        parameters (default ``default_free``) through the encoder, far view, from ``params``; a residual
-        network (g = T(R) + net, docs/neural.md) evaluates R of :meth:`exact_model` at each trial."""
+        parameters (default ``default_free``) through the encoder, far view, from ``params``; a network over
+        the reflectance model (g = T(R) + net, or T(R) as an input; docs/neural.md) evaluates R of
+        :meth:`exact_model` at each trial, a probing one the texture probe (:meth:`surrogate_probe`)."""
         from clothlab.neural.material_fit import MaterialObjective, unit_to_parameter
 
-        if self.surrogate.probe_points:
-            raise ConfigError("the fast material fit cannot take a network trained with --probe-points (the texture "
-                              "probe is a decoder input whose derivative the network does not return); fit the exact "
-                              f"kind {self.target} instead", field="model.options.weights")
-        if self.surrogate.residual_input:
-            raise ConfigError("the fast material fit cannot take a network trained with --residual-input (T(R) "
-                              "is a decoder input whose derivative the network does not return); fit the exact "
-                              f"kind {self.target} instead", field="model.options.weights")
         names = list(self._encoding.get("parameters", self._material_names()))
         free = list(free or self.default_free)
         for k in free:
@@ -224,16 +217,25 @@ class NeuralModel(Model):
                 raise ConfigError(f"{k!r} is not an encoder input of this network (inputs: {', '.join(names)})",
                                   field="fit.free")
         start = self.resolve(params)
-        reference = None
-        if self.surrogate.residual:
+
+        def trial(unit):
+            return {**start, **{k: unit_to_parameter(self.params[k], t) for k, t in zip(free, unit, strict=True)}}
+
+        reference = probe = None
+        if self.surrogate.residual or self.surrogate.residual_input:
             exact = self.exact_model()
 
             def reference(unit):
-                p = {**start, **{k: unit_to_parameter(self.params[k], t) for k, t in zip(free, unit, strict=True)}}
-                c = exact.components(wi, wo, p, warn=False)
+                c = exact.components(wi, wo, trial(unit), warn=False)
                 return np.column_stack([np.asarray(c[n], dtype=np.float64).reshape(-1) for n in self.component_names])
+        if self.surrogate.probe_points:
+            n = np.atleast_2d(wi).shape[0]
+            centre, size = np.full((n, 2), 0.5), np.full(n, FAR_SIZE)
+
+            def probe(unit):
+                return self.surrogate_probe(trial(unit))(wi, wo, centre, size)
         return MaterialObjective(self.surrogate, wi, wo, values, self.material_vector(start),
-                                 {k: names.index(k) for k in free}, size=FAR_SIZE, reference=reference)
+                                 {k: names.index(k) for k in free}, size=FAR_SIZE, reference=reference, probe=probe)
 
     def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
                      **options):
