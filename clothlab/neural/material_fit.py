@@ -93,8 +93,8 @@ class MaterialObjective:
         self.names = list(free_index)
         self.pos = np.array([free_index[k] for k in self.names], dtype=np.int64)
         self.base = np.array(base_vector, dtype=np.float64)
-        self.spatial = self.angular = None
-        if self.reference is None and self.probe is None:
+        self.spatial = self.angular = None  # fixed unless the decoder reads x-dependent inputs
+        if not (surrogate.residual_input or surrogate.probe_points):
             self.spatial, self.angular = surrogate.features(self.centre, self.size, self.wi, self.wo)
 
     def _vector(self, x) -> np.ndarray:
