@@ -111,3 +111,42 @@ def test_fast_fit_through_the_encoder_then_exact_refinement_recover_simulated_pa
     fitted, refined = neural.fit_material(wi, wo, y, params=exact.resolve({}), steps=60, starts=2, refine=True)
     assert fitted["alpha"] == pytest.approx(0.1525, rel=1e-4) and fitted["beta"] == pytest.approx(4.0, rel=1e-4)
     assert refined.coefficients["specular_warp"] == pytest.approx(0.5, rel=1e-4)
+
+
+def test_latents_of_other_materials_are_clipped_to_the_trained_materials_box():
+    """Surrogate.latent_box: per latent entry the trained rows' range widened by LATENT_MARGIN of it; held-out
+    rows and encoder input vectors are clipped to it (a vector far outside the training inputs cannot send
+    the decoder somewhere it was never trained), trained rows are untouched, and the clipped latent is what
+    the decoder reads (query with a vector = query_latent at the clipped z).  A one-material network has no
+    box."""
+    from clothlab.neural.network import Architecture, SurrogateNetwork
+    from clothlab.neural.surrogate import LATENT_MARGIN, Surrogate
+
+    arch = Architecture(n_material=5, n_spatial=24, n_angular=8, n_out=3, enc_width=16, latent=6, width=8,
+                        spatial=8)
+    rng = np.random.default_rng(1)
+    net = SurrogateNetwork(arch, seed=3)
+    materials = rng.random((5, 5))
+    sur = Surrogate(net, ("diffuse", "specular_warp", "specular_weft"), materials,
+                    {"heldout_materials": [3], "heldout_pattern": [4]})
+    np.testing.assert_array_equal(sur.trained_rows(), [0, 1, 2])
+    z = net.encode(materials).astype(np.float64)
+    lo, hi = z[:3].min(axis=0), z[:3].max(axis=0)
+    pad = LATENT_MARGIN * (hi - lo)
+    np.testing.assert_allclose(sur.latent_box[0], lo - pad, rtol=1e-5, atol=1e-6)  # float32, batch-shape noise
+    np.testing.assert_allclose(sur.latent_box[1], hi + pad, rtol=1e-5, atol=1e-6)
+    for row in range(3):
+        np.testing.assert_allclose(sur.latent(row), z[row], rtol=1e-5, atol=1e-6)
+    far = 50.0 * rng.standard_normal(5)
+    z_far = sur.latent(far)
+    assert np.all(z_far >= sur.latent_box[0] - 1e-6) and np.all(z_far <= sur.latent_box[1] + 1e-6)
+    assert not np.allclose(z_far, net.encode(far[None])[0], atol=1e-3)  # it was outside
+    np.testing.assert_allclose(sur.fusion_biases()[3], net.fusion_bias(sur.clip_latent(z[3:4]))[0], rtol=1e-5,
+                               atol=1e-6)
+    n = 9
+    q = (rng.random((n, 2)), rng.uniform(0.05, 3, n), np.tile([0.2, 0.1, 0.97], (n, 1)),
+         np.tile([-0.3, 0.1, 0.95], (n, 1)))
+    np.testing.assert_allclose(sur.query(*q, material=far), sur.query_latent(z_far, *q), rtol=1e-5)
+    single = Surrogate(net, ("diffuse", "specular_warp", "specular_weft"), materials[:1])
+    assert single.latent_box is None
+    np.testing.assert_allclose(single.latent(far), net.encode(far[None])[0], rtol=1e-5, atol=1e-6)

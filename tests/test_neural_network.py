@@ -168,3 +168,41 @@ def test_loss_is_eq_11_with_the_log_mapped_specular():
     bumped[1, 1] += h
     assert grad[1, 1] == pytest.approx((loss_and_gradient(bumped, targets, column_weights(spec))[0] - loss) / h,
                                        rel=1e-5)
+
+
+def test_latent_box_clips_z_and_passes_no_gradient_through_clipped_entries():
+    """forward(latent_box=(lo, hi)) decodes clip(z, lo, hi); backward's d material then matches central
+    differences of that clipped network (entries outside the box contribute nothing), and a box holding every
+    z changes nothing."""
+    rng = np.random.default_rng(6)
+    net = SurrogateNetwork(ARCH, seed=4, dtype=np.float64)
+    for p in net.params().values():
+        p += 0.1 * rng.standard_normal(p.shape)
+    material, index, spatial, angular, target = _batch(rng)
+    z = net.encode(material)
+    lo, hi = np.quantile(z, 0.3, axis=0), np.quantile(z, 0.7, axis=0)
+    assert np.any(z < lo) and np.any(z > hi)
+    wide = (z.min(axis=0) - 1.0, z.max(axis=0) + 1.0)
+    np.testing.assert_array_equal(net.forward(material, index, spatial, angular, latent_box=wide),
+                                  net.forward(material, index, spatial, angular))
+    clipped = np.clip(z, lo, hi)
+    expected = net.decode(clipped[index], spatial, angular)
+    np.testing.assert_allclose(net.forward(material, index, spatial, angular, latent_box=(lo, hi)), expected,
+                               rtol=1e-12)
+
+    def loss(m):
+        return float(np.sum(np.square(net.forward(m, index, spatial, angular, latent_box=(lo, hi)) - target)))
+
+    out = net.forward(material, index, spatial, angular, train=True, latent_box=(lo, hi))
+    d_material = net.backward(2.0 * (out - target))
+    numeric = np.zeros_like(material)
+    h = 1e-6
+    for i in np.ndindex(material.shape):
+        keep = material[i]
+        material[i] = keep + h
+        up = loss(material)
+        material[i] = keep - h
+        down = loss(material)
+        material[i] = keep
+        numeric[i] = (up - down) / (2 * h)
+    assert np.linalg.norm(d_material - numeric) <= 1e-5 * np.linalg.norm(numeric)

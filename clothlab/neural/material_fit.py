@@ -55,7 +55,8 @@ def _design(surrogate, m: np.ndarray, spatial, angular, train: bool, t_reference
     network's outputs, + T(R) for a residual network)."""
     net = surrogate.network
     index = np.zeros(spatial.shape[0], dtype=np.int64)
-    g = net.forward(m[None].astype(net.dtype), index, spatial, angular, train=train).astype(np.float64)
+    g = net.forward(m[None].astype(net.dtype), index, spatial, angular, train=train,
+                    latent_box=surrogate.latent_box).astype(np.float64)
     if t_reference is not None and surrogate.residual:
         g = g + t_reference
     return decode_outputs(g, surrogate._specular, surrogate.k), g

@@ -109,13 +109,20 @@ class SurrogateNetwork:
         x = L["ang1"].forward(np.concatenate([feature, angular], axis=1), train)
         return L["ang5"].forward(L["ang4"].forward(L["ang_res"].forward(x, train), train), train)
 
-    def forward(self, material, index, spatial, angular, train: bool = False) -> np.ndarray:
-        """Outputs (B, n_out): ``material`` (M, n_material), ``index`` (B,) into it, ``spatial``, ``angular``."""
+    def forward(self, material, index, spatial, angular, train: bool = False, latent_box=None) -> np.ndarray:
+        """Outputs (B, n_out): ``material`` (M, n_material), ``index`` (B,) into it, ``spatial``, ``angular``;
+        ``latent_box``: (lo, hi) (latent,) that z is clipped to (:meth:`Surrogate.latent_box`; the backward
+        pass then passes no gradient through a clipped entry)."""
         dt = self.dtype
         z = self.encode(material, train)
+        inside = None
+        if latent_box is not None:
+            lo, hi = latent_box
+            inside = (z >= lo) & (z <= hi)
+            z = np.clip(z, lo, hi).astype(dt)
         index = np.asarray(index, dtype=np.int64)
         if train:
-            self._cache = (index, z.shape[0])
+            self._cache = (index, z.shape[0], inside)
         return self.decode(z[index], np.asarray(spatial, dtype=dt), np.asarray(angular, dtype=dt), train)
 
     def backward(self, d_out: np.ndarray, inputs: bool = False):
@@ -124,12 +131,14 @@ class SurrogateNetwork:
         ``inputs`` also d loss / d the query inputs: (d material, d spatial (B, n_spatial), d angular (B,
         n_angular))."""
         L = self.layers
-        index, n_materials = self._cache
+        index, n_materials, inside = self._cache
         d = L["ang1"].backward(L["ang_res"].backward(L["ang4"].backward(L["ang5"].backward(d_out))))
         d_fused = L["fuse1"].backward(L["fuse2"].backward(d[:, :self.arch.spatial]))
         d_z_rows = d_fused[:, :self.arch.latent]
         d_z = np.zeros((n_materials, self.arch.latent), dtype=d_z_rows.dtype)
         np.add.at(d_z, index, d_z_rows)
+        if inside is not None:
+            d_z *= inside
         d_material = L["enc_in"].backward(L["enc_res"].backward(L["enc_out"].backward(d_z)))
         if inputs:
             return d_material, d_fused[:, self.arch.latent:], d[:, self.arch.spatial:]

@@ -35,6 +35,7 @@ from clothlab.neural.threads import one_blas_thread
 
 CHUNK = 2048
 OUTPUT_MARGIN = float(np.log(2.0))  # loss-space margin of the output cap above the largest training target
+LATENT_MARGIN = 0.1  # share of each latent entry's trained range added on both sides of the latent box
 
 
 @dataclass
@@ -54,6 +55,7 @@ class Surrogate:
         self._specular = is_specular(self.component_names)
         self._bias = None
         self._plans = {}
+        self._box = None
         self._weave_cache = None
 
     @property
@@ -127,16 +129,49 @@ class Surrogate:
             self._weave_cache = parse_wv_text(self.encoding["weave_wv"], source="surrogate sidecar")
         return self._weave_cache
 
+    def trained_rows(self) -> np.ndarray:
+        """Indices of the materials the network was trained on (all rows but ``encoding["heldout_materials"]``
+        and ``encoding["heldout_pattern"]``)."""
+        held = set(self.encoding.get("heldout_materials") or ()) | set(self.encoding.get("heldout_pattern") or ())
+        return np.array([m for m in range(self.materials.shape[0]) if m not in held], dtype=np.int64)
+
+    @property
+    def latent_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) (latent,) of a multi-material network (>= 2 trained materials; None otherwise): per entry
+        the range of the trained materials' latents widened by :data:`LATENT_MARGIN` of it on both sides.  The
+        latent of any other material (a held-out row, an encoder input vector) is clipped to it: after long
+        training the encoder can send a material between trained ones far outside their latents (a norm of 50
+        against at most 3 for the trained ones, measured), where the decoder was never trained; clipped, it
+        stays among them (docs/neural.md, "Latent box").  A one-material network's encoder says nothing about
+        other materials and is left as it is."""
+        if self._box is None:
+            rows = self.trained_rows()
+            if rows.size < 2:
+                self._box = False
+            else:
+                z = self.network.encode(self.materials[rows]).astype(np.float64)
+                lo, hi = z.min(axis=0), z.max(axis=0)
+                pad = LATENT_MARGIN * (hi - lo)
+                self._box = (lo - pad, hi + pad)
+        return self._box or None
+
+    def clip_latent(self, z: np.ndarray) -> np.ndarray:
+        """Latents (..., latent) clipped to :attr:`latent_box` (unchanged without one), in the network's dtype."""
+        box = self.latent_box
+        z = z if box is None else np.clip(z, box[0], box[1])
+        return np.asarray(z, dtype=self.network.dtype)
+
     def fusion_biases(self) -> np.ndarray:
-        """(M, width) per-material constant of the first fusion layer (computed once)."""
+        """(M, width) per-material constant of the first fusion layer (computed once; latents of held-out rows
+        clipped to :attr:`latent_box`)."""
         if self._bias is None:
-            self._bias = self.network.fusion_bias(self.network.encode(self.materials))
+            self._bias = self.network.fusion_bias(self.clip_latent(self.network.encode(self.materials)))
             self._plans = {}
         return self._bias
 
     def reset(self) -> None:
-        """Forget the cached latents and inference plans (after the weights changed)."""
-        self._bias, self._plans = None, {}
+        """Forget the cached latents, latent box and inference plans (after the weights changed)."""
+        self._bias, self._plans, self._box = None, {}, None
 
     def features(self, centre, size, wi, wo, t_reference=None, t_probe=None) -> tuple[np.ndarray, np.ndarray]:
         """float32 spatial and direction features of queries (``t_reference``: T(R) (N, C), appended to the
@@ -161,8 +196,8 @@ class Surrogate:
     def latent(self, material) -> np.ndarray:
         """z (latent,) of a trained material's row or of an encoder input vector."""
         if isinstance(material, int | np.integer):
-            return self.network.encode(self.materials[int(material)][None])[0]
-        return self.network.encode(np.asarray(material, dtype=np.float64).reshape(1, -1))[0]
+            return self.clip_latent(self.network.encode(self.materials[int(material)][None]))[0]
+        return self.clip_latent(self.network.encode(np.asarray(material, dtype=np.float64).reshape(1, -1)))[0]
 
     def query_latent(self, z, centre, size, wi, wo, reference=None, probe=None) -> np.ndarray:
         """:meth:`query` with the decoder reading latent ``z`` (latent,) directly (Fig. 8's interpolation);
@@ -201,7 +236,7 @@ class Surrogate:
         """The decoder plan of material row ``material`` (int, cached) or of an encoder input vector (new)."""
         if not isinstance(material, int | np.integer):
             vector = np.asarray(material, dtype=np.float64).reshape(1, -1)
-            return DecoderPlan(self.network, self.network.fusion_bias(self.network.encode(vector))[0])
+            return DecoderPlan(self.network, self.network.fusion_bias(self.clip_latent(self.network.encode(vector)))[0])
         plan = self._plans.get(int(material))
         if plan is None:
             plan = self._plans[int(material)] = DecoderPlan(self.network, self.fusion_biases()[material])
