@@ -232,7 +232,16 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         _save_checkpoint(Path(checkpoint), surrogate, optimizer, step, cpu, curve)
     surrogate.reset()
     metrics = {"steps": step, "cpu_s": cpu, "rows": {k: int(v.size) for k, v in split.items()},
-               "train_sample": errors_by_size(surrogate, data, train_rows[:: max(1, train_rows.size // 50000)])}
+               "train_sample": errors_by_size(surrogate, data, train_rows[:: max(1, train_rows.size // 50000)]),
+               **heldout_metrics(surrogate, data, split)}
+    return TrainResult(surrogate, curve, metrics)
+
+
+def heldout_metrics(surrogate: Surrogate, data: np.ndarray, split: dict[str, np.ndarray]) -> dict:
+    """The sidecar's held-out figures of ``surrogate`` on the rows of ``split`` (:func:`split_rows`): relative
+    RMSE by footprint size of the held-out pairs, unseen materials and unseen pattern (those present), and the
+    far view (residual networks)."""
+    metrics = {}
     for key in ("heldout_pairs", "heldout_materials", "heldout_pattern"):
         if split[key].size:
             metrics[key] = errors_by_size(surrogate, data, split[key])
@@ -240,7 +249,7 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         metrics["far_view"] = far_view_error(surrogate, data, split["heldout_pairs"])
         if split["heldout_pattern"].size:
             metrics["far_view_heldout_pattern"] = far_view_error(surrogate, data, split["heldout_pattern"])
-    return TrainResult(surrogate, curve, metrics)
+    return metrics
 
 
 def output_max(data: np.ndarray, rows: np.ndarray, specular: np.ndarray, block: int = 262_144) -> list[float]:
