@@ -447,3 +447,36 @@ def test_bootstrap_interval_of_the_relative_rmse_brackets_it_and_shows_a_heavy_t
     pred[0] = 40.0  # one highlight carries ~95 % of the squared error
     lo, hi = relative_rmse_interval(pred, truth)
     assert lo < 0.1 and hi > 0.5
+
+
+def test_labelling_on_workers_is_charged_to_the_budget_as_wall_time_x_workers(tmp_path, model):
+    """On a runner the label share of ``budget_s`` is wall x workers (the workers' CPU is not this process's),
+    and training gets the budget minus that, not minus this process's CPU: a label source that waits (wall
+    time, no CPU) on 4 workers costs the training 4x its wait."""
+    import time
+
+    from clothlab.neural.encodings import material_vector
+    from clothlab.neural.run import run_training
+    from clothlab.neural.training import TrainSpec
+    from clothlab.parallel import InProcessRunner
+
+    class WaitingLabels(ModelLabels):
+        def __call__(self, *args):
+            time.sleep(0.1)
+            return super().__call__(*args)
+
+    spec = DataSpec(centres=2, sizes=2, pairs=4)
+    p = model.default_parameters()
+    names = [n for n in model.params.names() if n != "orientation"]
+    materials = material_vector(model.weave, p, model.params, names)[None]
+    train_spec = TrainSpec(width=8, spatial=8, enc_width=8, latent=8, batch=64)
+    model.components(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]]))  # compiled before the clock runs
+    with InProcessRunner() as runner:
+        runner.workers = 4
+        result = run_training(tmp_path / "run", [WaitingLabels(model)], materials, spec, train_spec, budget_s=4.0,
+                              plots=False, runner=runner)
+    waited = 0.1 * spec.chunks_per_material()
+    label_s = result.metrics["label_cpu_s"]
+    assert label_s >= 4 * waited
+    summary = json.loads((tmp_path / "run" / "training.json").read_text())
+    assert summary["train_spec"]["budget_s"] == pytest.approx(4.0 - label_s)

@@ -5,6 +5,7 @@ Directory layout: ``data/`` (chunks, ``data.npy`` memory-mapped), ``checkpoint.n
 ``surrogate.npz`` + ``surrogate.json``, ``training.json`` (specs, curve, metrics), ``loss.png``,
 ``heldout.png``.  The CPU budget (seconds, ``time.process_time``) is shared: labelling stops at
 ``label_share`` of it (a partial data set trains; ``resume`` labels the rest), training takes what is left.
+On a runner the labelling is counted as wall time x workers, for the stop and for what is left.
 """
 
 from __future__ import annotations
@@ -55,8 +56,9 @@ def run_training(directory, label_sources, materials, data_spec: DataSpec, train
     written = generate(directory / "data", data_spec, label_sources, stop=lambda: used() > label_share * budget_s,
                        runner=runner)
     data, sha = assemble(directory / "data", data_spec, len(label_sources), len(names))
-    label_s = time.process_time() - start
-    LOG.info(f"{written} chunks labelled ({data.shape[0]:,} queries in all) in {label_s:.1f} CPU-s")
+    label_s = used()  # on a runner: wall x workers, the workers' CPU as the label share counted it
+    LOG.info(f"{written} chunks labelled ({data.shape[0]:,} queries in all) in {label_s:.1f} CPU-s"
+             + ("" if runner is None else f" (wall x {runner.workers} workers)"))
     spec = replace(train_spec, budget_s=max(1.0, budget_s - label_s)) if train_spec.steps is None else train_spec
     encoding = {**(encoding or {}), "data_spec": data_spec.to_dict()}  # the held-out cells follow from it
     result = train(data, names, materials, spec, encoding=encoding, heldout_materials=heldout_materials,
