@@ -27,28 +27,40 @@ def _loss(net, batch):
     return float(np.sum(np.square(out - target)))
 
 
+def _perturbed(rng, seed):
+    """A float64 network whose parameters (biases included) are moved off their initial values, so that every
+    path is exercised."""
+    net = SurrogateNetwork(ARCH, seed=seed, dtype=np.float64)
+    for p in net.params().values():
+        p += 0.1 * rng.standard_normal(p.shape)
+    return net
+
+
+def _central_differences(loss, array, h=1e-6):
+    """d loss() / d array by central differences of step h, perturbing ``array`` in place entry by entry."""
+    numeric = np.zeros_like(array)
+    for i in np.ndindex(array.shape):
+        keep = array[i]
+        array[i] = keep + h
+        up = loss()
+        array[i] = keep - h
+        down = loss()
+        array[i] = keep
+        numeric[i] = (up - down) / (2 * h)
+    return numeric
+
+
 def test_gradient_matches_central_differences_for_every_tensor():
     rng = np.random.default_rng(3)
-    net = SurrogateNetwork(ARCH, seed=1, dtype=np.float64)
-    for p in net.params().values():  # biases away from zero so that every path is exercised
-        p += 0.1 * rng.standard_normal(p.shape)
+    net = _perturbed(rng, seed=1)
     batch = _batch(rng)
     material, index, spatial, angular, target = batch
     out = net.forward(material, index, spatial, angular, train=True)
     net.backward(2.0 * (out - target))
     grads = {k: v.copy() for k, v in net.grads().items()}
     assert len(grads) == 2 * len(net.layers) + 4  # two residual blocks hold two layers each
-    h = 1e-6
     for name, p in net.params().items():
-        numeric = np.zeros_like(p)
-        for i in np.ndindex(p.shape):
-            keep = p[i]
-            p[i] = keep + h
-            up = _loss(net, batch)
-            p[i] = keep - h
-            down = _loss(net, batch)
-            p[i] = keep
-            numeric[i] = (up - down) / (2 * h)
+        numeric = _central_differences(lambda: _loss(net, batch), p)
         rel = np.linalg.norm(grads[name] - numeric) / max(np.linalg.norm(numeric), 1e-12)
         assert rel <= 1e-5, (name, rel)
 
@@ -56,22 +68,12 @@ def test_gradient_matches_central_differences_for_every_tensor():
 def test_material_vector_gradient_matches_central_differences():
     """backward() returns d loss / d material vectors: what the fast material fit descends on."""
     rng = np.random.default_rng(4)
-    net = SurrogateNetwork(ARCH, seed=2, dtype=np.float64)
-    for p in net.params().values():
-        p += 0.1 * rng.standard_normal(p.shape)
-    material, index, spatial, angular, target = _batch(rng)
+    net = _perturbed(rng, seed=2)
+    batch = _batch(rng)
+    material, index, spatial, angular, target = batch
     out = net.forward(material, index, spatial, angular, train=True)
     d_material = net.backward(2.0 * (out - target))
-    numeric = np.zeros_like(material)
-    h = 1e-6
-    for i in np.ndindex(material.shape):
-        keep = material[i]
-        material[i] = keep + h
-        up = _loss(net, (material, index, spatial, angular, target))
-        material[i] = keep - h
-        down = _loss(net, (material, index, spatial, angular, target))
-        material[i] = keep
-        numeric[i] = (up - down) / (2 * h)
+    numeric = _central_differences(lambda: _loss(net, batch), material)
     assert np.linalg.norm(d_material - numeric) / np.linalg.norm(numeric) <= 1e-5
 
 
@@ -79,25 +81,14 @@ def test_query_input_gradients_match_central_differences():
     """backward(inputs=True) also returns d loss / d spatial and angular inputs per row: what the fast fit of a
     network with material-dependent decoder inputs (texture probe, T(R) as an input) descends on."""
     rng = np.random.default_rng(5)
-    net = SurrogateNetwork(ARCH, seed=3, dtype=np.float64)
-    for p in net.params().values():
-        p += 0.1 * rng.standard_normal(p.shape)
+    net = _perturbed(rng, seed=3)
     batch = _batch(rng)
     material, index, spatial, angular, target = batch
     out = net.forward(material, index, spatial, angular, train=True)
     d_material, d_spatial, d_angular = net.backward(2.0 * (out - target), inputs=True)
     np.testing.assert_array_equal(d_material, net.backward(2.0 * (out - target)))
-    h = 1e-6
     for array, analytic in ((spatial, d_spatial), (angular, d_angular)):
-        numeric = np.zeros_like(array)
-        for i in np.ndindex(array.shape):
-            keep = array[i]
-            array[i] = keep + h
-            up = _loss(net, batch)
-            array[i] = keep - h
-            down = _loss(net, batch)
-            array[i] = keep
-            numeric[i] = (up - down) / (2 * h)
+        numeric = _central_differences(lambda: _loss(net, batch), array)
         assert analytic.shape == array.shape
         assert np.linalg.norm(analytic - numeric) / np.linalg.norm(numeric) <= 1e-5
 
@@ -175,9 +166,7 @@ def test_latent_box_clips_z_and_passes_no_gradient_through_clipped_entries():
     differences of that clipped network (entries outside the box contribute nothing), and a box holding every
     z changes nothing."""
     rng = np.random.default_rng(6)
-    net = SurrogateNetwork(ARCH, seed=4, dtype=np.float64)
-    for p in net.params().values():
-        p += 0.1 * rng.standard_normal(p.shape)
+    net = _perturbed(rng, seed=4)
     material, index, spatial, angular, target = _batch(rng)
     z = net.encode(material)
     lo, hi = np.quantile(z, 0.3, axis=0), np.quantile(z, 0.7, axis=0)
@@ -190,19 +179,10 @@ def test_latent_box_clips_z_and_passes_no_gradient_through_clipped_entries():
     np.testing.assert_allclose(net.forward(material, index, spatial, angular, latent_box=(lo, hi)), expected,
                                rtol=1e-12)
 
-    def loss(m):
-        return float(np.sum(np.square(net.forward(m, index, spatial, angular, latent_box=(lo, hi)) - target)))
+    def loss():
+        return float(np.sum(np.square(net.forward(material, index, spatial, angular, latent_box=(lo, hi)) - target)))
 
     out = net.forward(material, index, spatial, angular, train=True, latent_box=(lo, hi))
     d_material = net.backward(2.0 * (out - target))
-    numeric = np.zeros_like(material)
-    h = 1e-6
-    for i in np.ndindex(material.shape):
-        keep = material[i]
-        material[i] = keep + h
-        up = loss(material)
-        material[i] = keep - h
-        down = loss(material)
-        material[i] = keep
-        numeric[i] = (up - down) / (2 * h)
+    numeric = _central_differences(loss, material)
     assert np.linalg.norm(d_material - numeric) <= 1e-5 * np.linalg.norm(numeric)
