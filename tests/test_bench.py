@@ -143,6 +143,12 @@ def test_bench_from_an_empty_directory_regenerates_the_examples(tmp_path, monkey
     assert set(Path(tempfile.gettempdir()).glob("clothlab-examples-*")) == before
 
 
+CROSS_CPU_ULPS = 4096
+"""Largest last-bit difference, in ulps, allowed between a value computed here and one computed on another CPU
+(a regenerated table against the shipped one): round-off of a few hundred operations, far below any noise."""
+CROSS_CPU_RTOL = CROSS_CPU_ULPS * np.finfo(np.float64).eps
+
+
 def test_regenerated_examples_reproduce_the_shipped_measurements():
     """The regenerated tables agree with the repository's measurements to rounding (the same seeded generator)."""
     from clothlab.io.table import read_table
@@ -157,9 +163,12 @@ def test_regenerated_examples_reproduce_the_shipped_measurements():
             for table in ("clean.csv", "noisy.csv"):
                 got = read_table(data.measurements / fabric / table)
                 want = read_table(REPO / "measurements" / fabric / table)
-                np.testing.assert_allclose(got.values, want.values, rtol=1e-14, atol=0)
+                # values within CROSS_CPU_ULPS ulps: the generator is seeded, but numpy's SIMD dispatch and
+                # numba's host-CPU code differ in the last bits from one CPU to another
+                np.testing.assert_allclose(got.values, want.values, rtol=CROSS_CPU_RTOL, atol=0)
                 for angle in ("theta_i", "phi_i", "theta_o", "phi_o"):
-                    np.testing.assert_array_equal(getattr(got, angle), getattr(want, angle))
+                    # nominal angles (simulate.gonio.nominal_angles): the same recorded value on any CPU
+                    np.testing.assert_allclose(getattr(got, angle), getattr(want, angle), rtol=0, atol=1e-9)
         root = data.measurements
     assert not root.exists()
 

@@ -43,3 +43,19 @@ def test_cli_random_grey_rotated_table(tmp_path):
                  "--channels", "grey", "--orientation", "37"]) == 0
     m = read_table(out)
     assert m.n == 30 and m.channels == ("grey",) and m.provenance["parameters"]["orientation"] == 37.0
+
+
+def test_simulated_tables_record_nominal_angles():
+    """The virtual gonioreflectometer records angles to 1e-6 deg: the paper grid's rim reads exactly 75 deg (not
+    75.00000000000001), every angle is its own rounding, and a random sampling stays above the horizon."""
+    from clothlab.simulate.gonio import ANGLE_DECIMALS, MAX_NOMINAL_THETA, nominal_angles, paper_sampling
+
+    angles = paper_sampling()
+    assert float(np.max(angles[0])) == 75.0
+    for a in angles:
+        np.testing.assert_array_equal(a, np.round(a, ANGLE_DECIMALS))
+    ti, pi_, to, po = nominal_angles(np.array([89.99999999, 0.0]), np.array([359.9999999, -1e-9]),
+                                     np.array([1e-9, 45.0000004]), np.array([720.0, 12.5]))
+    assert np.all(ti <= MAX_NOMINAL_THETA) and ti[0] == MAX_NOMINAL_THETA
+    assert np.all((pi_ >= 0.0) & (pi_ < 360.0)) and pi_[0] == 0.0
+    assert to[0] == 0.0 and to[1] == 45.0 and po[0] == 0.0

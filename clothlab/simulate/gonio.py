@@ -11,6 +11,12 @@ Noise: value = f exp(s_m e1 - s_m^2 / 2) + s_a e2 with e1, e2 ~ N(0, 1) from num
 ``seed`` (multiplicative log-normal with mean 1, plus additive Gaussian), then floored at ``floor`` (a
 BRDF table may not hold negative values; the count of floored values is kept in the provenance).
 sigma = sqrt((s_m f)^2 + s_a^2) is written as the per-value uncertainty.
+
+Nominal angles: an instrument records the angles it was set to, not the round-off of the arithmetic that
+chose them.  :func:`nominal_angles` rounds every angle to :data:`ANGLE_DECIMALS` decimals of a degree (1e-6
+deg, far below any goniometer's resolution and far above float64 round-off), so the paper grid's rim reads
+75 and not 75.00000000000001, and a table regenerated on another CPU (numpy's SIMD paths differ in the last
+bits) records the same angles.  The model is evaluated at the recorded angles.
 """
 
 from __future__ import annotations
@@ -56,7 +62,26 @@ def paper_sampling(n: int = 15, max_theta: float = 75.0, exitant=EXITANT_DIRECTI
     ti, pi_ = incident_grid(n, max_theta)
     exitant = np.asarray(exitant, dtype=np.float64)
     k = len(exitant)
-    return (np.tile(ti, k), np.tile(pi_, k), np.repeat(exitant[:, 0], len(ti)), np.repeat(exitant[:, 1], len(ti)))
+    return nominal_angles(np.tile(ti, k), np.tile(pi_, k), np.repeat(exitant[:, 0], len(ti)),
+                          np.repeat(exitant[:, 1], len(ti)))
+
+
+ANGLE_DECIMALS = 6
+"""Decimals of a degree the virtual gonioreflectometer records (module docstring: nominal angles)."""
+MAX_NOMINAL_THETA = 90.0 - 10.0**-ANGLE_DECIMALS
+"""Largest recorded elevation: a direction just above the horizon stays above it after rounding."""
+
+
+def nominal_angles(theta_i, phi_i, theta_o, phi_o):
+    """The angles (deg) as the instrument records them: rounded to :data:`ANGLE_DECIMALS` decimals, elevations
+    kept in [0, :data:`MAX_NOMINAL_THETA`], azimuths in [0, 360)."""
+    def elevation(t):
+        return np.clip(np.round(np.asarray(t, dtype=np.float64), ANGLE_DECIMALS), 0.0, MAX_NOMINAL_THETA)
+
+    def azimuth(p):
+        return np.mod(np.round(np.asarray(p, dtype=np.float64), ANGLE_DECIMALS), 360.0)
+
+    return elevation(theta_i), azimuth(phi_i), elevation(theta_o), azimuth(phi_o)
 
 
 MIN_SIGMA = 1e-12
@@ -95,7 +120,7 @@ def simulate(model, params: dict, coefficients: dict, *, channels=("R", "G", "B"
     """
     from clothlab.frames import spherical_to_vector
 
-    ti, pi_, to, po = sampling if sampling is not None else paper_sampling()
+    ti, pi_, to, po = nominal_angles(*(sampling if sampling is not None else paper_sampling()))
     wi, wo = spherical_to_vector(ti, pi_), spherical_to_vector(to, po)
     clean = combine(model.components(wi, wo, params), {k: np.asarray(v, dtype=np.float64)
                                                        for k, v in coefficients.items()})
