@@ -38,6 +38,10 @@ def add_selection_options(p) -> None:
                    help="evaluations per candidate fit (default select.max_evals, 600)")
     p.add_argument("--candidate-cv", type=count_type(0, 2**31 - 1), metavar="K",
                    help="cross-validation folds per candidate (default select.cv_folds, 5; 0: rank by BIC)")
+    p.add_argument("--nested", type=count_type(0, 100), metavar="K",
+                   help="nested cross-validation with K outer folds (K >= 2; 0: none, the default): the whole "
+                        "selection repeated inside each outer fold; its outer held-out error is the figure of the "
+                        "selected model, the winner's inner CV the selection score (about K+1 times the cost)")
 
 
 def _settings(cfg, args):
@@ -74,12 +78,14 @@ def _settings(cfg, args):
             twice = next(item for i, item in enumerate(items) if item in items[:i])
             raise ConfigError(f"{twice!r} is listed twice", field=flag)
     for flag, value, low in (("--orientation-starts", args.orientation_starts, 1),
-                             ("--candidate-evals", args.candidate_evals, 1), ("--candidate-cv", args.candidate_cv, 0)):
-        if value is not None and (value < low or (flag == "--candidate-cv" and value == 1)):
+                             ("--candidate-evals", args.candidate_evals, 1), ("--candidate-cv", args.candidate_cv, 0),
+                             ("--nested", getattr(args, "nested", None), 0)):
+        if value is not None and (value < low or (flag in ("--candidate-cv", "--nested") and value == 1)):
             raise ConfigError(f"{flag} must be at least {low}{' and not 1' if low == 0 else ''}, got {value}",
                               field=flag)
     settings = settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
-                                    max_evals=args.candidate_evals, cv_folds=args.candidate_cv)
+                                    max_evals=args.candidate_evals, cv_folds=args.candidate_cv,
+                                    nested=getattr(args, "nested", None))
     check_settings(settings, cfg.base_dir)  # every weave reads, before any candidate is fitted
     return settings
 
@@ -115,7 +121,10 @@ def run(args) -> int:
 
 
 def present_selection(selection, saved_to) -> str:
-    """The ranked table (as saved in selection.md) and where the winner's fit went."""
+    """The ranked table (as saved in selection.md, with the nested CV when run), the winner's refit summary as a
+    plain fit prints it (:func:`clothlab.cli.fit.present_fit`) and where it went."""
+    from clothlab.cli.fit import present_fit
     from clothlab.fit.select import table_markdown
 
-    return f"{table_markdown(selection)}\n  winner: {selection.ranked[0].row['candidate']}; saved to {saved_to}"
+    return (f"{table_markdown(selection)}\n  winner: {selection.ranked[0].row['candidate']}; its refit:\n\n"
+            f"{present_fit(selection.winner, saved_to=saved_to)}")

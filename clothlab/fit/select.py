@@ -101,17 +101,21 @@ class SelectSettings:
     orientation_starts: int = DEFAULT_ORIENTATION_STARTS
     max_evals: int = DEFAULT_MAX_EVALS
     cv_folds: int = DEFAULT_CV_FOLDS
+    nested: int = 0  # outer folds of the nested cross-validation (clothlab.fit.nested); 0: none
 
 
 @dataclass(frozen=True)
 class CandidateTask:
-    """Everything one candidate fit needs (picklable: a validated config, a measurement, plain settings)."""
+    """Everything one candidate fit needs (picklable: a validated config, a measurement, plain settings);
+    ``held_out``: rows the fitted candidate predicts (an outer fold of :mod:`clothlab.fit.nested`)."""
 
     config: object
     candidate: Candidate
     max_evals: int
     cv_folds: int
     measurement: object = None
+    held_out: object = None
+    outer_fold: int | None = None
 
 
 @dataclass
@@ -123,10 +127,11 @@ class CandidateResult:
     params: dict = field(default_factory=dict)
     free: tuple = ()
     period: float = 0.0
+    held_out: np.ndarray | None = None  # (N_held, C) prediction of the task's held_out rows
 
 
 def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=None, max_evals=None,
-                         cv_folds=None) -> SelectSettings:
+                         cv_folds=None, nested=None) -> SelectSettings:
     """The :class:`SelectSettings` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
     with the given values (command-line options) replacing it."""
     sel = config.select
@@ -134,7 +139,8 @@ def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=
     return SelectSettings(weaves=chosen, kinds=tuple(kinds if kinds is not None else sel.kinds),
                           orientation_starts=int(orientation_starts or sel.orientation_starts),
                           max_evals=int(max_evals or sel.max_evals),
-                          cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds))
+                          cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds),
+                          nested=int(getattr(sel, "nested", 0) if nested is None else nested))
 
 
 def check_settings(settings: SelectSettings, base_dir=".") -> None:
@@ -258,8 +264,12 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
                objective=float(result.optimum.fun), n=n, k=k, aic=aic, bic=bic, cv_scheme=cv.get("scheme"),
                evaluations=int(result.optimum.nevals), wall_time_s=time.perf_counter() - started,
                note="; ".join(([cv["failed"]] if cv.get("failed") else []) + notes) or None)
+    held_out = None
+    if task.held_out is not None:  # the outer fold's rows, never seen by this fit (clothlab.fit.nested)
+        train = problem.solve(result.params)
+        held_out = problem.designs([result.params], wi=task.held_out.wi, wo=task.held_out.wo)[0] @ train.coefficients
     return CandidateResult(cand, row, params={n_: float(params[n_]) for n_ in problem.free}, free=problem.free,
-                           period=float(period))
+                           period=float(period), held_out=held_out)
 
 
 def rank(results: list[CandidateResult]) -> list[CandidateResult]:
@@ -284,6 +294,7 @@ class Selection:
     winner: object
     settings: SelectSettings
     wall_time: float
+    nested: dict | None = None  # fit.json selection.nested (clothlab.fit.nested)
 
     def summary(self) -> dict:
         return selection_summary(self)
@@ -297,7 +308,8 @@ def selection_summary(selection: Selection) -> dict:
             "ranking": RANKING, "information_criteria": LIKELIHOOD,
             "budget": {"max_evals": s.max_evals, "starts": 1, "polish": s.max_evals // 4, "cv_folds": s.cv_folds},
             "tried": {"weaves": list(s.weaves), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts},
-            "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time}
+            "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time,
+            **({"nested": selection.nested} if selection.nested else {})}
 
 
 def select(config, settings: SelectSettings | None = None, *, measurement=None, run_task=None,
@@ -350,8 +362,17 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
                                   cv_folds=config.fit.cv_folds, start=best.params, optimizer=config.fit.optimizer,
                                   posterior=posterior or config.fit.posterior,
                                   orientation=best.params.get(ORIENTATION, 0.0))  # its box centred there
+    nested = None
+    if settings.nested >= 2:  # the whole selection again inside each outer fold (clothlab.fit.nested)
+        from clothlab.fit.nested import nested_cross_validation, nested_lines
+
+        log.info("select: nested cross-validation, %d outer folds x %d candidates", settings.nested, len(tasks))
+        nested = nested_cross_validation(config, settings, measurement, settings.nested, run_task=run_task,
+                                         runner=runner, full_winner=best.row)
+        for line in nested_lines(nested):
+            log.info("select: %s", line.strip())
     winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir, runner=runner)
-    return Selection(ranked, winner, settings, time.perf_counter() - started)
+    return Selection(ranked, winner, settings, time.perf_counter() - started, nested=nested)
 
 
 def _short(value) -> str:
@@ -398,6 +419,10 @@ def table_markdown(selection: Selection) -> str:
              "| " + " | ".join(DISPLAY_HEAD) + " |", "|" + "---|" * len(DISPLAY_HEAD)]
     for cells in display_rows(r.row for r in selection.ranked):
         lines.append("| " + " | ".join(c.replace("|", "/") for c in cells) + " |")
+    if selection.nested:
+        from clothlab.fit.nested import nested_lines
+
+        lines += [""] + nested_lines(selection.nested)
     return "\n".join(lines) + "\n"
 
 

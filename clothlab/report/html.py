@@ -294,7 +294,41 @@ def _selection_section(fit: dict) -> list[str]:
         parts = [f"{esc(k)}: {esc(', '.join(map(str, v)) if isinstance(v, list) else v)}" for k, v in tried.items()]
         parts += [f"{esc(k)} {esc(v)}" for k, v in budget.items()]
         out.append(f'<p class="note">Candidates tried - {"; ".join(parts)} (per candidate).</p>')
-    return out + [_table([esc(h) for h in DISPLAY_HEAD], cells)]
+    return out + [_table([esc(h) for h in DISPLAY_HEAD], cells)] + _nested_section(selection.get("nested"))
+
+
+def _nested_section(nested) -> list[str]:
+    """fit.json ``selection.nested`` (:mod:`clothlab.fit.nested`): the selected model's outer held-out error
+    (the figure to quote) beside the selection score (the winner's inner CV, optimistic), each outer fold's
+    winner, and whether they agree; nothing when no nested CV ran."""
+    if not isinstance(nested, dict) or not isinstance(nested.get("folds"), list):
+        return []
+    held, score = nested.get("held_out") or {}, nested.get("selection_score") or {}
+    out = ["<h3>Nested cross-validation of the selection</h3>",
+           f'<p class="note">{esc(nested.get("rule", ""))}; {esc(nested.get("k"))} outer folds '
+           f'({esc(nested.get("scheme", ""))}), {esc(nested.get("fits"))} candidate fits, '
+           f'{fmt_number(nested.get("wall_time_s"))} s.</p>',
+           _table(["figure", "median", "80th", "mean", "what it is"],
+                  [["<b>selected model: outer held-out error (nested CV)</b>", ("num", fmt_percent(held.get("p50"))),
+                    ("num", fmt_percent(held.get("p80"))), ("num", fmt_percent(held.get("mean"))),
+                    "the error of the selection procedure on directions it never saw: the figure to quote"],
+                   ["selection score (inner CV of the winner on all rows)", ("num", fmt_percent(score.get("p50"))),
+                    ("num", fmt_percent(score.get("p80"))), ("num", fmt_percent(score.get("mean"))),
+                    esc(nested.get("selection_score_rule", ""))]])]
+    rows = []
+    for f in nested["folds"]:
+        if not isinstance(f, dict):
+            continue
+        h, s = f.get("held_out") or {}, f.get("selection_score") or {}
+        rows.append([("num", esc(int(f.get("fold", 0)) + 1)), esc(f.get("winner", "")),
+                     ("num", fmt_percent(s.get("p50"))), ("num", fmt_percent(s.get("p80"))),
+                     ("num", fmt_percent(h.get("p50"))), ("num", fmt_percent(h.get("p80"))),
+                     esc(f.get("runner_up") or "")])
+    out.append(_table(["outer fold", "winner", "selection score p50", "selection score p80", "outer held-out p50",
+                       "outer held-out p80", "runner-up"], rows))
+    cls = "note" if nested.get("winners_agree") else "warn"
+    out.append(f'<p class="{cls}"><b>Outer-fold winners:</b> {esc(nested.get("agreement", ""))}.</p>')
+    return out
 
 
 def _posterior_section(posterior) -> list[str]:
