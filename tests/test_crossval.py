@@ -281,3 +281,45 @@ def test_a_fold_failing_twice_is_a_note_and_the_fit_is_saved(tmp_path, monkeypat
     out = save_fit(result, fits_dir=tmp_path)
     saved = json.loads((out / "fit.json").read_text())
     assert saved["cross_validation"]["failed"] == cv["failed"] and saved["parameters"]["beta"]["value"] > 0
+
+
+def _grid_measurement(n_exitant: int, rows_each: int):
+    """A measurement of n_exitant exitant directions with rows_each distinct incident directions each (values
+    are placeholders: only the directions matter to the fold split)."""
+    from clothlab.io.measurement import Measurement
+
+    n = n_exitant * rows_each
+    theta_o = np.repeat(np.linspace(5.0, 65.0, n_exitant), rows_each)
+    phi_o = np.repeat(np.linspace(0.0, 300.0, n_exitant), rows_each)
+    theta_i = np.tile(np.linspace(10.0, 70.0, rows_each), n_exitant)
+    phi_i = np.tile(np.linspace(20.0, 340.0, rows_each), n_exitant)
+    return Measurement(theta_i, phi_i, theta_o, phi_o, np.ones((n, 1)), ("Y",))
+
+
+def test_grouped_folds_stay_balanced_when_no_group_divides_by_k():
+    """7 exitant directions of 7 rows, k = 5: each group deals 2 rows to two folds; dealing each group from where
+    the previous one stopped keeps the folds at 10 or 9 rows (restarting every group at fold 0 would give
+    14, 14, 7, 7, 7; issue 25: the dropped fold offset survived, the paper grid's groups divide by 5)."""
+    m = _grid_measurement(7, 7)
+    for seed in range(3):
+        labels = fold_labels(m, 5, seed=seed, scheme="grouped")
+        sizes = np.bincount(labels, minlength=5)
+        assert sizes.sum() == 49 and sizes.max() - sizes.min() <= 1, sizes
+        for g in range(7):
+            counts = np.bincount(labels[g * 7:(g + 1) * 7], minlength=5)
+            assert counts.max() - counts.min() <= 1
+
+
+def test_random_folds_are_shuffled_by_the_seed():
+    """The random scheme deals shuffled rows: the labels are not the rows dealt in file order (0, 1, .., k-1,
+    0, ..), and another seed gives another split with the same fold sizes (issue 25: an unshuffled random
+    scheme survived, the sizes alone were checked)."""
+    m = _grid_measurement(40, 1)
+    in_order = np.arange(m.n) % 5
+    splits = [fold_labels(m, 5, seed=seed, scheme="random") for seed in range(3)]
+    for labels in splits:
+        assert np.bincount(labels).tolist() == [8] * 5
+        assert not np.array_equal(labels, in_order)
+        assert not all(np.array_equal(labels[i::5], np.full(8, labels[i])) for i in range(5))  # not a stride
+    assert not np.array_equal(splits[0], splits[1]) and not np.array_equal(splits[1], splits[2])
+    np.testing.assert_array_equal(splits[0], fold_labels(m, 5, seed=0, scheme="random"))

@@ -167,3 +167,41 @@ def test_careful_path_when_the_check_fails(monkeypatch):
     coef, r = nn.nnls_small(B, y)
     _, r_ref = nnls(B, y)
     assert r == pytest.approx(r_ref, rel=1e-8)
+
+
+def test_a_problem_failing_the_check_gets_the_qr_answer_not_the_fast_paths(monkeypatch):
+    """The fallback runs and its answer is the one returned: with the check forced to fail (``_CHECK_RTOL`` < 0)
+    and the fast path's answer replaced by a wrong one (every coefficient 1, score 0), every problem must still
+    come out at scipy's optimum, which only the QR re-solve of the flagged problems can give.  Weighted rows,
+    a shared design, per-channel designs and a set of designs (issue 25: the fallback never running survived)."""
+    import clothlab.fit.nnls as nn
+    from clothlab.fit import nnls_kernels
+
+    real = nnls_kernels.normal_equations_nnls
+
+    def wrong_fast_path(*args):
+        coef, score, status = real(*args)
+        finite = status != 2
+        coef[finite], score[finite] = 1.0, 0.0
+        return coef, score, status
+
+    monkeypatch.setattr(nnls_kernels, "normal_equations_nnls", wrong_fast_path)
+    monkeypatch.setattr(nn, "_CHECK_RTOL", -1.0)
+    rng = np.random.default_rng(11)
+    A = rng.uniform(size=(150, 3))
+    truth = np.array([[0.5, 0.0, 2.0], [0.1, 0.3, 0.0], [0.0, 1.0, 0.7]])  # (k, C): x = 1 is far from it
+    y = A @ truth + 0.01 * rng.normal(size=(150, 3))
+    w = rng.uniform(0.2, 3.0, size=(150, 3))
+    for design in (A, np.repeat(A[:, :, None], 3, axis=2) * rng.uniform(0.5, 1.5, size=(1, 3, 3))):
+        coef, residual_norm = nn.nnls_small(design, y, w)
+        for c in range(3):
+            A_c = design if design.ndim == 2 else design[:, :, c]
+            _, r_ref = nnls(A_c * w[:, c, None], y[:, c] * w[:, c])
+            assert _objective(A_c, y[:, c], w[:, c], coef[:, c]) == pytest.approx(r_ref**2, rel=1e-9)
+            assert residual_norm[c] == pytest.approx(r_ref, rel=1e-9)
+    designs = rng.uniform(size=(2, 150, 3))
+    coef, residual_norm = nn.nnls_sets(designs, y, w)
+    for j in range(2):
+        for c in range(3):
+            _, r_ref = nnls(designs[j] * w[:, c, None], y[:, c] * w[:, c])
+            assert residual_norm[j, c] == pytest.approx(r_ref, rel=1e-9)

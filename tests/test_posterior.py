@@ -316,3 +316,25 @@ def test_predictive_bands_and_outputs():
 
     assert len(fig.axes) == 4
     plt.close(fig)
+
+
+@pytest.mark.parametrize("changed", ["values", "sigma", "incident", "exitant"])
+def test_checkpoint_of_other_data_starts_afresh(tmp_path, warnings_logged, changed):
+    """The fingerprint covers every data array of the likelihood: the measured values, their sigma and both
+    directions.  The same rows with one of them changed (values and sigma scaled by 1.01, an azimuth turned
+    by 10 deg) define another target, so a rerun must not continue the old chain (issue 25: a fingerprint
+    omitting wo survived)."""
+    problem, truth = _problem()
+    m = problem.measurement
+    checkpoint = tmp_path / "posterior.npz"
+    run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    other = {"values": {"values": m.values * 1.01}, "sigma": {"sigma": m.sigma * 1.01},
+             "incident": {"phi_i": (m.phi_i + 10.0) % 360.0}, "exitant": {"phi_o": (m.phi_o + 10.0) % 360.0}}
+    moved = FitProblem(problem.model, replace(m, **other[changed]), problem.free, problem.start,
+                       dict(zip(problem.free, zip(problem.lower, problem.upper, strict=True), strict=True)),
+                       problem.metric)
+    warnings_logged.clear()
+    fresh = run_posterior(moved, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    assert fresh.resumed_from == 0
+    assert "belongs to another fit (differs in: data)" in warnings_logged.text
+    assert run_posterior(moved, truth, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 60
