@@ -357,3 +357,122 @@ def load_json_text(text: str, *, path=None, error=InputError):
 def load_json_file(path, *, error=InputError, what: str = "JSON file", limit: int = MAX_YAML_BYTES):
     """:func:`load_json_text` of a bounded regular UTF-8 file."""
     return load_json_text(read_text(path, limit=limit, what=what, error=error), path=path, error=error)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# NumPy .npz archives (the surrogate's weights)
+
+MAX_NPZ_BYTES = 1 << 30
+"""Largest ``.npz`` archive read (1 GiB); each member is further bounded by the shape its caller expects."""
+NPY_HEADER_BYTES = 1 << 16
+"""Most bytes of a member's ``.npy`` header (format 1.0 allows 65,535; numpy writes 128)."""
+NPZ_FLOAT_DTYPES = ("float32", "float64")
+
+
+def read_npz(path, members: dict, *, limit: int = MAX_NPZ_BYTES, what: str = "weights file", error=InputError,
+             dtypes=NPZ_FLOAT_DTYPES, magnitude: float | None = None) -> dict:
+    """The arrays of an ``.npz`` archive whose members are exactly ``members`` = {name: shape}.
+
+    Checked before anything is decompressed: the file is regular and at most ``limit`` bytes, it is a zip
+    archive (not truncated: the central directory is read first), it holds exactly the expected members
+    (``name.npy``, stored or deflated, not encrypted), and each member's declared uncompressed size
+    (``ZipInfo.file_size``) is at most its shape's bytes plus a header.  Then each member is inflated with
+    a read bounded by that size (a member lying about its size is cut there and refused: no zip bomb), its
+    ``.npy`` header is parsed without pickle, and it must hold ``dtypes`` with exactly the expected shape,
+    every value finite and, with ``magnitude``, at most that in absolute value.  Every refusal is ``error``
+    naming the file (``path=``) and the member (``field=``)."""
+    import ast
+    import io
+    import zipfile
+
+    import numpy as np
+
+    data = read_bounded_bytes(path, limit=limit, what=what, error=error)
+    path = Path(path)
+    if not data:
+        raise error(f"empty {what}; expected a .npz archive", path=path)
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+        infos = archive.infolist()
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, ValueError, OSError, NotImplementedError) as exc:
+        raise error(f"not a .npz archive (truncated or not a zip file: {exc})", path=path) from None
+    found = {}
+    for info in infos:
+        name = info.filename.removesuffix(".npy")
+        if name not in members:
+            shown = info.filename if len(info.filename) <= 60 else info.filename[:57] + "..."
+            raise error(f"unexpected member {shown!r} (expected {len(members)} arrays)", path=path, field=shown)
+        if name in found:
+            raise error("member stored twice", path=path, field=name)
+        found[name] = info
+    missing = [name for name in members if name not in found]
+    if missing:
+        raise error(f"missing array{'s' if len(missing) > 1 else ''} {', '.join(missing[:3])}"
+                    f"{' ...' if len(missing) > 3 else ''}", path=path, field=missing[0])
+    out = {}
+    for name, shape in members.items():
+        info = found[name]
+        count = math.prod(shape)
+        bound = NPY_HEADER_BYTES + 10 + 8 * count  # the largest dtype accepted is 8 bytes
+        if info.flag_bits & 0x1:
+            raise error("member is encrypted", path=path, field=name)
+        if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+            raise error(f"member uses compression method {info.compress_type} (stored or deflated only)",
+                        path=path, field=name)
+        if info.file_size > bound:
+            raise error(f"member declares {info.file_size} bytes uncompressed; an array of shape {tuple(shape)} "
+                        f"needs at most {bound}", path=path, field=name)
+        try:
+            with archive.open(info) as handle:
+                raw = handle.read(bound + 1)
+        except (zipfile.BadZipFile, EOFError, ValueError, OSError, RuntimeError, NotImplementedError) as exc:
+            raise error(f"member cannot be read (corrupt or truncated archive: {exc})", path=path,
+                        field=name) from None
+        if len(raw) > bound:
+            raise error(f"member inflates past {bound} bytes (an array of shape {tuple(shape)}); refused",
+                        path=path, field=name)
+        out[name] = _npy_array(raw, shape, path=path, name=name, error=error, dtypes=dtypes,
+                               magnitude=magnitude, literal=ast.literal_eval, np=np)
+    return out
+
+
+def _npy_array(raw: bytes, shape, *, path, name, error, dtypes, magnitude, literal, np):
+    """The array of one ``.npy`` member (bytes), header parsed as a Python literal (never unpickled)."""
+    if raw[:6] != b"\x93NUMPY" or len(raw) < 10:
+        raise error("member is not a .npy array", path=path, field=name)
+    major = raw[6]
+    if major == 1:
+        header_len, start = int.from_bytes(raw[8:10], "little"), 10
+    elif major in (2, 3):
+        header_len, start = int.from_bytes(raw[8:12], "little"), 12
+    else:
+        raise error(f"member is .npy format version {major} (1 to 3 are read)", path=path, field=name)
+    if header_len > NPY_HEADER_BYTES or start + header_len > len(raw):
+        raise error("member's .npy header is truncated or too long", path=path, field=name)
+    try:
+        header = literal(raw[start:start + header_len].decode("latin-1"))
+        descr, fortran, found_shape = header["descr"], header["fortran_order"], tuple(header["shape"])
+        dtype = np.dtype(descr)
+    except (ValueError, SyntaxError, TypeError, KeyError, MemoryError, RecursionError):
+        raise error("member's .npy header cannot be read", path=path, field=name) from None
+    if dtype.hasobject or dtype.name not in dtypes or dtype.shape or dtype.names:
+        raise error(f"member holds dtype {dtype.str!r} ({dtype.name}); expected {' or '.join(dtypes)}", path=path,
+                    field=name)
+    if not isinstance(fortran, bool) or found_shape != tuple(shape):
+        raise error(f"member has shape {found_shape}, expected {tuple(shape)}", path=path, field=name)
+    body = raw[start + header_len:]
+    if len(body) != dtype.itemsize * math.prod(shape):
+        raise error(f"member holds {len(body)} data bytes, expected {dtype.itemsize * math.prod(shape)} "
+                    "(truncated or padded)", path=path, field=name)
+    array = np.frombuffer(body, dtype=dtype).reshape(shape, order="F" if fortran else "C")
+    array = array.astype(dtype.newbyteorder("="))
+    finite = np.isfinite(array)
+    if not finite.all():
+        index = tuple(int(i) for i in np.argwhere(~finite)[0])
+        raise error(f"member holds {array[index]!r} at index {index}; every value must be finite", path=path,
+                    field=name)
+    if magnitude is not None and array.size and float(np.max(np.abs(array))) > magnitude:
+        index = tuple(int(i) for i in np.unravel_index(int(np.argmax(np.abs(array))), array.shape))
+        raise error(f"member holds {float(array[index]):.6g} at index {index}; values beyond +-{magnitude:g} are "
+                    "not a trained network's", path=path, field=name)
+    return array

@@ -32,13 +32,13 @@ refine      ``clothlab fit``: after the fit through the encoder, refine the free
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from clothlab.errors import ConfigError, InputError
-from clothlab.models.base import ORIENTATION, Model, as_directions
+from clothlab.frames import to_weave_frame
+from clothlab.models.base import ORIENTATION, Model, ModelTexture, as_directions, split_orientation
 from clothlab.models.irawan.integrals import COMPONENTS
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 from clothlab.neural.encodings import normalised_parameters, pattern_descriptor
@@ -120,11 +120,11 @@ class NeuralModel(Model):
                 raise ConfigError(f"no shipped surrogate for weave {weave.name!r} (shipped: {shipped}); give "
                                   "model.options.weights: a .npz written by clothlab train-surrogate",
                                   field="model.options.weights")
-        target = target_class(read_sidecar(weights))  # ConfigError naming the file first
+        target = target_class(read_sidecar(weights, as_config=False))  # ConfigError naming the file first
         try:
             self.surrogate, self.sidecar = load_neural(weights, weave)
-        except InputError as exc:
-            raise ConfigError(f"model.options.weights: {exc}", field="model.options.weights") from None
+        except InputError as exc:  # the file named, and its member or field in the message
+            raise as_option_error(exc) from None
         if tuple(self.surrogate.component_names) != tuple(target.component_names):
             raise ConfigError(f"{weights}: components {list(self.surrogate.component_names)}, expected "
                               f"{list(target.component_names)} of its target kind {target.kind!r}",
@@ -262,7 +262,14 @@ class NeuralModel(Model):
     def query(self, centre, size, wi, wo, params: dict | None = None, *, reference=None) -> dict[str, np.ndarray]:
         """Components of box footprints of side ``size`` tiles at ``centre`` (N, 2) tiles.  ``reference``:
         the reflectance model's components (N, C) at the queries, when the caller has them (a residual
-        network's base R; computed here otherwise)."""
+        network's base R; computed here otherwise).  ``orientation`` in ``params`` rotates the directions into
+        the weave's frame as :meth:`components` does (module docstring of :mod:`clothlab.models.base`); centre
+        and size stay in the tile's frame."""
+        params, angle = split_orientation(params)
+        if angle != 0.0:
+            self.params[ORIENTATION].check(angle)
+            wi, wo = as_directions(wi, wo)
+            wi, wo = to_weave_frame(wi, angle), to_weave_frame(wo, angle)
         material = self._material(params)
         if (reference is None and not isinstance(material, int)
                 and (self.surrogate.residual or self.surrogate.residual_input)):
@@ -304,27 +311,63 @@ class NeuralModel(Model):
         return NeuralTexture(self)
 
 
-def read_sidecar(weights) -> dict:
-    """The ``.json`` sidecar of surrogate weights ``weights`` (.npz or .json); ConfigError at
-    ``model.options.weights`` when a file is missing or it is not a surrogate's."""
-    from clothlab.neural.serialise import FORMAT
+def read_sidecar(weights, *, as_config: bool = True) -> dict:
+    """The checked ``.json`` sidecar of surrogate weights ``weights`` (.npz or .json;
+    :func:`clothlab.neural.serialise.read_sidecar`'s schema, then the target kind and the parameter names
+    against that kind's declarations).  A ConfigError at ``model.options.weights`` when a file is missing;
+    a bad sidecar is a ConfigError there too, naming the sidecar (``path``) and its dotted field (first in
+    the message); with ``as_config`` (config validation, which names the yaml line of the option) both are
+    in the message."""
+    from clothlab.neural.serialise import read_sidecar as read_checked
 
     path = Path(weights)
     for p in (path.with_suffix(".npz"), path.with_suffix(".json")):
         if not p.is_file():
             raise ConfigError(f"surrogate file not found: {p} (a .npz and its .json sidecar written by clothlab "
                               "train-surrogate)", field="model.options.weights")
-    sidecar_path = path.with_suffix(".json")
     try:
-        sidecar = json.loads(sidecar_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"{sidecar_path} is not a surrogate sidecar (not valid JSON: {exc})",
-                          field="model.options.weights") from None
-    if not isinstance(sidecar, dict) or sidecar.get("format") != FORMAT:
-        found = sidecar.get("format") if isinstance(sidecar, dict) else type(sidecar).__name__
-        raise ConfigError(f"{sidecar_path} is not a surrogate sidecar (format {found!r}, expected {FORMAT!r})",
-                          field="model.options.weights")
+        sidecar = read_checked(path)
+        check_sidecar_names(sidecar, path.with_suffix(".json"))
+    except InputError as exc:
+        if as_config:  # config validation puts this at the option's yaml line: the sidecar named in the message
+            raise ConfigError(f"{exc}", field="model.options.weights") from None
+        raise as_option_error(exc) from None
     return sidecar
+
+
+def as_option_error(exc: InputError) -> ConfigError:
+    """A ConfigError at ``model.options.weights`` naming the weights' file (``path``) and, first in the
+    message, the sidecar field or the ``.npz`` member at fault."""
+    return ConfigError(f"{exc.field}: {exc.detail}" if exc.field else exc.detail, path=exc.path, line=exc.line,
+                       field="model.options.weights")
+
+
+def check_sidecar_names(sidecar: dict, path) -> None:
+    """InputError naming ``path`` and the field: the sidecar's target kind must be one of
+    :data:`TARGET_KINDS` and its parameter names (``encoding.parameters``, ``params``, ``materials_params``)
+    parameters of that kind, with values inside their physical ranges."""
+    from clothlab.errors import ParameterError
+
+    enc = sidecar.get("encoding") or {}
+    kind = enc.get("kind", "irawan")
+    if kind not in TARGET_KINDS:
+        raise InputError(f"surrogate target kind {kind!r}: kind neural takes networks of {', '.join(TARGET_KINDS)}",
+                         path=path, field="encoding.kind")
+    table = target_class(sidecar).declared_parameters()
+    for i, name in enumerate(enc.get("parameters", ())):
+        if name not in table:
+            raise InputError(f"{name!r} is not a parameter of kind {kind!r}", path=path,
+                             field=f"encoding.parameters[{i}]")
+    sets = [("encoding.params", enc.get("params") or {})]
+    sets += [(f"encoding.materials_params[{i}]", q) for i, q in enumerate(enc.get("materials_params") or ())]
+    for where, values in sets:
+        for name, value in values.items():
+            if name not in table:
+                raise InputError(f"{name!r} is not a parameter of kind {kind!r}", path=path, field=f"{where}.{name}")
+            try:
+                table[name].check(value)
+            except ParameterError as exc:
+                raise InputError(exc.detail, path=path, field=f"{where}.{name}") from None
 
 
 def target_class(sidecar: dict):
@@ -352,21 +395,20 @@ def trained_free(sidecar: dict) -> tuple:
     return NeuralModel.default_free if declared.issuperset(NeuralModel.default_free) else tuple(target.default_free)
 
 
-class NeuralTexture:
-    """The surrogate at texture points: footprint centre (u, v), size ``footprint`` tiles (filters itself)."""
+class NeuralTexture(ModelTexture):
+    """The surrogate at texture points: footprint centre (u, v), size ``footprint`` tiles (filters itself).
+    A :class:`clothlab.models.base.ModelTexture`: declarations, defaults, component names and the refusal of
+    an ``orientation`` other than 0 (the texture evaluates the weave in its tile frame) are the other texture
+    models'; :meth:`NeuralModel.query` takes an orientation."""
 
     kind = "neural-texture"
-
-    def __init__(self, model: NeuralModel):
-        self.model, self.weave = model, model.weave
-        self.params, self.component_names = model.params, model.component_names
-
-    def resolve(self, params: dict | None) -> dict[str, float]:
-        return self.model.resolve(params)
 
     def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
                    normalised: bool = True, warn: bool = True, footprint=None, view_distance=None):
         """Arrays of the points' shape; ``footprint``: size in tiles (scalar or per point)."""
+        from clothlab.models.base import texture_parameters
+
+        params = texture_parameters(params, self.model.kind)
         u, v = np.broadcast_arrays(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
         n = u.size
         wi, wo = (np.broadcast_to(np.atleast_2d(np.asarray(d, dtype=np.float64)), (n, 3)) for d in (wi, wo))
