@@ -109,8 +109,11 @@ class TextureMonteCarloLabels:
         mean_second = np.where(in_first[..., None], 0.0, values).sum(axis=1) / np.maximum(k - n_first, 1)[:, None]
         area_first, area_second = rest * size, whole * rest
         integral = area_first[:, None] * mean_first + area_second[:, None] * mean_second
-        if self.tile_average is not None:
-            integral += (whole * whole)[:, None] * self.tile_average(wi, wo, centre, size)
+        whole_rows = np.flatnonzero(whole > 0.0)
+        if self.tile_average is not None and whole_rows.size:  # R only where a whole tile is covered
+            wi, wo = (d[whole_rows] if d.shape[0] == n else d for d in (np.atleast_2d(wi), np.atleast_2d(wo)))
+            integral[whole_rows] += (whole[whole_rows] ** 2)[:, None] * self.tile_average(
+                wi, wo, np.atleast_2d(centre)[whole_rows], size[whole_rows])
         return integral / (size * size)[:, None]
 
 

@@ -1,6 +1,8 @@
 """Bench section ``neural``: inference speed of the numpy surrogate's decoder (Chen, Wang & Wang 2024,
 sec. 4.2-4.3: only the decoder runs per query) at the chosen width and one narrower and one wider, measured
-side by side in one run, against the target of :data:`TARGET_QPS` queries per second on this machine.
+side by side in one run, against the target of :data:`TARGET_QPS` queries per second on this machine; then
+the per-bin figures of every shipped network end to end (:mod:`clothlab.studies.neural_bins`) and the
+neural-lod render.
 
 Each width is timed in worker processes started with one BLAS thread each (OPENBLAS/OMP/MKL_NUM_THREADS=1:
 many small matrix products stall with threaded BLAS under load), float32, queries in chunks of
@@ -8,8 +10,9 @@ many small matrix products stall with threaded BLAS under load), float32, querie
 queries over the slowest worker's wall time; queries per CPU-second divides by the CPU time the workers
 used.  The weights are random: the cost does not depend on their values.
 
-With a shipped per-fabric network (:data:`clothlab.models.neural.model.SHIPPED`), the section also sets it
-against Monte-Carlo footprint integration at equal time (the "MSE vs time" table): held-out direction
+:func:`surrogate_vs_mc` (used by :func:`compare_networks`, not by the section: it pools bins and its
+reference uses R) sets a shipped per-fabric network against Monte-Carlo footprint integration at equal
+time (the "MSE vs time" table): held-out direction
 pairs of its training data spec (one pair per query), footprints >= 0.12 tile; the reference is the
 whole-tile-split MC estimate with :data:`REFERENCE_SAMPLES` samples
 (:class:`clothlab.neural.labels.TextureMonteCarloLabels`); the MC estimates are plain stratified box
@@ -225,13 +228,13 @@ def shipped_fabrics() -> list[str]:
 
 
 def run(context) -> dict:
-    """Decoder speed, the MC-vs-surrogate table of every shipped weave and the neural-lod render."""
+    """Decoder speed, the per-bin figures of every shipped network (:mod:`clothlab.studies.neural_bins`:
+    accuracy against the texture model, cold end-to-end cost, equal-time MSE ratios; no pooled figure) and
+    the neural-lod render."""
+    from clothlab.studies.neural_bins import run_all
     from clothlab.studies.render_lod import neural_lod_benchmark
 
-    fabrics = shipped_fabrics()
-    versus = [surrogate_vs_mc(context.quick, fabric) for fabric in fabrics]
-    return {**neural_speed(context.quick), "versus_mc": versus[0] if versus else {"skipped": "no shipped weights"},
-            "versus_mc_all": versus,
+    return {**neural_speed(context.quick), "per_bin": run_all(context.quick),
             "render": neural_lod_benchmark(context.quick, figures_dir=context.figures_dir)}
 
 
@@ -244,7 +247,11 @@ def lines(f: dict) -> list[str]:
                    f"{r['qps_one_worker']:>14,.0f} {r['qps_per_cpu_s_one_worker']:>9,.0f} {r['workers']:>9} "
                    f"{r['qps']:>9,.0f} {r['qps_per_cpu_s']:>9,.0f}   {'met' if r['meets_target'] else 'NOT met'}")
     out.append("  * the default width")
-    for v in f.get("versus_mc_all") or [f.get("versus_mc") or {}]:
+    if f.get("per_bin"):
+        from clothlab.studies.neural_bins import lines as bin_lines
+
+        out += bin_lines(f["per_bin"])
+    for v in f.get("versus_mc_all") or ([f["versus_mc"]] if f.get("versus_mc") else []):
         out += _versus_lines(v)
     if "render" in f:
         from clothlab.studies.render_lod import neural_lod_lines

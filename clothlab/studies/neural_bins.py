@@ -1,0 +1,311 @@
+"""Per-bin figures of every shipped network (issue 23, build item 1): accuracy against the texture model
+itself, the whole query's CPU time on directions never seen before, and equal-time MSE against Monte Carlo.
+
+For each shipped network (:func:`shipped_networks`: the per-fabric ``<preset>.npz`` and the Table-2 network
+``families/surface-table2``) and each material group (one material for a per-fabric network; the unseen
+materials, the held-out pattern and the trained materials of the Table-2 network), per footprint bin of
+:data:`BINS`:
+
+* **queries**: fresh held-out direction pairs of the network's data spec (:func:`clothlab.neural.data.
+  heldout_queries`, seeds :data:`QUERY_SEED` + ..., never the training seed), uniform centres, sizes as
+  Table 2 within the bin;
+* **reference**: the texture model's own box average by plain stratified MC of ``samples`` points (default
+  :data:`REFERENCE_SAMPLES` = 16,384; Chen, Wang & Wang 2024, eq. 3 with a box kernel), as the mean of two
+  independent halves: it does not use the reflectance model R, and the halves' difference gives its own
+  noise (``reference_noise``, relative RMS of the mean);
+* **accuracy**: relative RMSE of f (the sum of the components, unit coefficients) with a 90 % bootstrap
+  interval (:func:`clothlab.neural.training.relative_rmse_interval`), beside R alone on the same reference;
+* **cost**: the surrogate's ``Surrogate.query`` end to end (features, R or the texture probe, decoder, the
+  decoding), CPU time (``process_time``) per query, median of ``repeats`` calls, each call on a new set of
+  ``timing`` queries whose directions no model has seen (new draws; every model's direction memo is dropped
+  before each call as well: :meth:`clothlab.models.base.Model.forget_directions`); ``inputs_us`` is the R /
+  probe share, timed the same way;
+* **equal time**: MSE of k-sample estimates (k in :data:`MC_SAMPLES`) of plain stratified MC of the texture
+  and of *split* MC (whole tiles from R, the rest by MC: :class:`clothlab.neural.labels.
+  TextureMonteCarloLabels` with ``tile_average``; what a renderer with R does), each timed as the
+  surrogate; the MC MSE at the surrogate's CPU time is interpolated log-log between the bracketing k
+  (:func:`equal_time_mse`), and ``ratio_*`` = that MSE / the surrogate's MSE.  When the surrogate costs less
+  than MC-1, the ratio is against MC-1 (``below_mc1``: MC cannot be that cheap).
+
+No figure pools bins.  Run (the figures of docs/neural.md)::
+
+    clothlab bench --sections neural
+
+or this part alone: ``python -m clothlab.studies.neural_bins [--quick]``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+BINS = ((0.03, 0.06), (0.06, 0.12), (0.12, 0.25), (0.25, 1.0), (1.0, 4.0), (4.0, 5.0))  # tiles
+REFERENCE_SAMPLES = 16384
+MC_SAMPLES = (1, 2, 4, 8, 16, 32, 64, 128, 256)
+QUERY_SEED = 2311  # accuracy queries; timing queries use QUERY_SEED + 50,000 + ...
+TABLE2 = "families/surface-table2"
+POINTS_PER_CALL = 1 << 18  # texture points per reference call (memory)
+FULL = {"per_bin": 300, "samples": REFERENCE_SAMPLES, "timing": 4096, "repeats": 3, "materials": 12}
+QUICK = {"per_bin": 24, "samples": 1024, "timing": 512, "repeats": 2, "materials": 3}
+
+
+def shipped_networks() -> list[tuple[str, Path]]:
+    """(name, .npz) of every shipped network: the per-fabric ones, then the Table-2 network."""
+    from clothlab.models.neural.model import SHIPPED
+
+    out = [(p.stem, p) for p in sorted(SHIPPED.glob("*.npz"))]
+    table2 = SHIPPED / f"{TABLE2}.npz"
+    if table2.exists():
+        out.append((Path(TABLE2).name, table2))
+    return out
+
+
+def material_groups(encoding: dict, limit: int) -> dict[str, list[int]]:
+    """{group: material rows} (module docstring), at most ``limit`` rows per group (evenly spaced)."""
+    n = len(encoding.get("materials_params") or [encoding.get("params")])
+    if n == 1:
+        return {"": [0]}
+    unseen, pattern = list(encoding.get("heldout_materials") or []), list(encoding.get("heldout_pattern") or [])
+    trained = [m for m in range(n) if m not in set(unseen) | set(pattern)]
+    groups = {"unseen materials": unseen, "held-out pattern": pattern, "trained materials": trained}
+
+    def thin(rows):
+        return [rows[int(i)] for i in np.linspace(0, len(rows) - 1, limit)] if len(rows) > limit else rows
+    return {g: thin(rows) for g, rows in groups.items() if rows}
+
+
+class Material:
+    """One material of a network: its texture model's parameters, R and texture (from the surrogate's
+    attached references, :func:`clothlab.models.neural.model.load_neural`)."""
+
+    def __init__(self, surrogate, sidecar, row: int):
+        from clothlab.models.neural.model import reference_model
+        from clothlab.neural.labels import ModelLabels
+
+        self.row = row
+        if surrogate.references:
+            self.r = surrogate.references[row]
+        else:
+            enc = sidecar["encoding"]
+            owner = (enc.get("materials_weave") or [None] * (row + 1))[row]
+            params = (enc.get("materials_params") or [enc.get("params", {})])[row]
+            self.r = ModelLabels(reference_model(sidecar, None, owner), {k: float(v) for k, v in params.items()})
+        self.model, self.params = self.r.model, self.r.params
+        self.texture = self.model.texture()
+
+
+def _args(q: np.ndarray):
+    return q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3]
+
+
+def texture_reference(material: Material, q: np.ndarray, samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(f, f_a - f_b) of queries ``q``: f the mean of two plain stratified MC estimates of ``samples`` / 2
+    points each (seeds ``seed``, ``seed`` + 1; no R), summed over the components."""
+    from clothlab.neural.labels import TextureMonteCarloLabels
+
+    half = max(1, samples // 2)
+    step = max(1, POINTS_PER_CALL // half)
+    parts = []
+    for s in (seed, seed + 1):
+        mc = TextureMonteCarloLabels(material.texture, material.params, samples=half, seed=s)
+        parts.append(np.concatenate([mc(*_args(q[i:i + step])).sum(axis=1) for i in range(0, len(q), step)]))
+    return 0.5 * (parts[0] + parts[1]), parts[0] - parts[1]
+
+
+def _relative(a, b) -> float:
+    return float(np.sqrt(np.sum(np.square(a - b)) / max(np.sum(np.square(b)), 1e-300)))
+
+
+def forget_all(surrogate, materials) -> None:
+    """Drop the direction memo of every model a query may reach (R of each material, the probes' models)."""
+    for m in materials:
+        m.model.forget_directions()
+    for r in surrogate.references or ():
+        r.model.forget_directions()
+
+
+def cold_time(call, materials, blocks_for, surrogate, repeats: int) -> float:
+    """Median over ``repeats`` of the CPU seconds per query of ``call(material, q)`` summed over the
+    materials, each repeat on new queries ``blocks_for(r)`` ({row: q}) and every direction memo dropped."""
+    times = []
+    for r in range(repeats):
+        blocks = blocks_for(r)
+        forget_all(surrogate, materials)
+        n = sum(len(q) for q in blocks.values())
+        start = time.process_time()
+        for m in materials:
+            call(m, blocks[m.row])
+        times.append((time.process_time() - start) / n)
+    return float(np.median(times))
+
+
+def equal_time_mse(times, mses, t: float) -> tuple[float, bool]:
+    """(MC MSE at CPU time ``t``, below) from k-sample rows (times ascending): log-log interpolation between
+    the bracketing rows; above the last row the last MSE scaled by 1 / time (the plain MC rate); below the
+    first row the first row's MSE and ``below`` True (MC cannot be that cheap)."""
+    times, mses = np.asarray(times, dtype=np.float64), np.maximum(np.asarray(mses, dtype=np.float64), 1e-300)
+    if t <= times[0]:
+        return float(mses[0]), True
+    if t >= times[-1]:
+        return float(mses[-1] * times[-1] / t), False
+    return float(np.exp(np.interp(np.log(t), np.log(times), np.log(mses)))), False
+
+
+def bin_figures(surrogate, materials, spec, lo: float, hi: float, *, per_bin: int, samples: int, timing: int,
+                repeats: int, seed: int, mc_samples=MC_SAMPLES) -> dict:
+    """The figures of one bin (module docstring) for the materials (queries spread evenly over them)."""
+    from clothlab.neural.data import heldout_queries
+    from clothlab.neural.labels import TextureMonteCarloLabels
+    from clothlab.neural.training import relative_rmse_interval
+
+    each = -(-per_bin // len(materials))
+    each_t = -(-timing // len(materials))
+    q = {m.row: heldout_queries(spec, each, seed=seed + 7 * m.row, sizes=(lo, hi), material=m.row)
+         for m in materials}
+
+    def fresh(r):
+        return {m.row: heldout_queries(spec, each_t, seed=seed + 50_000 + 1000 * r + 7 * m.row, sizes=(lo, hi),
+                                       material=m.row) for m in materials}
+
+    ref, diff, pred, base = [], [], [], []
+    for m in materials:
+        f, d = texture_reference(m, q[m.row], samples, seed + 3 + 11 * m.row)
+        ref.append(f)
+        diff.append(d)
+        c, s, wi, wo = q[m.row][:, 1:3], q[m.row][:, 3], q[m.row][:, 4:7], q[m.row][:, 7:10]
+        pred.append(surrogate.query(c, s, wi, wo, material=m.row).sum(axis=1))
+        base.append(m.r(*_args(q[m.row])).sum(axis=1))
+    ref, diff, pred, base = (np.concatenate(x) for x in (ref, diff, pred, base))
+
+    def query(m, block):
+        return surrogate.query(block[:, 1:3], block[:, 3], block[:, 4:7], block[:, 7:10], material=m.row)
+
+    def inputs(m, block):
+        c, s, wi, wo = block[:, 1:3], block[:, 3], block[:, 4:7], block[:, 7:10]
+        surrogate.transformed_reference(c, s, wi, wo, material=m.row)
+        surrogate.transformed_probe(c, s, wi, wo, material=m.row)
+
+    warm = {m.row: heldout_queries(spec, 8, seed=seed + 99_999, sizes=(lo, hi), material=m.row) for m in materials}
+    for m in materials:  # compile / first-call costs out of the timings
+        query(m, warm[m.row])
+    sur_us = 1e6 * cold_time(query, materials, fresh, surrogate, repeats)
+    inputs_us = 1e6 * cold_time(inputs, materials, lambda r: fresh(r + repeats), surrogate, repeats)
+    sur_mse = float(np.mean(np.square(pred - ref)))
+
+    def sweep(split: bool) -> list[dict]:
+        rows = []
+        for k in mc_samples:
+            if split and k < 2:
+                continue
+
+            def estimator(m, k=k):
+                return TextureMonteCarloLabels(m.texture, m.params, samples=k, seed=seed + 5 + k,
+                                               tile_average=m.r if split else None)
+            value = np.concatenate([estimator(m)(*_args(q[m.row])).sum(axis=1) for m in materials])
+            keep = max(16, each_t // max(1, k // 4))  # fewer timing queries for large k (same points)
+            us = 1e6 * cold_time(lambda m, block, e=estimator: e(m)(*_args(block)), materials,
+                                 lambda r, k=k, keep=keep: {row: b[:keep] for row, b in
+                                                            fresh(r + 2 * repeats + 10 * k).items()},
+                                 surrogate, repeats)
+            rows.append({"samples": k, "us_per_query": us, "mse": float(np.mean(np.square(value - ref)))})
+        rows.sort(key=lambda r: r["us_per_query"])
+        return rows
+
+    noise = 0.5 * float(np.sqrt(np.sum(diff ** 2) / max(np.sum(ref ** 2), 1e-300)))
+    out = {"size_lo": lo, "size_hi": hi, "queries": int(ref.size), "materials": len(materials),
+           "surrogate": _relative(pred, ref), "surrogate_interval": relative_rmse_interval(pred, ref),
+           "reflectance_model": _relative(base, ref), "reference_noise": noise,
+           "us_per_query": sur_us, "inputs_us": inputs_us, "surrogate_mse": sur_mse}
+    for name, split in (("plain", False), ("split", True)):
+        rows = sweep(split)
+        mse, below = equal_time_mse([r["us_per_query"] for r in rows], [r["mse"] for r in rows], sur_us)
+        out[f"mc_{name}"] = rows
+        out[f"ratio_{name}"] = mse / max(sur_mse, 1e-300)
+        out[f"below_mc1_{name}"] = below
+    return out
+
+
+def network_figures(name: str, path, quick: bool = False, sizes: dict | None = None, bins=BINS) -> dict:
+    """Per group and bin :func:`bin_figures` of the network at ``path`` (``sizes``: overrides of
+    :data:`FULL` / :data:`QUICK`)."""
+    from clothlab.models.neural.model import load_neural
+    from clothlab.neural.data import DataSpec
+
+    size = {**(QUICK if quick else FULL), **(sizes or {})}
+    start = time.process_time()
+    surrogate, sidecar = load_neural(path)
+    enc = sidecar["encoding"]
+    spec = DataSpec(**enc["data_spec"])
+    groups = {}
+    for g, rows in material_groups(enc, size["materials"]).items():
+        materials = [Material(surrogate, sidecar, row) for row in rows]
+        groups[g] = [bin_figures(surrogate, materials, spec, lo, hi, per_bin=size["per_bin"],
+                                 samples=size["samples"], timing=size["timing"], repeats=size["repeats"],
+                                 seed=QUERY_SEED + 1000 * i)
+                     for i, (lo, hi) in enumerate(bins)]
+    return {"network": name, "path": str(path), "kind": enc.get("kind", "irawan"), "groups": groups,
+            "settings": size, "cpu_s": time.process_time() - start}
+
+
+def run_all(quick: bool = False, names=None, sizes: dict | None = None) -> list[dict]:
+    """:func:`network_figures` of every shipped network (or those in ``names``)."""
+    return [network_figures(name, path, quick, sizes) for name, path in shipped_networks()
+            if names is None or name in names]
+
+
+def table_lines(result: dict) -> list[str]:
+    """Markdown rows of one network: per group and bin the relative RMSE [90 % interval], R alone, the
+    reference's own noise, CPU-us per query (R / probe share), equal-time ratios against plain and split MC."""
+    s = result["settings"]
+    out = [f"{result['network']} ({result['kind']}; {s['per_bin']} queries per bin, reference {s['samples']:,} "
+           f"stratified texture samples, timing {s['timing']:,} new queries x {s['repeats']}; "
+           f"{result['cpu_s']:.0f} CPU-s)", "",
+           "| group | bin (tiles) | rel. RMSE [90 %] | R alone | ref. noise | CPU-us/query (R/probe) | "
+           "MC / surrogate MSE | split MC / surrogate MSE |", "|---|---|---|---|---|---|---|---|"]
+    for g, rows in result["groups"].items():
+        for r in rows:
+            lo_ci, hi_ci = r["surrogate_interval"]
+
+            def ratio(name, r=r):
+                return ("<=" if r[f"below_mc1_{name}"] else "") + f"{r[f'ratio_{name}']:.3g}"
+            out.append(f"| {g or '-'} | {r['size_lo']:g}-{r['size_hi']:g} | {r['surrogate']:.3f} "
+                       f"[{lo_ci:.3f}, {hi_ci:.3f}] | {r['reflectance_model']:.3f} | {r['reference_noise']:.4f} | "
+                       f"{r['us_per_query']:.2f} ({r['inputs_us']:.2f}) | {ratio('plain')} | {ratio('split')} |")
+    return out
+
+
+def lines(results: list[dict]) -> list[str]:
+    out = ["== neural surrogate per bin: fresh held-out queries, texture reference (no R), cold end-to-end "
+           "CPU time, equal-time MSE ratios =="]
+    for r in results:
+        out += table_lines(r) + [""]
+    out.append("'<=': the surrogate costs less than MC-1; the ratio is against MC-1 (a lower bound).")
+    return out
+
+
+def main(argv=None) -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--networks", default=None, help="comma-separated names (default: all shipped)")
+    parser.add_argument("--per-bin", type=int, default=None)
+    parser.add_argument("--json", default=None, help="also write the figures to this JSON file")
+    a = parser.parse_args(argv)
+    sizes = {"per_bin": a.per_bin} if a.per_bin else None
+    names = a.networks.split(",") if a.networks else None
+    results = []
+    for name, path in shipped_networks():
+        if names is None or name in names:
+            results.append(network_figures(name, path, a.quick, sizes))
+            print("\n".join(table_lines(results[-1])), flush=True)
+    if a.json:
+        import json
+
+        Path(a.json).write_text(json.dumps(results, indent=1), encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()
