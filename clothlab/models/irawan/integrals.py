@@ -150,18 +150,28 @@ def _specular_albedo_cached(key, samples):
 
 @dataclass(frozen=True, eq=False)
 class YarnTerms:
-    """What of I_j depends on the directions alone, for one segment type: the yarn-frame directions and, for
-    the filament path, the moments of :func:`clothlab.models.irawan.kernels.filament_moments` (None for the
-    ``adaptive`` rule, whose node count depends on the values)."""
+    """What of I_j depends on the directions alone, for one segment type: the yarn-frame directions and, made
+    when first needed (:attr:`filament`), the filament path's moments of
+    :func:`clothlab.models.irawan.kernels.filament_moments` (None for the ``adaptive`` rule, whose node count
+    depends on the values) and, per twist, the staple integrand's lit pieces (:meth:`staple_pieces`).  So a
+    new direction set costs only what its parameter sets use: a staple fit computes no filament moments."""
 
     kind: str  # the segment type (warp / weft)
     wi: np.ndarray  # (N, 3) yarn frame
     wo: np.ndarray
-    filament: tuple | None  # (ok, u, inv, s0, s1), each (N,)
+    quadrature: Quadrature | None = None
     #: psi (radians) -> (domain, lo, hi): the staple integrand's lit pieces on [-domain, domain]
     #: (:func:`clothlab.models.irawan.yarn.staple_pieces`, for the support / adaptive rules; they depend on the
     #: directions and psi only), the last few psi
     staple: dict = field(default_factory=dict)
+    _lazy: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def filament(self) -> tuple | None:
+        """(ok, u, inv, s0, s1, cos u, sin u), each (N,), computed on first use; None for ``adaptive``."""
+        if "filament" not in self._lazy:
+            self._lazy["filament"] = _filament_moments(self.wi, self.wo, self.quadrature)
+        return self._lazy["filament"]
 
     def staple_pieces(self, psi: float, umax: float) -> tuple[np.ndarray, np.ndarray]:
         """The lit pieces for twist ``psi`` valid up to ``umax`` (radians): computed once per psi on umax plus
@@ -177,22 +187,28 @@ class YarnTerms:
         return hit[1], hit[2]
 
 
-def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
-    """The parameter-free part of I_j at fabric-frame directions (N, 3) (computed once per direction set)."""
+def _filament_moments(lw, lo, quadrature: Quadrature | None) -> tuple | None:
+    """The filament moments of yarn-frame directions under ``quadrature`` (None: the trapezoid-11 default)."""
     from clothlab.models.irawan import kernels
     from clothlab.models.irawan.quadrature import unit_rule
 
-    lw = np.ascontiguousarray(to_yarn_frame(wi, kind), dtype=np.float64)
-    lo = np.ascontiguousarray(to_yarn_frame(wo, kind), dtype=np.float64)
+    quadrature = quadrature or Quadrature()
     rule, n = quadrature.rule, int(quadrature.nodes)
-    moments = None
     if rule in ("trapezoid", "gauss"):
         nodes, weights = interval_rule(rule, n, -0.5 * np.pi, 0.5 * np.pi)
-        moments = kernels.filament_moments(lw, lo, nodes[None, :], weights[None, :], False)
-    elif rule == "support":
+        return kernels.filament_moments(lw, lo, nodes[None, :], weights[None, :], False)
+    if rule == "support":
         t, wt = unit_rule("gauss", n)
-        moments = kernels.filament_moments(lw, lo, t[None, :], wt[None, :], True)
-    return YarnTerms(kind, lw, lo, moments)
+        return kernels.filament_moments(lw, lo, t[None, :], wt[None, :], True)
+    return None
+
+
+def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
+    """The parameter-free part of I_j at fabric-frame directions (N, 3): the yarn-frame directions now, the
+    rest when first used (:class:`YarnTerms`)."""
+    lw = np.ascontiguousarray(to_yarn_frame(wi, kind), dtype=np.float64)
+    lo = np.ascontiguousarray(to_yarn_frame(wo, kind), dtype=np.float64)
+    return YarnTerms(kind, lw, lo, quadrature)
 
 
 def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature,
@@ -216,13 +232,13 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
     staple = [staple_path(p, u, rule, n, PSI_FILAMENT_THRESHOLD) for p, u in zip(psi.tolist(), umax.tolist(),
                                                                                    strict=True)]
     fixed = rule in ("trapezoid", "gauss")
-    if not any(staple) and terms.filament is not None:
+    if not any(staple) and rule != "adaptive":
         return kernels.filament_from_moments(*terms.filament, umax, kappa, w, l, delta, shortened)
     if all(staple) and fixed:
         return kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n), psi, umax, kappa, w, l)
     out = np.empty((len(geometry), len(terms.wi)))
     for j, on_staple in enumerate(staple):  # mixed paths, or a rule without a batched form
-        if not on_staple and terms.filament is not None:
+        if not on_staple and rule != "adaptive":
             out[j] = kernels.filament_from_moments(*terms.filament, *cols[[1, 2, 3, 4, 5], j:j + 1], shortened)[0]
         elif on_staple and fixed:
             out[j] = kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n),

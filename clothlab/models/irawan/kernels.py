@@ -544,6 +544,29 @@ def staple_breakpoints(wix, wiy, wiz, wox, woy, woz, hx, hy, hz, psi, cot_psi, a
     return m
 
 
+ATAN_TERMS = 22
+"""Terms of the arctangent series in :func:`arctan` (|t| <= tan(pi/8): the 22nd term is below 1e-17)."""
+
+
+@njit(cache=True, inline="always")
+def arctan(x):
+    """atan x for any x from its Taylor series after two reductions (atan x = pi/2 - atan(1/x) for |x| > 1,
+    atan t = pi/4 + atan((t - 1) / (t + 1)) for t > tan(pi/8)): plain arithmetic and selects, so loops over
+    many directions vectorise (math.atan does not, without SVML); within a few ulp of math.atan."""
+    a = abs(x)
+    inverted = a > 1.0
+    t = 1.0 / a if inverted else a
+    shifted = t > 0.41421356237309503  # tan(pi/8)
+    r = (t - 1.0) / (t + 1.0) if shifted else t
+    r2 = r * r
+    acc = 0.0
+    for k in range(ATAN_TERMS - 1, -1, -1):
+        acc = acc * r2 + (1.0 if k % 2 == 0 else -1.0) / (2 * k + 1)
+    y = r * acc + (0.25 * math.pi if shifted else 0.0)
+    y = 0.5 * math.pi - y if inverted else y
+    return -y if x < 0.0 else y
+
+
 @njit(cache=True, inline="always")
 def sincos(x):
     """(sin x, cos x) for |x| <= pi/2 from their Taylor series to x^19 and x^20 (truncation error < 3e-16):
@@ -783,16 +806,21 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta, shortened):
 # Many parameter sets at once (the posterior evaluates every walker of an ensemble half in one call).
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def filament_moments(wi, wo, nodes, weights, on_arc):
-    """The parameter-free part of eq. 2 for each direction pair n (yarn frame), as (ok, u, inv, s0, s1).
+    """The parameter-free part of eq. 2 for each direction pair n (yarn frame), as (ok, u, inv, s0, s1, cu, su).
 
     For a filament yarn eq. 4 fixes u per direction, so the clamped cosines of eq. 8 and the lit arc depend on
     the directions alone; Algorithm 2's sum is then  inv (a R(u) s0 + a^2 s1) fade(u)  with
     s0 = sum_k w_k A(v_k), s1 = sum_k w_k cos(v_k) A(v_k) (eq. 6 numerator a (R + a cos v) times eq. 8) and
     inv = 1 / (|wi + wo| |(t x h)_x|).  ok is False where the integrand vanishes whatever the parameters
     (back-facing, degenerate h); the cuts |u| < umax and the fade of eq. 9 are applied by the caller.
-    ``nodes`` / ``weights`` (1, K) as in :func:`filament_quadrature` (``on_arc``: unit nodes on the lit arc)."""
+    cu, su = cos u, sin u of eq. 4's u, from the half vector without trigonometry (h_z > 0:
+    cos u = h_z / sqrt(h_y^2 + h_z^2), sin u = h_y / sqrt(h_y^2 + h_z^2)).
+    ``nodes`` / ``weights`` (1, K) as in :func:`filament_quadrature` (``on_arc``: unit nodes on the lit arc).
+    Without ``on_arc`` (the fixed rules) the nodes are the same for every direction: sin v, cos v are computed
+    once per node and the loop over the directions is innermost and branch-free (the checks of eq. 8 applied
+    as a select), so it vectorises; each direction's sum runs over the nodes in order, as before."""
     n_dir = wi.shape[0]
     n_nodes = nodes.shape[1]
     ok = np.zeros(n_dir, dtype=np.bool_)
@@ -800,50 +828,72 @@ def filament_moments(wi, wo, nodes, weights, on_arc):
     inv = np.zeros(n_dir)
     s0 = np.zeros(n_dir)
     s1 = np.zeros(n_dir)
-    for n in range(n_dir):
-        wix, wiy, wiz, wox, woy, woz = wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2]
-        hx, hy, hz, length = half_vector(wix, wiy, wiz, wox, woy, woz)
-        if not (wiz > 0.0 and woz > 0.0 and length > 0.0):  # back-facing or degenerate h: 0
-            continue
-        u = specular_u(hy, hz)  # eq. 4
+    cu_out = np.ones(n_dir)
+    su_out = np.zeros(n_dir)
+    ci0 = np.zeros(n_dir)
+    cr0 = np.zeros(n_dir)
+    wix, wiy_, wiz_ = wi[:, 0].copy(), wi[:, 1].copy(), wi[:, 2].copy()
+    wox, woy_, woz_ = wo[:, 0].copy(), wo[:, 1].copy(), wo[:, 2].copy()
+    for n in range(n_dir):  # branch-free (selects) on contiguous columns, so it vectorises
+        wiy, wiz, woy, woz = wiy_[n], wiz_[n], woy_[n], woz_[n]
+        sy, sz = wiy + woy, wiz + woz
+        sx = wix[n] + wox[n]
+        length = math.sqrt(sx * sx + sy * sy + sz * sz)
+        hy, hz = sy / length, sz / length  # sec. 6.2: h (NaN for a degenerate pair, dropped below)
         cross = tangent_cross_h_x(hy, hz)  # eq. 6
-        if cross <= 0.0:
+        good = (wiz > 0.0) & (woz > 0.0) & (length > 0.0) & (cross > 0.0)  # else back-facing or degenerate: 0
+        u = arctan(hy / hz)  # eq. 4: u = atan(h_y / h_z), h_z > 0
+        cu = hz / cross  # cos u
+        su = hy / cross  # sin u
+        ok[n] = good
+        u_out[n] = u if good else 0.0
+        inv[n] = 1.0 / (length * cross) if good else 0.0
+        cu_out[n] = cu if good else 1.0
+        su_out[n] = su if good else 0.0
+        ci0[n] = spine_normal_cosine(wiy, wiz, su, cu) if good else 0.0
+        cr0[n] = spine_normal_cosine(woy, woz, su, cu) if good else 0.0
+    if not on_arc:
+        for k in range(n_nodes):
+            wk = weights[0, k]
+            if wk == 0.0:
+                continue
+            v = nodes[0, k]
+            cv = math.cos(v)
+            sv = math.sin(v)
+            for n in range(n_dir):
+                ci = normal_cosine(wix[n], ci0[n], sv, cv)
+                cr = normal_cosine(wox[n], cr0[n], sv, cv)
+                g = wk * seeliger(ci, cr)  # eq. 8
+                lit = ok[n] and ci > 0.0 and cr > 0.0
+                s0[n] += g if lit else 0.0
+                s1[n] += g * cv if lit else 0.0
+        return ok, u_out, inv, s0, s1, cu_out, su_out
+    for n in range(n_dir):
+        if not ok[n]:
             continue
-        su = math.sin(u)
-        cu = math.cos(u)
-        ci0 = spine_normal_cosine(wiy, wiz, su, cu)
-        cr0 = spine_normal_cosine(woy, woz, su, cu)
-        lo, span = -0.5 * math.pi, 1.0
-        if on_arc:
-            lo_i, hi_i = lit_arc(wix, ci0)
-            lo_o, hi_o = lit_arc(wox, cr0)
-            lo = max(lo_i, lo_o)
-            span = min(hi_i, hi_o) - lo
+        lo_i, hi_i = lit_arc(wix[n], ci0[n])
+        lo_o, hi_o = lit_arc(wox[n], cr0[n])
+        lo = max(lo_i, lo_o)
+        span = min(hi_i, hi_o) - lo
         acc0 = 0.0
         acc1 = 0.0
         for k in range(n_nodes if span > 0.0 else 0):
             wk = weights[0, k]
             if wk == 0.0:
                 continue
-            v = lo + span * nodes[0, k] if on_arc else nodes[0, k]
+            v = lo + span * nodes[0, k]
             cv = math.cos(v)
             sv = math.sin(v)
-            ci = normal_cosine(wix, ci0, sv, cv)
-            cr = normal_cosine(wox, cr0, sv, cv)
+            ci = normal_cosine(wix[n], ci0[n], sv, cv)
+            cr = normal_cosine(wox[n], cr0[n], sv, cv)
             if ci <= 0.0 or cr <= 0.0:
                 continue
             g = wk * seeliger(ci, cr)  # eq. 8
             acc0 += g
             acc1 += g * cv
-        if on_arc:
-            acc0 *= span
-            acc1 *= span
-        ok[n] = True
-        u_out[n] = u
-        inv[n] = 1.0 / (length * cross)
-        s0[n] = acc0
-        s1[n] = acc1
-    return ok, u_out, inv, s0, s1
+        s0[n] = acc0 * span
+        s1[n] = acc1 * span
+    return ok, u_out, inv, s0, s1, cu_out, su_out
 
 
 @njit(cache=True, error_model="numpy")
@@ -894,16 +944,14 @@ def staple_quadrature_sets(wi, wo, unit_nodes, unit_weights, psi, umax, kappa, w
 
 
 @njit(cache=True, error_model="numpy")
-def filament_from_moments(ok, u, inv, s0, s1, umax, kappa, w, l, delta, shortened):
-    """(J, N) filament I_j (eq. 2) from the moments of :func:`filament_moments` for J parameter sets (umax in
-    radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of eq. 9 is 0.  Branch-free
-    over the directions (the cuts applied as a select), so the loop vectorises.  ``shortened``: R on the arc
-    of :func:`spine_arc`, |u| clamped to it."""
+def filament_from_moments(ok, u, inv, s0, s1, cu, su, umax, kappa, w, l, delta, shortened):
+    """(J, N) filament I_j (eq. 2) from the moments of :func:`filament_moments` (with cos u, sin u) for J
+    parameter sets (umax in radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of
+    eq. 9 is 0.  Branch-free over the directions (the cuts applied as a select), so the loop vectorises.
+    ``shortened``: R on the arc of :func:`spine_arc`, |u| clamped to it."""
     n_sets = umax.shape[0]
     n_dir = u.shape[0]
     out = np.zeros((n_sets, n_dir))
-    cu = np.cos(u)
-    su = np.sin(u)
     for j in range(n_sets):
         a = 0.5 * w[j]
         arc = spine_arc(umax[j], delta[j], shortened)

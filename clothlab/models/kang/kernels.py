@@ -417,3 +417,67 @@ def legendre_tile_average(h, nx, ny, c_y, c_f, x_a, w_a, x_l, w_l):
             acc += w_a[a] * inner
         out[i] = scale * acc
     return out
+
+
+# ------------------------------------------------------------------ a new direction set (the cold path)
+
+
+@njit(cache=True, error_model="numpy")
+def direction_terms(wi, wo):
+    """The parameter-free terms of eq. 1 at fabric-frame directions wi, wo (N, 3) in one pass:
+    (h (N, 3), m5 (N,), inv_denom (N,)) with h = |(wi + wo) / |wi + wo|| componentwise (zero where
+    wi + wo = 0; A depends on |h_x|, |h_y|, h_z only), m5 = (1 - clip(k.h, 0, 1))^5 of Schlick's Fresnel and
+    inv_denom = 1 / (4 (k.h) max(k1.n, k2.n)), 0 where not lit (a direction below the horizon, k.h <= 0).
+    Yarn frames: the warp's is the fabric frame; the weft's is it rotated by 90 deg about z (h_weft =
+    (|h_y|, |h_x|, h_z)), and k.h, k1.n, k2.n do not change under that rotation, so m5 and inv_denom are the
+    same for both yarn types."""
+    n = wi.shape[0]
+    h = np.zeros((n, 3))
+    m5 = np.zeros(n)
+    inv_denom = np.zeros(n)
+    for i in range(n):
+        sx, sy, sz = wi[i, 0] + wo[i, 0], wi[i, 1] + wo[i, 1], wi[i, 2] + wo[i, 2]
+        norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+        hx, hy, hz = (sx / norm, sy / norm, sz / norm) if norm > 0.0 else (0.0, 0.0, 0.0)
+        h[i, 0], h[i, 1], h[i, 2] = abs(hx), abs(hy), abs(hz)
+        cos_kh = wi[i, 0] * hx + wi[i, 1] * hy + wi[i, 2] * hz
+        c = min(max(cos_kh, 0.0), 1.0)
+        m = 1.0 - c
+        m5[i] = m * m * m * m * m  # Schlick's (1 - k.h)^5
+        denom = 4.0 * cos_kh * max(wi[i, 2], wo[i, 2])
+        lit = wi[i, 2] > 0.0 and wo[i, 2] > 0.0 and cos_kh > 0.0 and denom > 0.0
+        inv_denom[i] = 1.0 / denom if lit else 0.0
+    return h, m5, inv_denom
+
+
+@njit(cache=True)
+def equal_row_groups(keys):
+    """Groups of equal rows of int64 ``keys`` (N, 3): (first (M,), inverse (N,)) with first[g] the index of
+    group g's first row (groups in order of first appearance) and inverse[n] the group of row n.  One pass
+    with an open-addressing hash table (O(N); a sort is O(N log N))."""
+    n = keys.shape[0]
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    table = np.full(size, -1, dtype=np.int64)  # group of a slot, -1 empty
+    first = np.empty(n, dtype=np.int64)
+    inverse = np.empty(n, dtype=np.intp)
+    groups = 0
+    mask = size - 1
+    for i in range(n):
+        a, b, c = keys[i, 0], keys[i, 1], keys[i, 2]
+        slot = ((a * 0x9E3779B1) ^ (b * 0x85EBCA77) ^ (c * 0xC2B2AE3D)) & mask
+        while True:
+            g = table[slot]
+            if g < 0:
+                table[slot] = groups
+                first[groups] = i
+                inverse[i] = groups
+                groups += 1
+                break
+            r = first[g]
+            if keys[r, 0] == a and keys[r, 1] == b and keys[r, 2] == c:
+                inverse[i] = g
+                break
+            slot = (slot + 1) & mask
+    return first[:groups].copy(), inverse

@@ -171,16 +171,16 @@ class KangModel(Model):
         if d is not None and d["wi"].shape == wi.shape and np.array_equal(d["wi"], wi) and \
                 np.array_equal(d["wo"], wo):
             return d
+        from clothlab.models.kang import kernels
+
         d = {"wi": wi.copy(), "wo": wo.copy(), "h": {}, "m5": {}, "inv_denom": {}, "groups": {}}
-        for kind in YARN_KINDS:
-            wi_l, wo_l = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
-            h = microfacet.half_vector(wi_l, wo_l)
-            cos_kh = np.sum(wi_l * h, axis=-1)
-            denom = 4.0 * cos_kh * np.maximum(wi_l[:, 2], wo_l[:, 2])
-            lit = (wi_l[:, 2] > 0.0) & (wo_l[:, 2] > 0.0) & (cos_kh > 0.0) & (denom > 0.0)
-            d["h"][kind] = np.abs(h)  # A depends on (|h_x|, |h_y|, h_z) only (kernels.peak_tile_average)
-            d["m5"][kind] = (1.0 - np.clip(cos_kh, 0.0, 1.0)) ** 5
-            d["inv_denom"][kind] = np.divide(1.0, denom, out=np.zeros_like(denom), where=lit)
+        # one compiled pass (kernels.direction_terms): A depends on (|h_x|, |h_y|, h_z) only, the weft frame
+        # swaps |h_x| and |h_y|, and eq. 1's factors do not change under that rotation
+        h, m5, inv_denom = kernels.direction_terms(np.ascontiguousarray(wi, dtype=np.float64),
+                                                   np.ascontiguousarray(wo, dtype=np.float64))
+        d["h"] = {"warp": h, "weft": np.ascontiguousarray(h[:, [1, 0, 2]])}
+        d["m5"] = {"warp": m5, "weft": m5}
+        d["inv_denom"] = {"warp": inv_denom, "weft": inv_denom}
         self._directions = d
         return d
 
@@ -370,14 +370,11 @@ def _half_vector_groups(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     groups).  A member's value is the rule's value at a half vector within 1e-12 of its own: the same to rounding,
     except where that offset moves a node count (a ceil), where it differs by the rule's own error (tested:
     > 99 % of the values to 1e-9 relative, all to 1e-4 floored at 1 % of the mean; the rule's error is ~4e-4)."""
+    from clothlab.models.kang import kernels
+
     keys = np.rint(h * (1.0 / GROUP_TOLERANCE)).astype(np.int64)
-    order = np.lexsort(keys.T[::-1])
-    sorted_keys = keys[order]
-    first = np.ones(len(h), dtype=bool)
-    first[1:] = np.any(sorted_keys[1:] != sorted_keys[:-1], axis=1)
-    inverse = np.empty(len(h), dtype=np.intp)
-    inverse[order] = np.cumsum(first) - 1
-    return np.ascontiguousarray(h[order[first]]), inverse
+    first, inverse = kernels.equal_row_groups(keys)  # each group's first row, in order of appearance
+    return np.ascontiguousarray(h[first]), inverse
 
 
 @cache

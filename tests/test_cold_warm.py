@@ -1,0 +1,166 @@
+"""A model evaluated at new directions (cold: the direction set's terms computed in the call) gives the values
+of a warm evaluation (those terms kept from an earlier call), for the IM and the Kang model; the compiled
+direction-set kernels agree with their literal numpy forms (issue 27)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from clothlab.frames import to_yarn_frame
+from clothlab.models.irawan.integrals import yarn_integral_fabric
+from clothlab.models.irawan.model import IrawanModel, Quadrature
+from clothlab.models.kang.model import KangModel
+from clothlab.weave.presets import PRESET_NAMES, get_preset
+
+
+def _pairs(n, rng):
+    """n direction pairs over the upper hemisphere, a few below the horizon and one retro pair wo = -wi."""
+    def sphere(m):
+        v = rng.standard_normal((m, 3))
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    wi, wo = sphere(n), sphere(n)
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]), np.abs(wo[:, 2])
+    wi[:3, 2] *= -1.0  # back-facing rows give 0
+    wo[3] = -wi[3]
+    return wi, wo
+
+
+def _sets(model, rng, k):
+    base = model.default_parameters()
+    out = []
+    for _ in range(k):
+        p = dict(base)
+        for kind in ("warp", "weft"):
+            p[f"{kind}.umax"] = float(rng.uniform(5.0, 45.0))
+            p[f"{kind}.kappa"] = float(rng.uniform(-0.3, 1.0))
+        p["delta"] = float(rng.uniform(0.0, 0.5))
+        out.append(p)
+    return out
+
+
+@pytest.mark.parametrize("rule", [("trapezoid", 11), ("gauss", 8), ("support", 4)])
+@pytest.mark.parametrize("fabric", PRESET_NAMES)
+def test_irawan_cold_equals_warm(fabric, rule):
+    rng = np.random.default_rng(hash((fabric, rule)) % 2**32)
+    warm = IrawanModel(get_preset(fabric), Quadrature(*rule))
+    sets = _sets(warm, rng, 3)
+    d1, d2 = _pairs(200, rng), _pairs(150, rng)
+    warm.components_many(*d1, sets[:1], normalised=False, warn=False)  # fills the direction terms of d1
+    for directions in (d1, d2, d1):  # d1 again after another set: the terms are rebuilt and must agree
+        warm_values = warm.components_many(*directions, sets, normalised=False, warn=False)
+        cold = IrawanModel(get_preset(fabric), Quadrature(*rule))
+        cold_values = cold.components_many(*directions, sets, normalised=False, warn=False)
+        for name in ("specular_warp", "specular_weft"):
+            np.testing.assert_array_equal(warm_values[name], cold_values[name])
+            assert np.count_nonzero(cold_values[name]) > 20  # the comparison can fail
+        for j, p in enumerate(sets):  # and the per-direction path (no direction terms) to rounding
+            for kind in ("warp", "weft"):
+                literal = yarn_integral_fabric(*directions, p, kind, warm.quadrature)
+                got = cold_values[f"specular_{kind}"][j] / (p["alpha"] + _von_mises(directions, p["beta"]))
+                np.testing.assert_allclose(got, literal, rtol=1e-11, atol=1e-300)
+
+
+def _von_mises(directions, beta):
+    from clothlab.models.irawan.phase import von_mises
+
+    wi, wo = directions
+    return von_mises(-np.sum(wi * wo, axis=1), beta)
+
+
+def test_staple_fit_computes_no_filament_moments():
+    """The direction set's filament moments are made only when a parameter set takes the filament path."""
+    model = IrawanModel(get_preset("cotton-denim"))  # psi = -30 deg: staple yarns
+    wi, wo = _pairs(50, np.random.default_rng(1))
+    p = model.default_parameters()
+    model.components(wi, wo, p, normalised=False, warn=False)
+    terms = model._at(wi, wo)["terms"]
+    assert terms and all(not t._lazy for t in terms.values())
+    model.components(wi, wo, {**p, "warp.psi": 0.0}, normalised=False, warn=False)
+    assert "filament" in terms["warp"]._lazy and not terms["weft"]._lazy
+
+
+def test_arctan_matches_the_library():
+    from clothlab.models.irawan.kernels import arctan as compiled
+
+    x = np.concatenate([np.linspace(-5, 5, 2001), np.geomspace(1e-300, 1e300, 601),
+                        -np.geomspace(1e-300, 1e300, 601),
+                        [0.0, -0.0, 1.0, -1.0, math.tan(math.pi / 8), np.nextafter(math.tan(math.pi / 8), 1),
+                         np.nextafter(1.0, 0), np.nextafter(1.0, 2), np.inf, -np.inf]])
+    got = np.array([compiled(v) for v in x])
+    expected = np.arctan(x)
+    assert np.all(np.abs(got - expected) <= 4e-16 * np.abs(expected))
+    assert math.copysign(1.0, compiled(-0.0)) in (1.0, -1.0)  # finite, no NaN at the signed zero
+
+
+def test_irawan_moments_match_the_literal_cosines():
+    """cos u, sin u of eq. 4's u from the half vector equal the library's cos(atan(h_y / h_z))."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.quadrature import interval_rule
+
+    wi, wo = _pairs(300, np.random.default_rng(2))
+    lw, lo = np.ascontiguousarray(to_yarn_frame(wi, "weft")), np.ascontiguousarray(to_yarn_frame(wo, "weft"))
+    nodes, weights = interval_rule("trapezoid", 11, -0.5 * np.pi, 0.5 * np.pi)
+    ok, u, inv, s0, s1, cu, su = kernels.filament_moments(lw, lo, nodes[None], weights[None], False)
+    with np.errstate(invalid="ignore"):  # the retro pair wo = -wi has no half vector
+        h = (lw + lo) / np.linalg.norm(lw + lo, axis=1, keepdims=True)
+        np.testing.assert_array_equal(ok, (lw[:, 2] > 0) & (lo[:, 2] > 0) & (np.hypot(h[:, 1], h[:, 2]) > 0))
+    np.testing.assert_allclose(u[ok], np.arctan(h[ok, 1] / h[ok, 2]), rtol=1e-15, atol=1e-16)
+    np.testing.assert_allclose(cu[ok], np.cos(u[ok]), rtol=2e-15)
+    np.testing.assert_allclose(su[ok], np.sin(u[ok]), rtol=2e-15, atol=1e-16)
+    assert np.all(u[~ok] == 0.0) and np.all(s0[~ok] == 0.0) and np.count_nonzero(s0) > 100
+
+
+@pytest.mark.parametrize("fabric", ["cotton-denim", "silk-charmeuse", "wool-gabardine"])
+def test_kang_cold_equals_warm(fabric):
+    rng = np.random.default_rng(7)
+    warm = KangModel(get_preset(fabric))
+    p = warm.default_parameters()
+    d1, d2 = _pairs(300, rng), _pairs(120, rng)
+    warm.components(*d1, p)
+    for directions in (d1, d2, d1):
+        warm_values = warm.components(*directions, {**p, "warp.ny": 40.0})
+        cold = KangModel(get_preset(fabric))
+        cold_values = cold.components(*directions, {**p, "warp.ny": 40.0})
+        for name in ("specular_warp", "specular_weft"):
+            np.testing.assert_array_equal(warm_values[name], cold_values[name])
+            assert np.count_nonzero(cold_values[name]) > 50
+
+
+def test_kang_direction_terms_match_numpy():
+    """The compiled direction terms equal eq. 1's factors formed in numpy per yarn frame (the previous code)."""
+    from clothlab.models.kang import kernels
+
+    wi, wo = _pairs(400, np.random.default_rng(3))
+    h, m5, inv_denom = kernels.direction_terms(wi, wo)
+    for kind, got_h in (("warp", h), ("weft", h[:, [1, 0, 2]])):
+        wi_l, wo_l = to_yarn_frame(wi, kind), to_yarn_frame(wo, kind)
+        s = wi_l + wo_l
+        norm = np.linalg.norm(s, axis=1, keepdims=True)
+        h_l = np.divide(s, norm, out=np.zeros_like(s), where=norm > 0)
+        cos_kh = np.sum(wi_l * h_l, axis=1)
+        denom = 4.0 * cos_kh * np.maximum(wi_l[:, 2], wo_l[:, 2])
+        lit = (wi_l[:, 2] > 0) & (wo_l[:, 2] > 0) & (cos_kh > 0) & (denom > 0)
+        np.testing.assert_allclose(got_h, np.abs(h_l), rtol=1e-15, atol=1e-16)
+        np.testing.assert_allclose(m5, (1.0 - np.clip(cos_kh, 0, 1)) ** 5, rtol=1e-14, atol=1e-300)
+        np.testing.assert_allclose(inv_denom, np.divide(1.0, denom, out=np.zeros_like(denom), where=lit),
+                                   rtol=1e-14)
+        assert np.count_nonzero(inv_denom == 0.0) >= 4  # the back-facing and retro rows
+
+
+def test_equal_row_groups_is_the_partition_of_equal_rows():
+    from clothlab.models.kang import kernels
+
+    rng = np.random.default_rng(4)
+    keys = rng.integers(-3, 3, (2000, 3)).astype(np.int64) * 10**11  # many repeats, large values, negatives
+    first, inverse = kernels.equal_row_groups(keys)
+    unique, expected_inverse = np.unique(keys, axis=0, return_inverse=True)
+    assert len(first) == len(unique)
+    np.testing.assert_array_equal(keys[first][inverse], keys)  # every row maps to a group holding its value
+    assert np.all(np.diff(first) > 0) and first[0] == 0  # groups in order of first appearance
+    for g in range(len(first)):  # the group's first row is the earliest row with that value
+        assert np.flatnonzero(inverse == g)[0] == first[g]
+    assert len(np.unique(expected_inverse.ravel())) == len(first)
