@@ -78,6 +78,7 @@ def add_parser(sub):
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an option of the --format reader (e.g. theta_step=5 for merl); repeatable")
     add_force(p, "output table")
+    p.dash_values = frozenset({"--columns"})  # '-' skips a column: --columns -,theta_o,... is a value
     return p
 
 

@@ -54,9 +54,56 @@ def _add_verbosity(parser, dest_suffix: str = "") -> None:
     parser.add_argument("-q", "--quiet", action="store_true", dest="quiet" + dest_suffix, help=_QUIET_HELP)
 
 
+class ClothlabParser(argparse.ArgumentParser):
+    """argparse with clothlab's error format: a usage mistake is ONE line ``clothlab: error: ...`` naming the
+    option (``field '--nodes': ...``) and exit 2, for the top parser and every subcommand's (argparse makes
+    the subparsers of this class); no usage block.  ``clothlab COMMAND --help`` shows the usage.
+
+    Options listed in :attr:`dash_values` (e.g. ``import --columns``) take the next word as their value even
+    when it begins with '-' (``--columns -,theta_o,...``: '-' skips a column)."""
+
+    dash_values: frozenset = frozenset()
+
+    def error(self, message: str):
+        self.exit(2, f"clothlab: error: {usage_message(message)}\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        if args is not None and self.dash_values:
+            args = _join_dash_values(list(args), self.dash_values, self._option_string_actions)
+        return super().parse_known_args(args, namespace)
+
+
+def usage_message(message: str) -> str:
+    """argparse's ``argument --nodes: expected ...`` as clothlab's ``field '--nodes': expected ...``, on one
+    line (control characters of the user's words shown escaped)."""
+    head, sep, rest = message.partition(": ")
+    if head.startswith("argument ") and sep:
+        message = f"field '{head[len('argument '):]}': {rest}"
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
+def _join_dash_values(args: list, options, known) -> list:
+    """``[..., '--columns', '-,x']`` -> ``[..., '--columns=-,x']`` for ``options`` whose value begins with '-'
+    (argparse would read it as an option), unless the next word is itself an option of the parser."""
+    out, i = [], 0
+    while i < len(args):
+        word = args[i]
+        if word == "--":
+            out += args[i:]
+            break
+        if word in options and i + 1 < len(args) and args[i + 1].startswith("-") and args[i + 1] != "--" and \
+                args[i + 1].split("=", 1)[0] not in known:
+            out.append(f"{word}={args[i + 1]}")
+            i += 2
+            continue
+        out.append(word)
+        i += 1
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The whole ``clothlab`` parser (subcommand modules add their own options)."""
-    parser = argparse.ArgumentParser(
+    parser = ClothlabParser(
         prog="clothlab",
         description="Measure, fit and report the appearance of woven cloth (Irawan-Marschner, Kang).",
         epilog="Run `clothlab COMMAND --help` for the options of a command.")

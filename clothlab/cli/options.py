@@ -153,12 +153,15 @@ def runner_of(args):
 
 def parallel_requested(args) -> bool:
     """True when :func:`add_parallel`'s options (or ``$DASK_SCHEDULER_ADDRESS``) ask for a Dask runner; then
-    Dask must be installed (else the one-line error naming the extra, before any work)."""
-    import os
+    Dask must be installed (else the one-line error naming the extra, before any work).  The options are
+    checked here, before any work and whether or not the command then distributes anything: ``--workers``
+    with ``--scheduler`` is refused, and a malformed address is refused naming where it came from (the
+    option or the environment variable)."""
+    from clothlab.parallel import require_dask
+    from clothlab.parallel.runner import resolve_options
 
-    from clothlab.parallel import SCHEDULER_ENV, require_dask
-
-    requested = args.workers is not None or args.scheduler is not None or bool(os.environ.get(SCHEDULER_ENV))
+    workers, address = resolve_options(args.workers, args.scheduler)
+    requested = workers is not None or address is not None
     if requested:
         require_dask()
     return requested

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from clothlab.errors import ClothlabError
+from clothlab.parallel.address import parse_scheduler_address, probe_scheduler
 from clothlab.progress import Progress, get_logger
 
 log = get_logger(__name__)
@@ -228,32 +229,40 @@ class DaskRunner(Runner):
     """Tasks on a Dask cluster: a ``LocalCluster`` of ``workers`` processes (one thread each, loopback) started
     here and shut down by :meth:`close`, or the existing scheduler at ``address``."""
 
-    def __init__(self, *, workers: int | None = None, address: str | None = None):
+    def __init__(self, *, workers: int | None = None, address=None):
         import logging
 
         distributed = require_dask()
         self.cluster = None
-        self.address = address
-        if address is None:
-            self.cluster = distributed.LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tcp",
-                dashboard_address=":0", silence_logs=logging.ERROR,
-                scheduler_kwargs={"allowed_failures": 0},  # a lost worker fails its task: retried by name here
-                preload=["clothlab.parallel.worker"])  # workers ignore Ctrl-C: the command stops them
-            try:
-                self.client = distributed.Client(self.cluster, set_as_default=False)
-            except BaseException:
-                self.cluster.close()
-                raise
-            self.description = f"Dask LocalCluster, {workers} worker processes"
-        else:
-            try:
-                self.client = distributed.Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
-            except (OSError, ValueError) as exc:
-                raise ClothlabError(f"cannot reach the Dask scheduler at {address}: {exc}",
-                                    field="--scheduler") from None
-            self.description = f"Dask cluster at {address}"
-        info = self.client.scheduler_info()
+        self.client = None
+        if isinstance(address, str):
+            address = parse_scheduler_address(address, "--scheduler")
+        self.address = None if address is None else address.text
+        try:
+            if address is None:
+                self.cluster = distributed.LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tcp",
+                    dashboard_address=":0", silence_logs=logging.ERROR,
+                    scheduler_kwargs={"allowed_failures": 0},  # a lost worker fails its task: retried by name here
+                    preload=["clothlab.parallel.worker"])  # workers ignore Ctrl-C: the command stops them
+                self.client = _client(distributed, self.cluster)
+                self.description = f"Dask LocalCluster, {workers} worker processes"
+            else:
+                probe_scheduler(address, CONNECT_TIMEOUT_S)  # bounded: a service that is not Dask is named
+                try:
+                    self.client = _client(distributed, address.text, timeout=CONNECT_TIMEOUT_S)
+                except MemoryError:  # a reply announcing an absurd size: garbled, or not Dask's protocol
+                    raise address.error(f"the service at {address.text} does not speak Dask's protocol (a reply "
+                                        "announced an impossible size); check the host and port") from None
+                except Exception as exc:  # noqa: BLE001 - a comms error, a garbled reply: one line naming it
+                    text = " ".join(str(exc).split())[:200]
+                    raise address.error(f"cannot reach the Dask scheduler at {address.text}: "
+                                        f"{type(exc).__name__}: {text}") from None
+                self.description = f"Dask cluster at {address.text}"
+            info = self.client.scheduler_info()
+        except BaseException:
+            self.close()
+            raise
         self.workers = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
         self.dashboard = self.client.dashboard_link if dashboard_enabled(self.client) else None
         log.info("%s (%d slots)%s", self.description, self.workers,
@@ -295,12 +304,34 @@ class DaskRunner(Runner):
             self.client.cancel(keys)
 
     def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.client.close(timeout=10)
+        if self.client is not None:
+            _close_client(self.client)
+            self.client = None
         if self.cluster is not None:
             with contextlib.suppress(Exception):
                 self.cluster.close(timeout=10)
             self.cluster = None
+
+
+def _client(distributed, address, **kwargs):
+    """A ``distributed.Client`` of ``address``, closed (and silenced: no ``Client.__del__`` traceback at exit)
+    when making it fails.  The object is created before it connects so that a failed start can be closed."""
+    client = distributed.Client.__new__(distributed.Client)
+    try:
+        client.__init__(address, set_as_default=False, **kwargs)
+    except BaseException:
+        _close_client(client)
+        raise
+    return client
+
+
+def _close_client(client) -> None:
+    """Close ``client`` within a few seconds; whatever happens, mark it closed so that its ``__del__`` does not
+    try again (and print a traceback) at interpreter exit."""
+    with contextlib.suppress(Exception):
+        client.close(timeout=5)
+    with contextlib.suppress(Exception):
+        client.status = "closed"
 
 
 def dashboard_enabled(client) -> bool:
@@ -314,19 +345,30 @@ def dashboard_enabled(client) -> bool:
         return False
 
 
-def make_runner(workers: int | None = None, scheduler: str | None = None, *, environ=None) -> Runner:
-    """The runner the options ask for: ``scheduler`` (an existing cluster), else ``workers`` (a LocalCluster of
-    that many processes), else ``$DASK_SCHEDULER_ADDRESS``, else in-process."""
+def resolve_options(workers: int | None = None, scheduler: str | None = None, *, environ=None):
+    """The checked choice of the options: ``(workers, address)`` with ``address`` a
+    :class:`~clothlab.parallel.address.SchedulerAddress` (from ``scheduler``, else ``$DASK_SCHEDULER_ADDRESS``
+    when ``workers`` is not given) or None.  Conflicting options and a malformed address are refused here,
+    whether or not the command then distributes anything (one line naming the option or the variable)."""
     environ = os.environ if environ is None else environ
     if workers is not None and scheduler is not None:
         raise ClothlabError("give either --workers (a local cluster) or --scheduler (an existing one), not both",
                             field="--workers")
-    if workers is not None and workers < 1:
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ClothlabError(f"--workers needs at least 1 worker, got {workers}", field="--workers")
-    if scheduler is None and workers is None:
-        scheduler = environ.get(SCHEDULER_ENV) or None
     if scheduler is not None:
-        return DaskRunner(address=scheduler)
+        return workers, parse_scheduler_address(scheduler, "--scheduler")
+    if workers is None and environ.get(SCHEDULER_ENV):
+        return None, parse_scheduler_address(environ[SCHEDULER_ENV], SCHEDULER_ENV)
+    return workers, None
+
+
+def make_runner(workers: int | None = None, scheduler: str | None = None, *, environ=None) -> Runner:
+    """The runner the options ask for: ``scheduler`` (an existing cluster), else ``workers`` (a LocalCluster of
+    that many processes), else ``$DASK_SCHEDULER_ADDRESS``, else in-process (:func:`resolve_options`)."""
+    workers, address = resolve_options(workers, scheduler, environ=environ)
+    if address is not None:
+        return DaskRunner(address=address)
     if workers is not None:
         return DaskRunner(workers=workers)
     return InProcessRunner()

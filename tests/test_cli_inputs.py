@@ -1,0 +1,231 @@
+"""Issue 24, the command-line families: Dask options (the address parsed and probed, conflicts refused, the
+client closed on error, the source of the address named), one error format for argparse's own mistakes,
+``report`` of a corrupt fit directory, ``fit-btf`` with a missing grid image, the size limits of fabric.yaml,
+``train-surrogate``'s run directory and ``--resume``, and Ctrl-C in the posterior.
+
+Network tests aim at loopback only: a listener of the test's own on 127.0.0.1."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from clothlab.cli.main import build_parser, main
+from clothlab.errors import ClothlabError
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def one_error_line(err: str) -> str:
+    """The single ``clothlab: error:`` line of ``err`` (fails on a traceback, a usage block, several lines)."""
+    lines = err.strip().splitlines()
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert len(lines) == 1 and lines[0].startswith("clothlab: error: "), err
+    return lines[0]
+
+
+# ---------------------------------------------------------------------------------------------------------
+# A. Dask options
+
+
+class Listener:
+    """A TCP server on 127.0.0.1 (a free port) that sends ``greeting`` to each connection, then ``reply`` to
+    whatever the client sends; closed on exit."""
+
+    def __init__(self, greeting: bytes, reply: bytes = b""):
+        self.greeting, self.reply = greeting, reply
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(8)
+        self.port = self.sock.getsockname()[1]
+        self.address = f"tcp://127.0.0.1:{self.port}"
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+
+    def _serve(self):
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            with conn:
+                try:
+                    conn.sendall(self.greeting)
+                    conn.settimeout(3)
+                    if self.reply and conn.recv(65536):
+                        conn.sendall(self.reply)
+                    time.sleep(0.5)
+                except OSError:
+                    pass
+
+    def __enter__(self):
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.sock.close()
+
+
+def fake_dask_handshake() -> bytes:
+    """What a Dask scheduler sends first: total length, frame count, frame length, a msgpack map."""
+    msgpack = pytest.importorskip("msgpack")
+    frame = msgpack.packb({"compression": None, "python": [3, 11, 7], "pickle-protocol": 5})
+    body = struct.pack("<QQ", 1, len(frame)) + frame
+    return struct.pack("<Q", len(body)) + body
+
+
+HTTP = b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+
+
+@pytest.mark.parametrize("address, words", [
+    ("", "empty"), ("127.0.0.1", "port is missing"), ("tcp://127.0.0.1", "port is missing"),
+    ("tcp://127.0.0.1:0", "outside 1-65535"), ("tcp://127.0.0.1:65536", "outside 1-65535"),
+    ("tcp://127.0.0.1:99999999999", "not a number"), ("tcp://127.0.0.1:8_786", "not a number"),
+    ("tcp://127.0.0.1:\u0668\u0667", "non-ASCII"), ("http://127.0.0.1:8786", "unknown scheme"),
+    ("inproc://127.0.0.1/1/2", "inproc"), ("tcp://:8786", "host is missing"), ("tcp://300.1.1.1:8786", "IPv4"),
+    ("tcp://bad_host:8786", "host name"), ("tcp://::1:8786", "brackets"), ("tcp://[::zz]:8786", "IPv6"),
+    ("tcp://h:8786/path", "path"), ("tcp://127.0.0.1:8786 ", "space"), ("tcp://a\nb:1", "control"),
+    ("x" * 400, "characters"),
+])
+def test_a_malformed_scheduler_address_is_refused_before_any_connection(address, words):
+    from clothlab.parallel.runner import resolve_options
+
+    with pytest.raises(ClothlabError) as info:
+        resolve_options(None, address)
+    assert info.value.field == "--scheduler" and words in str(info.value), str(info.value)
+    assert "\n" not in str(info.value)
+    if not address:  # an empty variable means "not set": in-process
+        assert resolve_options(None, None, environ={"DASK_SCHEDULER_ADDRESS": ""}) == (None, None)
+        return
+    with pytest.raises(ClothlabError) as info:  # the same address from the environment is blamed as itself
+        resolve_options(None, None, environ={"DASK_SCHEDULER_ADDRESS": address})
+    assert info.value.field == "DASK_SCHEDULER_ADDRESS", str(info.value)
+
+
+def test_good_addresses_are_normalised():
+    from clothlab.parallel.address import parse_scheduler_address
+
+    assert parse_scheduler_address("127.0.0.1:8786", "--scheduler").text == "tcp://127.0.0.1:8786"
+    assert parse_scheduler_address("TCP://Node-1.example.org:1", "--scheduler").text == "tcp://Node-1.example.org:1"
+    assert parse_scheduler_address("tls://[::1]:8786", "--scheduler").text == "tls://[::1]:8786"
+
+
+def test_a_non_dask_service_is_named_without_a_huge_allocation(monkeypatch):
+    """An HTTP server answering on the port: before, Dask's client read its first 8 bytes as a length and
+    tried to allocate 3 EiB (a traceback); now a bounded probe names it in one line, at once."""
+    pytest.importorskip("distributed")
+    import clothlab.parallel.runner as runner
+
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 2.0)
+    for greeting in (HTTP, b"\xff" * 64, b"\x00" * 8, b""):
+        with Listener(greeting) as server:
+            tic = time.monotonic()
+            with pytest.raises(ClothlabError) as info:
+                runner.make_runner(scheduler=server.address)
+            assert time.monotonic() - tic < 10
+        text = str(info.value)
+        assert info.value.field == "--scheduler" and server.address in text and "\n" not in text, text
+        assert "Dask" in text, text
+
+
+def test_a_service_that_breaks_after_the_handshake_is_one_line_and_the_client_is_closed(tmp_path):
+    """The probe passes (a Dask-shaped handshake), then garbage: one line, exit 2, and no ``Client.__del__``
+    traceback at exit (the client is closed on error)."""
+    pytest.importorskip("distributed")
+    handshake = fake_dask_handshake()
+    with Listener(handshake, reply=HTTP * 4) as server:
+        code = ("import sys\nimport clothlab.parallel.runner as r\nr.CONNECT_TIMEOUT_S = 3.0\n"
+                "from clothlab.cli.main import main\nsys.exit(main(sys.argv[1:]))")
+        done = subprocess.run([sys.executable, "-c", code, "check", "--scheduler", server.address],
+                              capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    line = one_error_line(done.stderr)
+    assert "field '--scheduler'" in line and server.address in line
+
+
+def test_the_environment_variable_is_blamed_as_itself(tmp_path):
+    pytest.importorskip("distributed")
+    with Listener(HTTP) as server:
+        env = dict(os.environ, DASK_SCHEDULER_ADDRESS=server.address)
+        done = subprocess.run([sys.executable, "-m", "clothlab", "check"], capture_output=True, text=True,
+                              timeout=120, cwd=tmp_path, env=env)
+    assert done.returncode == 2, done.stderr
+    line = one_error_line(done.stderr)
+    assert "field 'DASK_SCHEDULER_ADDRESS'" in line and "--scheduler" not in line, line
+    env = dict(os.environ, DASK_SCHEDULER_ADDRESS="tcp://127.0.0.1:http")
+    done = subprocess.run([sys.executable, "-m", "clothlab", "check"], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path, env=env)
+    assert done.returncode == 2 and "field 'DASK_SCHEDULER_ADDRESS'" in one_error_line(done.stderr)
+
+
+def test_bad_scheduler_and_conflicting_options_refused_when_nothing_is_distributed(tmp_path, capsys):
+    """One fit without CV or posterior distributes nothing: before, a malformed --scheduler (and --workers with
+    --scheduler) was ignored and the fit ran; now both are refused before any work."""
+    from test_parallel import make_project
+
+    [config] = make_project(tmp_path, fabrics=("polyester-lining",), max_evals=10)
+    for extra, field in ((["--scheduler", "tcp://127.0.0.1:99999"], "--scheduler"),
+                         (["--scheduler", "nonsense"], "--scheduler"),
+                         (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--workers")):
+        assert main(["fit", str(config), *extra]) == 2
+        assert f"field '{field}'" in one_error_line(capsys.readouterr().err)
+    assert not (tmp_path / "fits").exists()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# B. One error format, argparse included
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["fit", "x.yaml", "--nodes", "abc"], "--nodes"),
+    (["fit", "x.yaml", "--max-evals", "1_0"], "--max-evals"),
+    (["bogus"], "COMMAND"),
+    (["report", "--comparison-name"], "--comparison-name"),
+    (["train-surrogate", "preset:cotton-denim", "--target", "nope"], "--target"),
+    (["import", "a.csv", "-o", "b.csv", "--delimiter", "pipe"], "--delimiter"),
+    (["-v=3"], "-v/--verbose"),
+    (["eval", "fits/x", "d.csv", "--rule", "sim\npson"], "--rule"),
+])
+def test_argparse_mistakes_are_one_line_naming_the_option(argv, option, capsys):
+    with pytest.raises(SystemExit) as info:
+        build_parser().parse_args(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    line = one_error_line(err)
+    assert f"field '{option}'" in line and "usage:" not in err and "clothlab fit:" not in err, err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["fit"], "required"), (["report", "--nope"], "unrecognized arguments: --nope"),
+    (["fit", "a.yaml", "--nope\nx"], "unrecognized"),
+])
+def test_other_usage_errors_are_one_line_too(argv, words, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2 and words in one_error_line(capsys.readouterr().err)
+
+
+def test_import_columns_may_begin_with_a_dash(tmp_path, capsys):
+    """``--columns -,theta_i,...`` ('-' skips the first column) is a value, not an unknown option (issue 28)."""
+    from clothlab.io.table import read_table
+
+    rows = ["7,10,0,30,180,0.5", "8,20,90,40,270,0.25"]
+    (tmp_path / "lab.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "t.csv"
+    assert main(["import", str(tmp_path / "lab.csv"), "-o", str(out), "--header", "no", "--columns",
+                 "-,theta_i,phi_i,theta_o,phi_o,grey", "-q"]) == 0, capsys.readouterr().err
+    table = read_table(out)
+    assert list(table.theta_i) == [10.0, 20.0] and list(table.theta_o) == [30.0, 40.0]
+    # an option word after --columns is still the next option: its value is missing
+    with pytest.raises(SystemExit):
+        main(["import", str(tmp_path / "lab.csv"), "-o", str(out), "--columns", "--force"])
+    assert "field '--columns'" in one_error_line(capsys.readouterr().err)
