@@ -19,6 +19,8 @@ import html
 import math
 from dataclasses import dataclass, field
 
+from clothlab.fit.metrics import fit_statistics
+
 CORREL_THRESHOLD = 0.5
 """Correlations with a larger magnitude are listed (lmfit's default ``min_correl`` is 0.1)."""
 
@@ -75,11 +77,42 @@ def _seconds(value) -> str:
 
 
 # ---------------------------------------------------------------------------------------------- sections
-def _values(fit: dict, k: int) -> str:
+def _counts(fit: dict) -> tuple[int, int, int]:
+    """(n, free parameters, linear coefficients): n the fitted values (rows x channels), as the selection table."""
     m = fit.get("measurement") or {}
     n = (m.get("n") or 0) * len(m.get("channels") or [])
-    coefficients = sum(len(v) for v in (fit.get("coefficients") or {}).values())
+    free = sum(1 for e in (fit.get("parameters") or {}).values() if e.get("free"))
+    return n, free, sum(len(v) for v in (fit.get("coefficients") or {}).values())
+
+
+def _values(fit: dict, k: int) -> str:
+    n, _, coefficients = _counts(fit)
     return f"{k}, and {coefficients} linear coefficients (NNLS), for {n} values"
+
+
+def statistics(fit: dict) -> dict | None:
+    """lmfit's fit statistics of a fit summary (fit.json content): :func:`clothlab.fit.metrics.fit_statistics` of
+    the final objective F with n the fitted values and k the free parameters plus the linear coefficients, as the
+    selection table (:mod:`clothlab.fit.select`) counts them; None when no final objective is recorded."""
+    final = (fit.get("objective") or {}).get("final")
+    if final is None:
+        return None
+    n, free, coefficients = _counts(fit)
+    return fit_statistics(float(final), n, free + coefficients)
+
+
+def _statistics_section(fit: dict) -> Section:
+    stats = statistics(fit)
+    if stats is None:
+        return Section("Statistics", "none recorded (no final objective in this fit)")
+    _, free, coefficients = _counts(fit)
+    rows = [["data points (n)", str(stats["n"])],
+            ["variables (k)", f"{stats['k']} ({free} free parameters + {coefficients} linear coefficients)"],
+            ["chi-square", _num(stats["chi_square"])], ["reduced chi-square", _num(stats["reduced_chi_square"])],
+            ["Akaike info crit (AIC)", _num(stats["aic"], 8)], ["Bayesian info crit (BIC)", _num(stats["bic"], 8)]]
+    return Section("Statistics", "chi-square = n F, F the final objective (mean loss of the metric residuals); "
+                   "AIC = n ln F + 2k, BIC = n ln F + k ln n, comparable between fits of the same data only", None,
+                   rows)
 
 
 def _evaluations(fit: dict, any_free: bool) -> str:
@@ -270,7 +303,7 @@ def _notes_section(fit: dict, posterior: dict | None) -> Section:
 def report_sections(fit: dict, posterior: dict | None = None, *,
                     correl_threshold: float = CORREL_THRESHOLD) -> list[Section]:
     """The report of a fit summary (fit.json content) and its posterior summary (posterior.json, or None)."""
-    return [_fit_section(fit), _parameter_section(fit, posterior),
+    return [_fit_section(fit), _statistics_section(fit), _parameter_section(fit, posterior),
             _correlation_section(fit, posterior, correl_threshold), _coefficient_section(fit),
             _error_section(fit), _time_section(fit, posterior), _notes_section(fit, posterior)]
 

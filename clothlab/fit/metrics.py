@@ -26,6 +26,7 @@ Metrics (``METRICS``):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -159,6 +160,34 @@ def objective_value(residuals) -> float:
     """Mean squared residual, the scalar a fit minimises (NaN propagates, on purpose)."""
     residuals = np.asarray(residuals, dtype=np.float64)
     return float(np.mean(residuals * residuals))
+
+
+def information_criteria(objective: float, n: int, k: int) -> tuple[float, float]:
+    """(AIC, BIC) = (n ln F + 2 k, n ln F + k ln n) of a fit with objective F (:func:`objective_value`, the
+    mean of the loss over the fitted values) over n fitted values (rows x channels) and k estimated numbers (free
+    parameters plus linear coefficients); -inf for F <= 0 (an exact fit) or n < 1.  The residuals are taken as
+    independent Gaussian with one unknown variance, profiled out (-2 ln L = n ln F + const), so only differences
+    between fits of the same data mean anything (the selection table, :mod:`clothlab.fit.select`)."""
+    if not objective > 0.0 or n < 1:
+        return -math.inf, -math.inf
+    log_f = n * math.log(objective)
+    return log_f + 2.0 * k, log_f + k * math.log(n)
+
+
+def fit_statistics(objective: float, n: int, k: int) -> dict:
+    """lmfit's statistics block of a fit with objective F over n values and k estimated numbers:
+    ``{"n", "k", "chi_square", "reduced_chi_square", "aic", "bic"}``.
+
+    chi-square = n F, the sum of the squared metric residuals (under a robust loss the summed loss, the sum of
+    squares of :func:`clothlab.fit.loss.effective_residuals`): lmfit's ``chisqr`` with the metric residual as
+    the residual (unweighted: sigma plays no role); reduced chi-square = chi-square / (n - k) (NaN when
+    n <= k); AIC and BIC by :func:`information_criteria`, which are lmfit's n ln(chisqr / n) + 2 k and
+    n ln(chisqr / n) + k ln n.
+    """
+    aic, bic = information_criteria(objective, n, k)
+    chi_square = n * objective
+    return {"n": int(n), "k": int(k), "chi_square": chi_square,
+            "reduced_chi_square": chi_square / (n - k) if n > k else math.nan, "aic": aic, "bic": bic}
 
 
 def linear_weights(measured, metric: str) -> np.ndarray:

@@ -44,13 +44,13 @@ the ranking rule, the likelihood note and the budgets.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from clothlab.config.validate import default_free
+from clothlab.fit.metrics import information_criteria
 from clothlab.fit.periodic import wrap
 from clothlab.models.base import ORIENTATION
 from clothlab.models.registry import model_class
@@ -216,14 +216,6 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
     fit = replace(config.fit, free=tuple(free), bounds=bounds, optimizer=optimizer, posterior=posterior,
                   cv_folds=int(cv_folds))
     return replace(config, name=name or config.name, model=model, fit=fit)
-
-
-def information_criteria(objective: float, n: int, k: int) -> tuple[float, float]:
-    """(AIC, BIC) of a fit with objective F over n values and k estimated numbers (module docstring)."""
-    if not objective > 0.0 or n < 1:
-        return -math.inf, -math.inf
-    log_f = n * math.log(objective)
-    return log_f + 2.0 * k, log_f + k * math.log(n)
 
 
 def fit_candidate(task: CandidateTask) -> CandidateResult:

@@ -243,6 +243,25 @@ def _coefficient_section(fit: dict) -> list[str]:
             _table(["coefficient", *map(esc, channels or ["value"])], rows)]
 
 
+def _statistics_section(fit: dict) -> list[str]:
+    """lmfit's fit statistics (:func:`clothlab.fit.fitreport.statistics`), as the text report shows them."""
+    from clothlab.fit.fitreport import statistics
+
+    stats = statistics(fit)
+    if stats is None:
+        return []
+    rows = [("data points (n)", stats["n"]), ("variables (k: free parameters + linear coefficients)", stats["k"]),
+            ("chi-square", fmt_number(stats["chi_square"], 6)),
+            ("reduced chi-square", fmt_number(stats["reduced_chi_square"], 6)),
+            ("Akaike info crit (AIC)", fmt_number(stats["aic"], 8)),
+            ("Bayesian info crit (BIC)", fmt_number(stats["bic"], 8))]
+    return ["<h2>Fit statistics</h2>",
+            '<p class="note">chi-square = n F, F the final objective (mean loss of the metric residuals); '
+            "AIC = n ln F + 2k, BIC = n ln F + k ln n (as the selection table), comparable between fits of the "
+            "same data only.</p>",
+            _table(None, [(f"<b>{esc(k)}</b>", ("num", str(v))) for k, v in rows])]
+
+
 def _warning_section(fit: dict, notes) -> list[str]:
     warnings = [str(w) for w in fit.get("warnings") or []]
     out = []
@@ -412,6 +431,7 @@ def render_report_html(fit: dict, figures: dict, tables: dict) -> str:
     body += _selection_section(fit)
     body += _parameter_section(fit)
     body += _coefficient_section(fit)
+    body += _statistics_section(fit)
     body += _warning_section(fit, tables.get("notes") or [])
     body += _figure_section(figures, SCATTERED_CAPTIONS if sampling is not None and sampling.scattered else None)
     body += _posterior_section(tables.get("posterior"))
