@@ -229,3 +229,67 @@ def test_import_columns_may_begin_with_a_dash(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["import", str(tmp_path / "lab.csv"), "-o", str(out), "--columns", "--force"])
     assert "field '--columns'" in one_error_line(capsys.readouterr().err)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# C. report of a corrupt fit directory
+
+
+def _fit_copy(tmp_path: Path, edit=None, text_edit=None, predictions=None) -> Path:
+    """A copy of the shipped fits/polyester-lining-lambert/ with fit.json (or predictions.csv) edited."""
+    d = tmp_path / "fits" / "f"
+    shutil.copytree(REPO / "fits" / "polyester-lining-lambert", d)
+    fit = json.loads((d / "fit.json").read_text())
+    if edit is not None:
+        edit(fit)
+    text = json.dumps(fit)
+    if text_edit is not None:
+        text = text_edit(text)
+    (d / "fit.json").write_text(text)
+    if predictions is not None:
+        lines = (d / "predictions.csv").read_text().splitlines()
+        (d / "predictions.csv").write_text("\n".join(predictions(lines)) + "\n")
+    return d
+
+
+def _zero_measured(lines):
+    header = lines[0].split(",")
+    cols = [i for i, h in enumerate(header) if h.startswith("measured_")]
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for i in cols:
+            cells[i] = "0"
+        out.append(",".join(cells))
+    return out
+
+
+@pytest.mark.parametrize("case, kwargs, file, field", [
+    ("bogus kind", {"edit": lambda f: f["model"].update(kind="bogus")}, "fit.json", "model.kind"),
+    ("missing kind", {"edit": lambda f: f["model"].pop("kind")}, "fit.json", "model.kind"),
+    ("no model", {"edit": lambda f: f.pop("model")}, "fit.json", "model.kind"),
+    ("zero n", {"edit": lambda f: f["measurement"].update(n=0)}, "fit.json", "measurement.n"),
+    ("wrong n", {"edit": lambda f: f["measurement"].update(n=7)}, "fit.json", "measurement.n"),
+    ("zero measured", {"predictions": _zero_measured}, "predictions.csv", "measured_R"),
+    ("NaN objective", {"text_edit": lambda t: t.replace('"final": 0.2899918708559089', '"final": NaN', 1)},
+     "fit.json", "objective.final"),
+    ("null objective", {"edit": lambda f: f["objective"].update(final=None)}, "fit.json", "objective.final"),
+    ("string objective", {"edit": lambda f: f["objective"].update(start="0.3")}, "fit.json", "objective.start"),
+    ("Infinity deep", {"text_edit": lambda t: t.replace('"wall_time_s": ', '"wall_time_s": Infinity, "x": ', 1)},
+     "fit.json", "wall_time_s"),
+    ("-Infinity in a list", {"edit": lambda f: f.update(extra=[1, {"a": [0, "MARK"]}]),
+                             "text_edit": lambda t: t.replace('"MARK"', "-Infinity")}, "fit.json", "extra.1.a.1"),
+])
+def test_report_refuses_a_corrupt_fit_naming_the_file_and_field(tmp_path, capsys, case, kwargs, file, field):
+    """Before: rendered and exit 0 (or, for Infinity, a message without the field)."""
+    d = _fit_copy(tmp_path, **kwargs)
+    assert main(["report", str(d), "-o", str(tmp_path / "reports")]) == 2, case
+    line = one_error_line(capsys.readouterr().err)
+    assert f"{file}, field '{field}'" in line, line
+    assert not (tmp_path / "reports" / "f").exists()
+
+
+def test_report_still_renders_the_shipped_fit(tmp_path):
+    d = _fit_copy(tmp_path)
+    assert main(["report", str(d), "-o", str(tmp_path / "reports"), "-q"]) == 0
+    assert (tmp_path / "reports" / "polyester-lining-lambert" / "index.html").is_file()

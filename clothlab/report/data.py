@@ -158,7 +158,8 @@ def _finite(value, path: Path, field: str) -> float:
 
 def _check_predictions(predictions: dict, channels, path: Path) -> None:
     """The measured and model columns the report shows: every value finite (read strictly already), model
-    values not all zero, at least two rows."""
+    values not all zero, some measured value positive (the relative error of sec. 8 needs one), at least two
+    rows."""
     n = len(next(iter(predictions.values())))
     if n < 2:
         raise InputError(f"{n} data row; a fit's predictions hold at least 2", path=path)
@@ -166,6 +167,77 @@ def _check_predictions(predictions: dict, channels, path: Path) -> None:
         if not np.any(predictions[f"model_{c}"]):
             raise InputError(f"every value of model_{c} is 0: not the predictions of a fit", path=path,
                              field=f"model_{c}")
+        if not np.any(predictions[f"measured_{c}"] > 0):
+            raise InputError(f"no value of measured_{c} is positive: no relative error can be computed (Irawan & "
+                             "Marschner 2012, sec. 8), not the measurement of a fit", path=path,
+                             field=f"measured_{c}")
+
+
+class _NonFinite:
+    """A ``NaN`` / ``Infinity`` constant of a JSON document, kept in place to name its field."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+
+def _non_finite_field(value, prefix: str = "") -> tuple[str, str] | None:
+    """(dotted field, constant) of the first :class:`_NonFinite` in ``value``, depth first."""
+    if isinstance(value, _NonFinite):
+        return prefix or "(top level)", value.name
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        found = _non_finite_field(item, f"{prefix}.{key}" if prefix else str(key))
+        if found is not None:
+            return found
+    return None
+
+
+def read_fit_json(path) -> dict:
+    """fit.json as :func:`read_json` reads it; a ``NaN`` or ``Infinity`` (which clothlab never writes) is
+    refused naming its dotted field, e.g. ``objective.final``."""
+    import json
+
+    path = Path(path)
+    try:
+        return read_json(path)
+    except InputError as exc:
+        if "not a finite number" not in exc.detail:
+            raise
+        # depth and size were checked by the first read: parse again keeping the constants to find them
+        data = json.loads(read_text(path, limit=MAX_TABLE_BYTES, what="file"), parse_constant=_NonFinite)
+        found = _non_finite_field(data)
+        if found is None:
+            raise
+        where, name = found
+        raise InputError(f"{name} is not a finite number; clothlab writes finite numbers only (a value that "
+                         "could not be computed is null)", path=path, field=where) from None
+
+
+def _check_model_and_objective(fit: dict, path: Path) -> None:
+    """A known model kind (the report describes the fit by it), a positive measured count, a finite final
+    objective."""
+    from clothlab.models.registry import MODEL_KINDS
+
+    model = fit.get("model")
+    kind = model.get("kind") if isinstance(model, dict) else None
+    if not isinstance(kind, str) or kind not in MODEL_KINDS:
+        found = "missing" if kind is None else f"{kind!r}"
+        raise InputError(f"the model kind is {found}; expected one of {', '.join(MODEL_KINDS)}", path=path,
+                         field="model.kind")
+    n = fit["measurement"].get("n")
+    if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+        raise InputError(f"expected a positive count of measured values, found {n!r}", path=path,
+                         field="measurement.n")
+    objective = fit.get("objective")
+    if objective is None:  # a fit written without the optimiser's record (e.g. a generating model)
+        return
+    if not isinstance(objective, dict) or "final" not in objective:
+        raise InputError(f"expected an object with the final objective value, found {objective!r}", path=path,
+                         field="objective")
+    _finite(objective["final"], path, "objective.final")
+    for key, value in objective.items():
+        if value is not None and key != "final":
+            _finite(value, path, f"objective.{key}")
 
 
 def _check_fit_json(fit: dict, path: Path) -> None:
@@ -195,6 +267,7 @@ def _check_fit_json(fit: dict, path: Path) -> None:
             _finite(per_channel.get(c), path, f"coefficients.{cname}.{c}")
     if "warnings" in fit and not isinstance(fit["warnings"], list):
         raise InputError("expected a list of strings", path=path, field="warnings")
+    _check_model_and_objective(fit, path)
 
 
 def load_fit_dir(fit_dir) -> FitRecord:
@@ -204,7 +277,7 @@ def load_fit_dir(fit_dir) -> FitRecord:
         raise InputError("not a directory; expected a fit directory such as fits/<name>/ with fit.json and "
                          "predictions.csv", path=fit_dir)
     fit_path = fit_dir / "fit.json"
-    fit = read_json(fit_path)
+    fit = read_fit_json(fit_path)
     _check_fit_json(fit, fit_path)
 
     pred_path = fit_dir / "predictions.csv"
@@ -224,6 +297,11 @@ def load_fit_dir(fit_dir) -> FitRecord:
         raise InputError(f"no channel columns: expected pairs measured_<c>, model_<c>; the header has "
                          f"{list(predictions)}", path=pred_path, line=1)
     _check_predictions(predictions, channels, pred_path)
+    n = fit["measurement"].get("n")
+    rows = len(predictions["theta_i"])
+    if n is not None and n != rows:
+        raise InputError(f"measurement.n = {n} but {pred_path.name} holds {rows} rows", path=fit_path,
+                         field="measurement.n")
 
     record = FitRecord(fit_dir, fit, predictions, channels)
     slices_path, trace_path, posterior_path = (fit_dir / n for n in ("slices.csv", "trace.csv", "posterior.json"))
