@@ -293,3 +293,47 @@ def test_report_still_renders_the_shipped_fit(tmp_path):
     d = _fit_copy(tmp_path)
     assert main(["report", str(d), "-o", str(tmp_path / "reports"), "-q"]) == 0
     assert (tmp_path / "reports" / "polyester-lining-lambert" / "index.html").is_file()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# D. fit-btf with a missing grid image
+
+
+@pytest.fixture(scope="module")
+def names_only_stack(tmp_path_factory):
+    """A simulated 8-image stack (Fig. 4's elevations 15-60 deg x azimuths 0, 180) without its manifest: the
+    angles come from the UTIA file names."""
+    from clothlab.simulate.btf import TextureLayout, simulate_btf
+
+    path = simulate_btf("preset:cotton-denim", tmp_path_factory.mktemp("btf") / "stack", n_directions=8, size=12,
+                        tile_repeats=2, layout=TextureLayout(offset=(0.1, 0.2), hwidth=0.35, noise=False, seed=1))
+    (path / "manifest.yaml").unlink()
+    return path
+
+
+def test_fit_btf_with_a_missing_grid_image_exits_2_naming_it(tmp_path, capsys, names_only_stack):
+    """Before: the 7 remaining images were fitted and the command exited 0."""
+    from clothlab.btf import BtfStack
+
+    assert len(BtfStack.open(names_only_stack)) == 8  # the complete grid opens
+    stack = tmp_path / "stack"
+    shutil.copytree(names_only_stack, stack)
+    victim = sorted((stack / "tv000_pv000").iterdir())[3]
+    victim.unlink()
+    assert main(["fit-btf", str(stack), str(REPO / "fits" / "cotton-denim"), "-o", str(tmp_path / "out")]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert f"missing image: expected 'tv000_pv000/{victim.name}'" in line and str(victim) in line, line
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scattered_names_only_stack_is_not_taken_for_a_grid(tmp_path, names_only_stack):
+    """Directions that do not fill three quarters of their polar x azimuth product claim no grid."""
+    from clothlab.btf import BtfStack
+
+    stack = tmp_path / "stack"
+    shutil.copytree(names_only_stack, stack)
+    view = stack / "tv000_pv000"
+    for image in sorted(view.iterdir()):
+        if not image.name.startswith(("tl015_pl000", "tl030_pl180", "tl060_pl000")):
+            image.unlink()
+    assert len(BtfStack.open(stack)) == 3  # 3 of 3 x 2: a scattered sampling

@@ -184,10 +184,12 @@ def check_grid(directory, raw, *, required: bool = False) -> None:
     shared = len(raw) > len(lights)
     full = {_key(t, p) for t, p in utia_directions()}
     claims_full = lights <= full and set(views) <= full and len(raw) > len(full) ** 2 // 2
+    product_lights, product_views = _claimed_product(lights), _claimed_product(set(views))
     if claims_full:
         expected_views, expected_lights = sorted(full), sorted(full)
-    elif required or shared:
-        expected_views, expected_lights = sorted(views), sorted(lights)
+    elif required or shared or product_lights or product_views:
+        expected_views = sorted(product_views or views)
+        expected_lights = sorted(product_lights or lights)
     else:
         return
     missing = [(view, light) for view in expected_views for light in expected_lights
@@ -197,13 +199,32 @@ def check_grid(directory, raw, *, required: bool = False) -> None:
     view, light = missing[0]
     expected = _expected_path(Path(directory), views.get(view), raw[0][0], light, view)
     what = ("the 81 x 81 Bonn UBO2003 / UTIA sampling (its directions all lie on that grid)" if claims_full else
-            f"a {len(expected_views)}-view x {len(expected_lights)}-light grid (the lights of every view)")
+            f"a {len(expected_views)}-view x {len(expected_lights)}-light grid (the lights of every view"
+            + (", every polar angle at every azimuth" if product_lights or product_views else "") + ")")
     more = f"; {len(missing) - 1} more image(s) missing" if len(missing) > 1 else ""
     shown = expected.relative_to(directory) if expected.is_relative_to(directory) else expected
     raise InputError(
         f"missing image: expected '{shown}'"
         f" (light tl {light[0]:g} pl {light[1]:g}, view tv {view[0]:g} pv {view[1]:g}) to complete {what}{more}; "
         "a stack that is not a light x view grid needs a manifest", path=expected)
+
+
+PRODUCT_COVERAGE = 0.75
+"""A set of directions off the pole filling at least this share (and not all) of the product of its polar
+angles and azimuths claims that product grid: the rest are missing images (e.g. Fig. 4's elevations x
+azimuths with one image deleted).  A sampling that is not such a grid needs a manifest."""
+
+
+def _claimed_product(directions: set) -> set | None:
+    """The polar x azimuth grid (the pole, theta = 0, kept as one direction) that ``directions`` claim but do
+    not fill, or None: at least two polar angles and two azimuths off the pole, and a coverage of at least
+    :data:`PRODUCT_COVERAGE` of their product."""
+    off_pole = {d for d in directions if d[0] != 0.0}
+    thetas, phis = {t for t, _ in off_pole}, {p for _, p in off_pole}
+    grid = {(t, p) for t in thetas for p in phis}
+    if len(thetas) < 2 or len(phis) < 2 or off_pole == grid or len(off_pole) < PRODUCT_COVERAGE * len(grid):
+        return None
+    return grid | (directions - off_pole)
 
 
 def _expected_path(directory: Path, same_view: dict | None, template: Path, light, view) -> Path:
