@@ -96,6 +96,11 @@ def nnls_small(A, y, w=None) -> tuple[np.ndarray, np.ndarray]:
 
     A channel whose A, y or w hold non-finite values gets NaN coefficients and a NaN residual (so an
     objective built on it becomes non-finite and the optimiser applies its penalty); no warning is raised.
+
+    >>> A = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    >>> coef, norm = nnls_small(A, np.array([2.0, -1.0, 1.0]))  # unconstrained least squares: (2, -1)
+    >>> (coef.round(6) + 0.0).tolist(), round(norm, 6)  # the best non-negative: x2 = 0, x1 = (2 + 1) / 2
+    ([1.5, 0.0], 1.224745)
     """
     y = np.asarray(y, dtype=np.float64)
     one_channel = y.ndim == 1

@@ -24,6 +24,14 @@ class Measurement:
     values : (N, C) BRDF in 1/sr.   sigma : (N, C) or None, same unit.
     channels : names of the C channels (e.g. ('R', 'G', 'B')).
     provenance : free metadata (instrument, reference standard, sample name, simulated?, source file ...).
+
+    >>> import numpy as np
+    >>> m = Measurement(theta_i=np.array([30.0, 45.0, 60.0]), phi_i=np.zeros(3), theta_o=np.zeros(3),
+    ...                 phi_o=np.zeros(3), values=np.array([0.3, 0.2, 0.1]), channels=("Y",))
+    >>> m.n, m.values.shape  # one channel: values become (N, 1)
+    (3, (3, 1))
+    >>> m.subset(m.theta_i > 40.0).theta_i.tolist()
+    [45.0, 60.0]
     """
 
     theta_i: np.ndarray

@@ -604,6 +604,20 @@ def read_table(path) -> Measurement:
     """Load a clothlab table (CSV + YAML header or sidecar) into clothlab's convention.
 
     Every problem raises :class:`InputError` naming file, line and column.
+
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = Path(tmp) / "brdf.csv"
+    ...     _ = path.write_text("# clothlab-table: 1\\n# angle_unit: deg\\n# quantity: reflectance_factor\\n"
+    ...                         "# azimuth_zero: warp\\n# azimuth_sense: cw\\n# channels: [Y]\\n"
+    ...                         "theta_i,phi_i,theta_o,phi_o,Y\\n30,30,0,0,0.5\\n")
+    ...     m = read_table(path)
+    >>> float(m.phi_i[0]), round(float(m.values[0, 0]), 6)  # clothlab azimuth; BRDF = reflectance / pi
+    (60.0, 0.159155)
+    >>> read_table("missing.csv")
+    Traceback (most recent call last):
+    ...
+    clothlab.errors.InputError: missing.csv: ...
     """
     path = Path(path)
     lines = read_text_lines(path)
@@ -662,7 +676,23 @@ def _header_text(header: dict) -> list[str]:
 def format_table(m: Measurement, *, quantity: str = "brdf", angle_unit: str = "deg",
                  azimuth_zero: str = "weft", azimuth_sense: str = "ccw", azimuth_offset: float = 0.0) -> str:
     """The text of a clothlab table holding ``m`` in the requested conventions (floats as repr; exact with
-    ``azimuth_offset=0``, which is then not written)."""
+    ``azimuth_offset=0``, which is then not written).
+
+    >>> m = Measurement(np.array([30.0, 45.0]), np.array([0.0, 90.0]), np.array([30.0, 0.0]),
+    ...                 np.array([180.0, 0.0]), np.array([[0.12], [0.3]]), ("Y",))
+    >>> print(format_table(m), end="")
+    # clothlab-table: 1
+    # angle_unit: deg
+    # quantity: brdf
+    # azimuth_zero: weft
+    # azimuth_sense: ccw
+    # channels: [Y]
+    theta_i,phi_i,theta_o,phi_o,Y
+    30.0,0.0,30.0,180.0,0.12
+    45.0,90.0,0.0,0.0,0.3
+    >>> print(format_table(m, azimuth_zero="warp").splitlines()[-1])  # azimuths from the warp in the file
+    45.0,0.0,0.0,270.0,0.3
+    """
     for name, value in (("quantity", quantity), ("angle_unit", angle_unit), ("azimuth_zero", azimuth_zero),
                         ("azimuth_sense", azimuth_sense)):
         check_choice(name, value)
@@ -712,6 +742,14 @@ def write_table(m: Measurement, path, *, overwrite: bool = False, quantity: str 
     tuples come back as lists).  The text is parsed back before writing, so an invalid measurement (NaN,
     negative values, duplicate directions ...) raises :class:`InputError` and nothing is written.
     An existing file raises :class:`ResultExistsError` unless ``overwrite``.
+
+    >>> import tempfile
+    >>> m = Measurement(np.array([30.0]), np.array([0.0]), np.array([30.0]), np.array([180.0]),
+    ...                 np.array([[0.12, 0.1, 0.08]]), ("R", "G", "B"))
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     back = read_table(write_table(m, Path(tmp) / "brdf.csv"))
+    >>> back.channels, back.values.tolist() == m.values.tolist()
+    (('R', 'G', 'B'), True)
     """
     path = Path(path)
     if path.exists() and not overwrite:

@@ -4,6 +4,13 @@ The presets are the ``.wv`` files shipped in ``clothlab/weave/data/`` (the one s
 are the published ones, see docs/presets.md); :func:`get_preset` reads them with
 :func:`clothlab.weave.wvformat.parse_wv_text`.  :func:`resolve_weave` interprets the ``weave:`` field of
 fabric.yaml: ``preset:<name>`` or a path to a ``.wv`` file.
+
+>>> from clothlab.weave.presets import PRESET_NAMES, get_preset
+>>> PRESET_NAMES[:2]
+('cotton-denim', 'silk-shantung')
+>>> denim = get_preset("cotton-denim")
+>>> denim.warp.umax, denim.weft.umax  # Table I, degrees
+(12.0, 38.0)
 """
 
 from __future__ import annotations
@@ -28,7 +35,15 @@ PRESET_PREFIX = "preset:"
 
 
 def canonical_preset_name(name: str) -> str:
-    """The preset key for ``name`` (case-insensitive; '_' or ' ' accepted for '-'); ConfigError if unknown."""
+    """The preset key for ``name`` (case-insensitive; '_' or ' ' accepted for '-'); ConfigError if unknown.
+
+    >>> canonical_preset_name("Silk_Charmeuse")
+    'silk-charmeuse'
+    >>> canonical_preset_name("linen")
+    Traceback (most recent call last):
+    ...
+    clothlab.errors.ConfigError: field 'weave': unknown weave preset 'linen'; known presets: cotton-denim, ...
+    """
     key = str(name).strip().lower().replace("_", "-").replace(" ", "-")
     if key not in PRESET_NAMES:
         raise ConfigError(f"unknown weave preset '{name}'; known presets: {', '.join(PRESET_NAMES)}",
@@ -46,6 +61,12 @@ def get_preset(name: str) -> Weave:
     """The weave of one of the paper's fabrics (:data:`PRESET_NAMES`); angles in degrees, w and l in cells.
 
     The returned Weave is shared between calls (it is frozen and its pattern array is read-only).
+
+    >>> lining = get_preset("polyester-lining")
+    >>> lining.name, lining.pattern.shape, lining.warp.psi
+    ('polyester-lining', (2, 2), 0.0)
+    >>> get_preset("Polyester Lining") is lining
+    True
     """
     return _load_preset(canonical_preset_name(name))
 
@@ -57,6 +78,11 @@ def resolve_weave(spec: str, base_dir) -> Weave:
     path to a ``.wv`` file, relative to ``base_dir`` (the directory of
     fabric.yaml) unless absolute.  An unknown preset or a missing file raises :class:`ConfigError` naming
     it; errors inside the file raise :class:`~clothlab.errors.InputError` naming file, line and field.
+
+    >>> resolve_weave("preset:cotton-twill", ".").name
+    'cotton-twill'
+    >>> resolve_weave("pattern:plain", ".").pattern.shape
+    (2, 2)
     """
     if not isinstance(spec, str) or not spec.strip():
         raise ConfigError(f"weave must be 'preset:<name>' or the path of a .wv file, got {spec!r}; "
