@@ -57,6 +57,7 @@ class Surrogate:
         self._plans = {}
         self._box = None
         self._weave_cache = None
+        self._yarn_tables = None
 
     @property
     def half_vector(self) -> bool:
@@ -177,12 +178,7 @@ class Surrogate:
         """float32 spatial and direction features of queries (``t_reference``: T(R) (N, C), appended to the
         direction features when ``residual_input``; ``t_probe``: T of the texture probe, appended after it)."""
         dt = self.network.dtype
-        centre = np.atleast_2d(centre)
-        spatial = spatial_features(centre, np.atleast_1d(size), self.position_bins, self.size_bins)
-        if self.yarn_bins:
-            extent = {k: tuple(v) for k, v in self.encoding["yarn_extent"].items()}
-            spatial = np.concatenate([spatial, yarn_features(self._weave(), centre, extent, self.yarn_bins)], axis=1)
-        angular = direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector)
+        spatial, angular = self._base_features(centre, size, wi, wo)
         if self.residual_input:
             if t_reference is None:
                 raise ValueError("this network reads T(R) as an input: give t_reference")
@@ -191,6 +187,29 @@ class Surrogate:
             if t_probe is None:
                 raise ValueError("this network reads a texture probe as an input: give t_probe")
             angular = np.concatenate([angular, t_probe], axis=1)
+        return spatial.astype(dt, copy=False), angular.astype(dt, copy=False)
+
+    def _base_features(self, centre, size, wi, wo) -> tuple[np.ndarray, np.ndarray]:
+        """Spatial (one-blob position and size, yarn features) and direction features in the network's dtype:
+        one compiled pass (:mod:`clothlab.neural.fast_features`; the values of :meth:`reference_features`)."""
+        from clothlab.neural.fast_features import features, yarn_tables
+
+        if self.yarn_bins and self._yarn_tables is None:
+            extent = {k: tuple(v) for k, v in self.encoding["yarn_extent"].items()}
+            self._yarn_tables = yarn_tables(self._weave(), extent)
+        return features(centre, size, wi, wo, self.position_bins, self.size_bins, self.yarn_bins, self.half_vector,
+                        self._yarn_tables, self.network.dtype)
+
+    def reference_features(self, centre, size, wi, wo) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_base_features` by the numpy encodings (float64, then the network's dtype): the definition
+        the compiled pass is tested against."""
+        dt = self.network.dtype
+        centre = np.atleast_2d(centre)
+        spatial = spatial_features(centre, np.atleast_1d(size), self.position_bins, self.size_bins)
+        if self.yarn_bins:
+            extent = {k: tuple(v) for k, v in self.encoding["yarn_extent"].items()}
+            spatial = np.concatenate([spatial, yarn_features(self._weave(), centre, extent, self.yarn_bins)], axis=1)
+        angular = direction_features(np.atleast_2d(wi), np.atleast_2d(wo), self.half_vector)
         return spatial.astype(dt), angular.astype(dt)
 
     def latent(self, material) -> np.ndarray:

@@ -9,10 +9,10 @@ materials, the held-out pattern and the trained materials of the Table-2 network
 * **queries**: fresh held-out direction pairs of the network's data spec (:func:`clothlab.neural.data.
   heldout_queries`, seeds :data:`QUERY_SEED` + ..., never the training seed), uniform centres, sizes as
   Table 2 within the bin;
-* **reference**: the texture model's own box average by plain stratified MC of ``samples`` points (default
-  :data:`REFERENCE_SAMPLES` = 16,384; Chen, Wang & Wang 2024, eq. 3 with a box kernel), as the mean of two
-  independent halves: it does not use the reflectance model R, and the halves' difference gives its own
-  noise (``reference_noise``, relative RMS of the mean);
+* **reference**: the texture model's own box average by stratified MC of ``samples`` points (default
+  :data:`REFERENCE_SAMPLES` = 16,384; Chen, Wang & Wang 2024, eq. 3 with a box kernel; :func:`texture_reference`),
+  as the mean of two independent stratified halves: it does not use the reflectance model R, and the halves'
+  difference gives its own noise (``reference_noise``, relative RMS of the mean);
 * **accuracy**: relative RMSE of f (the sum of the components, unit coefficients) with a 90 % bootstrap
   interval (:func:`clothlab.neural.training.relative_rmse_interval`), beside R alone on the same reference;
 * **cost**: the surrogate's ``Surrogate.query`` end to end (features, R or the texture probe, decoder, the
@@ -46,7 +46,6 @@ REFERENCE_SAMPLES = 16384
 MC_SAMPLES = (1, 2, 4, 8, 16, 32, 64, 128, 256)
 QUERY_SEED = 2311  # accuracy queries; timing queries use QUERY_SEED + 50,000 + ...
 TABLE2 = "families/surface-table2"
-POINTS_PER_CALL = 1 << 18  # texture points per reference call (memory)
 FULL = {"per_bin": 300, "samples": REFERENCE_SAMPLES, "timing": 4096, "repeats": 3, "materials": 12}
 QUICK = {"per_bin": 24, "samples": 1024, "timing": 512, "repeats": 2, "materials": 3}
 
@@ -101,17 +100,26 @@ def _args(q: np.ndarray):
 
 
 def texture_reference(material: Material, q: np.ndarray, samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(f, f_a - f_b) of queries ``q``: f the mean of two plain stratified MC estimates of ``samples`` / 2
-    points each (seeds ``seed``, ``seed`` + 1; no R), summed over the components."""
-    from clothlab.neural.labels import TextureMonteCarloLabels
-
-    half = max(1, samples // 2)
-    step = max(1, POINTS_PER_CALL // half)
-    parts = []
-    for s in (seed, seed + 1):
-        mc = TextureMonteCarloLabels(material.texture, material.params, samples=half, seed=s)
-        parts.append(np.concatenate([mc(*_args(q[i:i + step])).sum(axis=1) for i in range(0, len(q), step)]))
-    return 0.5 * (parts[0] + parts[1]), parts[0] - parts[1]
+    """(f, f_a - f_b) of queries ``q``: f the mean of two stratified MC estimates of the box average of the
+    noise-free texture, each of ``samples`` / 2 points jittered on an nx x ny grid over the box (nx = 2 ny;
+    seeds (``seed``, query, half)); no R; f summed over the components.  The texture is called once per
+    query with its directions shared by the points (``shared_directions``)."""
+    half = max(2, samples // 2)
+    ny = max(1, int(np.sqrt(half / 2)))
+    nx = half // ny
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    ix, iy = ix.reshape(-1), iy.reshape(-1)
+    out = np.empty((2, len(q)))
+    for i, row in enumerate(q):
+        size, low = row[3], row[1:3] - 0.5 * row[3]
+        for h in range(2):
+            jitter = np.random.default_rng([seed, i, h]).random((2, ix.size))
+            u = low[0] + size * (ix + jitter[0]) / nx
+            v = low[1] + size * (iy + jitter[1]) / ny
+            comps = material.texture.components(u, v, row[4:7][None], row[7:10][None], material.params,
+                                                noise=False, warn=False)
+            out[h, i] = sum(float(np.mean(c)) for c in comps.values())
+    return 0.5 * (out[0] + out[1]), out[0] - out[1]
 
 
 def _relative(a, b) -> float:
@@ -197,12 +205,13 @@ def bin_figures(surrogate, materials, spec, lo: float, hi: float, *, per_bin: in
     def sweep(split: bool) -> list[dict]:
         rows = []
         for k in mc_samples:
-            if split and k < 2:
+            whole = split and (k >= 2 or hi > 1.0)  # below 1 tile split MC is plain MC (MC-1 included)
+            if split and k < 2 and hi > 1.0:
                 continue
 
-            def estimator(m, k=k):
+            def estimator(m, k=k, whole=whole):
                 return TextureMonteCarloLabels(m.texture, m.params, samples=k, seed=seed + 5 + k,
-                                               tile_average=m.r if split else None)
+                                               tile_average=m.r if whole else None)
             value = np.concatenate([estimator(m)(*_args(q[m.row])).sum(axis=1) for m in materials])
             keep = max(16, each_t // max(1, k // 4))  # fewer timing queries for large k (same points)
             us = 1e6 * cold_time(lambda m, block, e=estimator: e(m)(*_args(block)), materials,
