@@ -23,14 +23,27 @@ def add_parser(sub):
     p.add_argument("--shader", default="im-lod", type=one_of(SHADERS, "shader"),
                    help=LazyText(lambda: f"one of {', '.join(SHADERS())} (default im-lod)"))
     p.add_argument("--spp", type=count_type(1, 1_000_000), help="samples per pixel (default: the scene's render.spp)")
+    p.add_argument("--renderer", default="clothlab", choices=("clothlab", "mitsuba"),
+                   help="clothlab (default) or mitsuba: Mitsuba 3 with the clothlab plugin (docs/mitsuba.md)")
+    p.add_argument("--variant", help="Mitsuba variant (default: llvm_ad_rgb if it runs here, else scalar_rgb)")
     add_force(p, "STEM.exr and STEM.png")
     return p
 
 
 def run(args) -> int:
+    output = args.output if args.output is not None else DEFAULT_DIR / Path(args.scene).stem
+    if getattr(args, "renderer", "clothlab") == "mitsuba":
+        from clothlab.mitsuba.scene import render_to_files as mitsuba_render_to_files
+
+        result, exr, png = mitsuba_render_to_files(args.scene, output, shader=args.shader, spp=args.spp,
+                                                   variant=args.variant, force=args.force)
+        t, s = result.timings, result.stats
+        print(f"rendered {args.scene} in Mitsuba 3 ({s['variant']}, plugin policy {s['policy']}, kind {s['kind']}) "
+              f"with {args.shader}, {result.spp} spp in {t['total']:.2f} s (render {t['render']:.2f} s, "
+              f"{s['plugin_calls']} plugin calls)\n  wrote {exr} and {png}")
+        return 0
     from clothlab.render import render_to_files
 
-    output = args.output if args.output is not None else DEFAULT_DIR / Path(args.scene).stem
     result, exr, png = render_to_files(args.scene, output, shader=args.shader, spp=args.spp, force=args.force)
     print(present_render(args.scene, result, exr, png))
     return 0

@@ -133,3 +133,23 @@ def render_scene(scene, *, shader: str = "im-lod", spp: int | None = None, seed:
                         exposure=scene.exposure,
                         metadata={"scene": scene.source or "", "renderer": "mitsuba", "variant": variant,
                                   "shader": shader, "spp": int(spp), "lod_f0": scene.lod.f0, "lod_f1": scene.lod.f1})
+
+
+def render_to_files(scene_path, output_stem, *, shader: str = "im-lod", spp: int | None = None,
+                    variant: str | None = None, force: bool = False):
+    """:func:`clothlab.render.render_to_files` with Mitsuba 3 as the renderer: ``<stem>.exr`` and ``.png``;
+    refuses existing outputs unless ``force`` (checked before rendering).  Returns (result, EXR, PNG)."""
+    from pathlib import Path
+
+    from clothlab.errors import ResultExistsError
+    from clothlab.render import load_scene, save_render
+
+    stem = Path(output_stem)
+    if stem.suffix.lower() in (".exr", ".png"):
+        stem = stem.with_suffix("")
+    existing = [p for p in (stem.parent / f"{stem.name}.exr", stem.parent / f"{stem.name}.png") if p.exists()]
+    if existing and not force:
+        raise ResultExistsError(f"{existing[0]} already exists; use --force to replace it", path=existing[0])
+    result = render_scene(load_scene(scene_path), shader=shader, spp=spp, variant=variant)
+    exr, png = save_render(result, stem, force=force)
+    return result, exr, png
