@@ -11,11 +11,24 @@ import pytest
 
 from clothlab.config import apply_overrides, load_config
 from clothlab.fit.nested import agreement, nested_cross_validation, outer_labels
-from clothlab.fit.select import SelectSettings, fit_candidate
+from clothlab.fit.select import CandidateTask, SelectSettings, candidates, fit_candidate, rank
 
 EXAMPLE = Path(__file__).parent.parent / "measurements" / "scattered-twill" / "fabric.yaml"
 SETTINGS = SelectSettings(weaves=("preset:wool-gabardine", "preset:cotton-denim"), kinds=("irawan",),
                           orientation_starts=1, max_evals=40, cv_folds=2, nested=3)
+
+
+WINNER = {"candidate": "x", "cv_mean": 0.1, "cv_p50": 0.08, "cv_p80": 0.15}
+
+
+def _make_task(cfg):
+    return lambda fold, c, train, held: CandidateTask(cfg, c, SETTINGS.max_evals, SETTINGS.cv_folds, train,
+                                                      held_out=held, outer_fold=fold)
+
+
+def _nested(cfg, m, runner=None):
+    return nested_cross_validation(cfg, m, 3, candidate_list=candidates(SETTINGS), make_task=_make_task(cfg),
+                                   run_task=fit_candidate, rank=rank, runner=runner, full_winner=WINNER)
 
 
 def _config():
@@ -29,8 +42,7 @@ def nested():
 
     cfg = _config()
     m = load_measurement(cfg.measurement.path)
-    return cfg, m, nested_cross_validation(cfg, SETTINGS, m, 3, full_winner={"candidate": "x", "cv_mean": 0.1,
-                                                                              "cv_p50": 0.08, "cv_p80": 0.15})
+    return cfg, m, _nested(cfg, m)
 
 
 def test_every_row_is_held_out_once_and_each_fold_has_a_winner(nested):
@@ -55,8 +67,9 @@ def test_outer_held_out_prediction_does_not_see_the_held_out_values(nested):
     labels, _, _ = outer_labels(cfg, m, 3)
     test = labels == 0
     changed = replace(m, values=np.where(test[:, None], m.values * 3.0 + 0.01, m.values))
-    for a, b in zip(nested_tasks(cfg, SETTINGS, m, labels)[:2], nested_tasks(cfg, SETTINGS, changed, labels)[:2],
-                    strict=True):
+    cands = candidates(SETTINGS)
+    for a, b in zip(nested_tasks(m, labels, cands, _make_task(cfg))[:2],
+                    nested_tasks(changed, labels, cands, _make_task(cfg))[:2], strict=True):
         ra, rb = fit_candidate(a), fit_candidate(b)
         np.testing.assert_array_equal(ra.held_out, rb.held_out)
         assert ra.row["cv_mean"] == rb.row["cv_mean"]
@@ -67,8 +80,7 @@ def test_a_runner_gives_the_in_process_figures_bit_for_bit(nested):
 
     cfg, m, out = nested
     with InProcessRunner() as runner:
-        again = nested_cross_validation(cfg, SETTINGS, m, 3, runner=runner,
-                                        full_winner={"candidate": "x", "cv_mean": 0.1, "cv_p50": 0.08, "cv_p80": 0.15})
+        again = _nested(cfg, m, runner=runner)
     strip = {"wall_time_s"}
     assert {k: v for k, v in again.items() if k not in strip} == {k: v for k, v in out.items() if k not in strip}
 
@@ -78,7 +90,7 @@ def test_agreement_says_when_outer_winners_differ():
     assert same["winners_agree"] and "same candidate" in same["agreement"]
     differ = agreement(["a #1", "b #1", "a #1"], [("w", "k"), ("v", "k"), ("w", "k")])
     assert not differ["winners_agree"] and "DIFFERENT" in differ["agreement"]
-    assert "a #1 (2 of 3)" in differ["agreement"] and "not determined" in differ["agreement"]
+    assert "a #1 (2 of 3)" in differ["agreement"] and "the weave is not determined" in differ["agreement"]
     family = agreement(["a #1", "a #2"], [("w", "k"), ("w", "k")])
     assert "same weave and kind" in family["agreement"]
 

@@ -38,6 +38,12 @@ def add_selection_options(p) -> None:
                    help="evaluations per candidate fit (default select.max_evals, 600)")
     p.add_argument("--candidate-cv", type=count_type(0, 2**31 - 1), metavar="K",
                    help="cross-validation folds per candidate (default select.cv_folds, 5; 0: rank by BIC)")
+    p.add_argument("--losses", metavar="LIST",
+                   help="comma-separated candidate losses (squared, l1, huber, cauchy; default: fabric.yaml's fit.loss "
+                        "only); huber and cauchy are tried at each --loss-scales value, the CV ranking chooses")
+    p.add_argument("--loss-scales", metavar="LIST",
+                   help="comma-separated scales of the huber / cauchy candidates, in the metric's units (0.1 = 10 %%; "
+                        "default fit.loss_scale)")
     p.add_argument("--nested", type=count_type(0, 100), metavar="K",
                    help="nested cross-validation with K outer folds (K >= 2; 0: none, the default): the whole "
                         "selection repeated inside each outer fold; its outer held-out error is the figure of the "
@@ -71,9 +77,24 @@ def _settings(cfg, args):
                     weaves.append(PRESET_PREFIX + canonical_preset_name(item.removeprefix(PRESET_PREFIX)))
                 except ConfigError as exc:  # an unknown preset, or an empty entry
                     raise ConfigError(exc.detail, field="--weaves") from None
+    losses = scales = None
+    if getattr(args, "losses", None) is not None:
+        from clothlab.config.choices import LOSSES
+
+        losses = [as_choice(k.strip(), Location(None, "--losses"), LOSSES) for k in args.losses.split(",")]
+    if getattr(args, "loss_scales", None) is not None:
+        from clothlab.strict import parse_number
+
+        scales = []
+        for item in args.loss_scales.split(","):
+            value = parse_number(item, error=ConfigError, field="--loss-scales")
+            if not value > 0:
+                raise ConfigError(f"expected positive numbers (the metric's units), got {item.strip()!r}",
+                                  field="--loss-scales")
+            scales.append(value)
     if args.kinds is not None:
         kinds = [as_choice(k.strip(), Location(None, "--kinds"), MODEL_KINDS) for k in args.kinds.split(",")]
-    for flag, items in (("--weaves", weaves), ("--kinds", kinds)):
+    for flag, items in (("--weaves", weaves), ("--kinds", kinds), ("--losses", losses), ("--loss-scales", scales)):
         if items is not None and len(set(items)) != len(items):
             twice = next(item for i, item in enumerate(items) if item in items[:i])
             raise ConfigError(f"{twice!r} is listed twice", field=flag)
@@ -85,7 +106,7 @@ def _settings(cfg, args):
                               field=flag)
     settings = settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
                                     max_evals=args.candidate_evals, cv_folds=args.candidate_cv,
-                                    nested=getattr(args, "nested", None))
+                                    nested=getattr(args, "nested", None), losses=losses, loss_scales=scales)
     check_settings(settings, cfg.base_dir)  # every weave reads, before any candidate is fitted
     return settings
 
@@ -122,9 +143,8 @@ def run(args) -> int:
 
 def present_selection(selection, saved_to) -> str:
     """The ranked table (as saved in selection.md, with the nested CV when run), the winner's refit summary as a
-    plain fit prints it (:func:`clothlab.cli.fit.present_fit`) and where it went."""
-    from clothlab.cli.fit import present_fit
+    plain fit prints it (``fit_report()``, as :func:`clothlab.cli.fit.present_fit`) and where it went."""
     from clothlab.fit.select import table_markdown
 
     return (f"{table_markdown(selection)}\n  winner: {selection.ranked[0].row['candidate']}; its refit:\n\n"
-            f"{present_fit(selection.winner, saved_to=saved_to)}")
+            f"{selection.winner.fit_report()}\n  saved to {saved_to}")

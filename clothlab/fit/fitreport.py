@@ -177,6 +177,9 @@ def _parameter_section(fit: dict, posterior: dict | None) -> Section:
         caption = "uncertainty: none recorded (no posterior; no Gauss-Newton estimate in this fit)"
         header = ["name", "value", "unit", "", "", "start", "bounds", "note"]
     rows = []
+    from clothlab.fit.determined import not_determined
+
+    undetermined = not_determined(fit)  # coefficient 0, no effect, within 2 % of a bound (issue 28 item 6)
     for name, e in fit["parameters"].items():
         value = e.get("value")
         notes = []
@@ -185,6 +188,8 @@ def _parameter_section(fit: dict, posterior: dict | None) -> Section:
             continue
         if e.get("at_bound"):
             notes.append(f"AT {e['at_bound'].upper()} BOUND")
+        if name in undetermined:
+            notes.append(f"NOT DETERMINED: {undetermined[name]}")
         if "truth" in e:
             notes.append(f"truth {_num(e['truth'])}")
         if name in post:

@@ -53,17 +53,15 @@ def outer_labels(config, measurement, k: int):
     return labels, scheme, reason
 
 
-def nested_tasks(config, settings, measurement, labels) -> list:
-    """The (outer fold, candidate) tasks, fold-major: every candidate of :func:`clothlab.fit.select.candidates`
-    fitted on the outer-training rows, predicting the outer held-out rows."""
-    from clothlab.fit.select import CandidateTask, candidates
-
+def nested_tasks(measurement, labels, candidate_list, make_task) -> list:
+    """The (outer fold, candidate) tasks, fold-major: ``make_task(fold, candidate, train, held_out)`` for every
+    candidate (:func:`clothlab.fit.select.candidates`), fitted on the outer-training rows and predicting the
+    outer held-out rows."""
     tasks = []
     for fold in range(int(labels.max()) + 1):
         test = labels == fold
         train, held = measurement.subset(~test), measurement.subset(test)
-        tasks += [CandidateTask(config, c, settings.max_evals, settings.cv_folds, train, held_out=held,
-                                outer_fold=fold) for c in candidates(settings, measurement.isotropic)]
+        tasks += [make_task(fold, c, train, held) for c in candidate_list]
     return tasks
 
 
@@ -91,21 +89,22 @@ def _score(row: dict) -> dict:
     return {"mean": row.get("cv_mean"), "p50": row.get("cv_p50"), "p80": row.get("cv_p80")}
 
 
-def nested_cross_validation(config, settings, measurement, k: int, *, run_task=None, runner=None,
-                            full_winner: dict | None = None, percentiles=None) -> dict:
-    """The nested CV of the selection ``settings`` on ``measurement`` with ``k`` outer folds (module
-    docstring); ``full_winner``: the table row of the selection's winner on all rows (its inner CV figure is
-    the selection score).  Returns the fit.json ``selection.nested`` mapping."""
+def nested_cross_validation(config, measurement, k: int, *, candidate_list, make_task, run_task, rank,
+                            runner=None, full_winner: dict | None = None, percentiles=None) -> dict:
+    """The nested CV of a selection on ``measurement`` with ``k`` outer folds (module docstring): the
+    ``candidate_list`` as tasks (``make_task``, :func:`nested_tasks`) run by ``run_task`` (a candidate fit:
+    its result's ``row`` and ``held_out`` prediction) and ranked per fold by ``rank`` (the selection's own
+    functions, :mod:`clothlab.fit.select`); ``full_winner``: the table row of the selection's winner on all
+    rows (its inner CV figure is the selection score).  Returns the fit.json ``selection.nested`` mapping."""
     from clothlab.errors import ConfigError
-    from clothlab.fit.select import fit_candidate, rank
 
     if k < 2:
         raise ConfigError(f"nested cross-validation needs at least 2 outer folds, got {k}", field="--nested")
     started = time.perf_counter()
     percentiles = tuple(percentiles or config.report.percentiles)
     labels, scheme, reason = outer_labels(config, measurement, k)
-    tasks = nested_tasks(config, settings, measurement, labels)
-    results = run_tasks(tasks, run_task or fit_candidate, runner)
+    tasks = nested_tasks(measurement, labels, candidate_list, make_task)
+    results = run_tasks(tasks, run_task, runner)
     n_folds = int(labels.max()) + 1
     per_fold = len(tasks) // n_folds
     pooled = np.full(measurement.values.shape, np.nan)
@@ -155,10 +154,14 @@ def agreement(winners, families, full=None) -> dict:
         if full is not None and winners[0] != full:
             text += f" (the selection on all rows chose {full})"
     else:
-        family = len(set(families)) == 1
-        text = (f"the outer folds chose DIFFERENT candidates: {listed}"
-                + ("; all the same weave and kind" if family else "; the selection is not determined by these "
-                   "data to one weave and kind"))
+        weaves, kinds = {f[0] for f in families}, {f[1] for f in families}
+        if len(weaves) == 1 and len(kinds) == 1:
+            tail = "; all the same weave and kind (they differ in loss or orientation start)"
+        else:
+            undetermined = [w for w, n in (("weave", len(weaves)), ("kind", len(kinds))) if n > 1]
+            tail = f"; the {' and the '.join(undetermined)} {'is' if len(undetermined) == 1 else 'are'} not " \
+                   "determined by these data"
+        text = f"the outer folds chose DIFFERENT candidates: {listed}{tail}"
     return {"winners": list(winners), "winners_agree": same, "winner_counts": counts, "agreement": text}
 
 

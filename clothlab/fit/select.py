@@ -71,9 +71,9 @@ LIKELIHOOD = ("AIC = n ln(F) + 2k, BIC = n ln(F) + k ln(n): F the objective at t
               "residual), n the fitted values (rows x channels), k the free parameters plus the linear "
               "coefficients (components x channels); residuals assumed independent Gaussian with one unknown "
               "variance (profiled out), so only differences between candidates on the same data mean anything")
-TABLE_COLUMNS = ("rank", "candidate", "weave", "kind", "orientation_start", "orientation", "cv_mean", "cv_p50",
-                 "cv_p80", "in_sample_p50", "in_sample_p80", "objective", "n", "k", "aic", "bic", "cv_scheme",
-                 "evaluations", "wall_time_s", "note")
+TABLE_COLUMNS = ("rank", "candidate", "weave", "kind", "loss", "loss_scale", "free", "orientation_start",
+                 "orientation", "cv_mean", "cv_p50", "cv_p80", "in_sample_p50", "in_sample_p80", "objective", "n",
+                 "k", "aic", "bic", "cv_scheme", "evaluations", "wall_time_s", "note")
 
 
 @dataclass(frozen=True)
@@ -84,12 +84,18 @@ class Candidate:
     weave: str
     kind: str
     orientation_start: int | None = None
+    loss: str | None = None  # None: fabric.yaml's fit.loss
+    loss_scale: float | None = None  # None: fabric.yaml's fit.loss_scale
 
     @property
     def name(self) -> str:
         weave = self.weave[len(PRESET_PREFIX):] if self.weave.startswith(PRESET_PREFIX) else self.weave
         start = "" if self.orientation_start is None else f" #{self.orientation_start}"
-        return f"{weave} {self.kind}{start}"
+        loss = ""
+        if self.loss is not None:
+            loss = f" {self.loss}" + ("" if self.loss in ("squared", "l1") or self.loss_scale is None
+                                      else f" {self.loss_scale:g}")
+        return f"{weave} {self.kind}{loss}{start}"
 
 
 @dataclass(frozen=True)
@@ -102,6 +108,8 @@ class SelectSettings:
     max_evals: int = DEFAULT_MAX_EVALS
     cv_folds: int = DEFAULT_CV_FOLDS
     nested: int = 0  # outer folds of the nested cross-validation (clothlab.fit.nested); 0: none
+    losses: tuple = ()  # candidate losses (clothlab.fit.loss); empty: fabric.yaml's fit.loss only
+    loss_scales: tuple = ()  # scales tried for huber / cauchy (the CV ranking chooses); empty: fit.loss_scale
 
 
 @dataclass(frozen=True)
@@ -131,7 +139,7 @@ class CandidateResult:
 
 
 def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=None, max_evals=None,
-                         cv_folds=None, nested=None) -> SelectSettings:
+                         cv_folds=None, nested=None, losses=None, loss_scales=None) -> SelectSettings:
     """The :class:`SelectSettings` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
     with the given values (command-line options) replacing it."""
     sel = config.select
@@ -140,7 +148,10 @@ def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=
                           orientation_starts=int(orientation_starts or sel.orientation_starts),
                           max_evals=int(max_evals or sel.max_evals),
                           cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds),
-                          nested=int(getattr(sel, "nested", 0) if nested is None else nested))
+                          nested=int(getattr(sel, "nested", 0) if nested is None else nested),
+                          losses=tuple(losses if losses is not None else getattr(sel, "losses", ())),
+                          loss_scales=tuple(float(x) for x in (loss_scales if loss_scales is not None
+                                                               else getattr(sel, "loss_scales", ()))))
 
 
 def check_settings(settings: SelectSettings, base_dir=".") -> None:
@@ -156,13 +167,20 @@ def candidates(settings: SelectSettings, isotropic: bool = False) -> list[Candid
     """The candidate list (module docstring), in weave, kind, orientation-start order; for an ``isotropic``
     measurement one candidate per weave and kind, the orientation not freed (the fit averages the model over
     it: :mod:`clothlab.fit.problem`)."""
+    losses = [(None, None)]
+    if settings.losses:
+        scales = tuple(settings.loss_scales) or (None,)
+        losses = [(loss, None) if loss in ("squared", "l1") else (loss, s) for loss in settings.losses
+                  for s in (scales if loss not in ("squared", "l1") else (None,))]
     out = []
     for weave in settings.weaves:
         for kind in settings.kinds:
-            if isotropic or model_class(kind).orientation_period == 0.0:
-                out.append(Candidate(weave, kind, None))
-                continue
-            out += [Candidate(weave, kind, j) for j in range(1, max(1, int(settings.orientation_starts)) + 1)]
+            for loss, scale in losses:
+                if isotropic or model_class(kind).orientation_period == 0.0:
+                    out.append(Candidate(weave, kind, None, loss, scale))
+                    continue
+                out += [Candidate(weave, kind, j, loss, scale)
+                        for j in range(1, max(1, int(settings.orientation_starts)) + 1)]
     return out
 
 
@@ -186,21 +204,121 @@ def orientation_span(kind: str) -> float:
     return float(model_class(kind).params[ORIENTATION].period)
 
 
+#: What a parameter of one model family means in another (issue 28 item 1): concept -> family -> parameters.
+#: A fit.free name a candidate's kind does not declare is replaced by its concept's parameters in the kind's
+#: family (an empty tuple: the concept has no counterpart there, shown as "-> none" in the selection table);
+#: a name in no concept is an error (:func:`map_free`).
+CONCEPTS = {
+    "yarn inclination (IM sec. 5.2; Kang eqs. 3-4 c_y)": {
+        "irawan": ("warp.umax", "weft.umax"), "surface": ("warp.umax", "weft.umax"), "kang": ("yarn_curvature",)},
+    "fibre twist (IM sec. 5.2; Kang s_f)": {
+        "irawan": ("warp.psi", "weft.psi"), "surface": ("warp.psi", "weft.psi"), "kang": ("fibre_slope",)},
+    "fibre scattering lobe (IM eq. 7; SGGX roughness and height scale; Kang eq. 2 exponents)": {
+        "irawan": ("alpha", "beta"), "surface": ("warp.alpha", "weft.alpha", "warp.beta", "weft.beta"),
+        "kang": ("warp.nx", "warp.ny", "weft.nx", "weft.ny")},
+    "spine curvature (IM sec. 5.4)": {"irawan": ("warp.kappa", "weft.kappa")},
+    "filament smoothing (IM eq. 9)": {"irawan": ("delta",)},
+    "highlight band width (IM eq. 12)": {"irawan": ("hwidth",)},
+    "segment rectangle (IM sec. 5.3)": {"irawan": ("warp.w", "warp.l", "weft.w", "weft.l")},
+    "yarn gap (SGGX sec. 5.1)": {"surface": ("gap",)},
+    "diffuse blend (SGGX eq. 1)": {"surface": ("blend",)},
+    "Kang fibre structure (eqs. 1-4)": {"kang": ("fibre_curvature", "n_strands", "fresnel_f0", "noise")},
+    "diffuse roughness (Oren & Nayar eq. 30)": {"diffuse": ("sigma",)},
+}
+#: Name-level counterparts of the IM model's fit.free names in the other families, tried before :data:`CONCEPTS`
+#: (by role: the SGGX surface's per-yarn roughness alpha and height scale beta shape its yarn highlight as the
+#: IM fibre lobe's alpha and beta do; Kang's exponents n_x across / n_y along the yarn likewise).
+IM_COUNTERPARTS = {
+    "surface": {"alpha": ("warp.alpha", "weft.alpha"), "beta": ("warp.beta", "weft.beta")},
+    "kang": {"warp.umax": ("yarn_curvature",), "weft.umax": ("yarn_curvature",), "warp.psi": ("fibre_slope",),
+             "weft.psi": ("fibre_slope",), "alpha": ("warp.nx", "weft.nx"), "beta": ("warp.ny", "weft.ny")},
+}
+FAMILIES = {"irawan": "irawan", "neural": "irawan", "surface": "surface", "kang": "kang", "lambert": "diffuse",
+            "oren-nayar": "diffuse"}
+
+
+def _family(kind: str) -> str:
+    cls = model_class(kind)
+    return FAMILIES.get(getattr(cls, "specular_class", cls).kind, cls.kind)
+
+
+def map_free(kind: str, free, options: dict | None = None) -> tuple[list, dict]:
+    """(free, mapping): fabric.yaml's ``fit.free`` names (orientation aside) as parameters of ``kind``: a name
+    the kind declares is kept, another is replaced by its :data:`CONCEPTS` counterpart in the kind's family
+    (``mapping`` records each replaced name and what it became, possibly nothing).  A name in no concept (or
+    a concept the family has no entry for while the kind does not declare the name) raises ConfigError at
+    ``fit.free``: never a silent drop."""
+    from clothlab.errors import ConfigError
+
+    cls = model_class(kind)
+    table = cls.declared_parameters(options or {})
+    family = _family(kind)
+    out, mapping = [], {}
+    for name in free:
+        if name == ORIENTATION:
+            continue
+        if name in table:
+            targets = (name,)
+        elif name in IM_COUNTERPARTS.get(family, {}):
+            targets = tuple(t for t in IM_COUNTERPARTS[family][name] if t in table)
+            mapping[name] = list(targets)
+        else:
+            concept = next((c for c, fams in CONCEPTS.items() if any(name in v for v in fams.values())), None)
+            if concept is None:
+                known = ", ".join(getattr(p, "name", p) for p in table)
+                raise ConfigError(f"fit.free names {name!r}, which model kind {kind!r} does not declare and which "
+                                  f"has no counterpart in it (its parameters: {known}); remove it or "
+                                  "leave that kind out of select.kinds", field="fit.free")
+            targets = tuple(t for t in CONCEPTS[concept].get(family, ()) if t in table)
+            mapping[name] = list(targets)
+        out += [t for t in targets if t not in out]
+    return out, mapping
+
+
+def free_mapping(config, kinds) -> dict:
+    """Per kind, the fit.free names :func:`map_free` replaced and what they became (ConfigError for a name with
+    no counterpart, before any candidate is fitted)."""
+    out = {}
+    for kind in kinds:
+        options = config.model.options if kind == config.model.kind else {}
+        out[kind] = map_free(kind, config.fit.free, options)[1]
+    return out
+
+
+def _model_parameters(config, kind, weave, options):
+    """The parameter names of ``kind`` built on ``weave`` (None when it cannot be built: the fit says why)."""
+    from clothlab.errors import ClothlabError
+    from clothlab.models.registry import build_model
+    from clothlab.weave.presets import resolve_weave
+
+    try:
+        q = config.model.quadrature
+        model = build_model(kind, resolve_weave(weave, config.base_dir), (q.rule, q.nodes), **dict(options))
+    except (ClothlabError, TypeError, ValueError):
+        return None
+    return {getattr(p, "name", p) for p in model.params}
+
+
 def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: int, name: str | None = None,
                      start: dict | None = None, optimizer=None, posterior=None, orientation: float = 0.0):
-    """``config`` turned into the fit of ``candidate`` (module docstring): kind, weave, free parameters, starts
-    and bounds (``orientation``: the start, the box one period about it); budget ``max_evals`` (one start,
-    polish max_evals // 4) unless ``optimizer`` is given; CV ``cv_folds``; no posterior unless given."""
+    """``config`` turned into the fit of ``candidate`` (module docstring): kind, weave, free parameters
+    (:func:`map_free`), loss, starts and bounds (``orientation``: the start, the box one period about it);
+    budget ``max_evals`` (one start, polish max_evals // 4) unless ``optimizer`` is given; CV ``cv_folds``; no
+    posterior unless given."""
     cls = model_class(candidate.kind)
     specular = getattr(cls, "specular_class", cls)  # a composite passes the options to its specular part
     options = dict(config.model.options) if cls.kind == config.model.kind or \
         specular is model_class(config.model.kind) else {}
     table = cls.declared_parameters(config.model.options if cls.kind == config.model.kind else {})
-    free = [n for n in config.fit.free if n in table and n != ORIENTATION]
+    free, _ = map_free(candidate.kind, config.fit.free, config.model.options if cls.kind == config.model.kind
+                       else {})
     if not free:  # config validation's rule (kind neural: the parameters its network was trained over)
         free = list(default_free(specular, options))
     diffuse = getattr(cls, "diffuse_class", None)  # a composite's diffuse term brings its own (sigma)
     free += [n for n in (diffuse.default_free if diffuse else ()) if n not in free and n in table]
+    built = _model_parameters(config, candidate.kind, candidate.weave, tuple(sorted(options.items())))
+    if built is not None:  # e.g. Kang declares the parameters of the yarn kinds the weave has
+        free = [n for n in free if n in built]
     params = {k: v for k, v in config.model.params.items() if k in table and k != ORIENTATION}
     bounds = {k: v for k, v in config.fit.bounds.items() if k in free}
     if candidate.orientation_start is not None:
@@ -213,8 +331,10 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
     if optimizer is None:
         optimizer = replace(config.fit.optimizer, max_evals=int(max_evals), starts=1, polish=int(max_evals) // 4)
     model = replace(config.model, kind=candidate.kind, weave=candidate.weave, params=params, options=options)
+    loss = candidate.loss or config.fit.loss
+    scale = candidate.loss_scale if candidate.loss_scale is not None else config.fit.loss_scale
     fit = replace(config.fit, free=tuple(free), bounds=bounds, optimizer=optimizer, posterior=posterior,
-                  cv_folds=int(cv_folds))
+                  cv_folds=int(cv_folds), loss=loss, loss_scale=float(scale))
     return replace(config, name=name or config.name, model=model, fit=fit)
 
 
@@ -227,7 +347,9 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
     cand = task.candidate
     started = time.perf_counter()
     row = {c: None for c in TABLE_COLUMNS}
-    row.update(candidate=cand.name, weave=cand.weave, kind=cand.kind, orientation_start=cand.orientation_start)
+    row.update(candidate=cand.name, weave=cand.weave, kind=cand.kind, orientation_start=cand.orientation_start,
+               loss=cand.loss or task.config.fit.loss,
+               loss_scale=cand.loss_scale if cand.loss_scale is not None else task.config.fit.loss_scale)
     try:
         cfg = candidate_config(task.config, cand, max_evals=task.max_evals, cv_folds=task.cv_folds)
         if cand.orientation_start is not None:
@@ -235,6 +357,7 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
             row["orientation_start"] = starts[min(cand.orientation_start, len(starts)) - 1]
             cfg = candidate_config(task.config, cand, max_evals=task.max_evals, cv_folds=task.cv_folds,
                                    orientation=row["orientation_start"])
+        row["free"] = " ".join(cfg.fit.free)
         result = run_fit(cfg, measurement=task.measurement, posterior_progress=False)
     except ClothlabError as exc:
         row.update(note=f"not fitted: {exc}", wall_time_s=time.perf_counter() - started)
@@ -242,7 +365,10 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
     problem = result.problem
     n = int(problem.y.size)
     k = len(problem.free) + int(np.asarray(result.solution.coefficients).size)
-    aic, bic = information_criteria(float(result.optimum.fun), n, k)
+    from clothlab.fit.metrics import metric_residuals
+
+    squared = float(np.mean(metric_residuals(problem.y, result.solution.prediction, problem.metric) ** 2))
+    aic, bic = information_criteria(squared, n, k)  # F: mean squared metric residual whatever the loss
     params = dict(result.params)
     period = problem.model.fit_period(params)
     if ORIENTATION in problem.free and period:
@@ -251,6 +377,11 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
     held = cv.get("held_out") or {}
     errors = result.errors["overall"]
     notes = [w for w in result.warnings if "ended at its" in w]
+    from clothlab.fit.determined import flag_text, not_determined
+
+    flags = not_determined(_fit_like(result))
+    if flags:
+        notes.append(flag_text(flags))
     row.update(orientation=params.get(ORIENTATION), cv_mean=held.get("mean"), cv_p50=held.get("p50"),
                cv_p80=held.get("p80"), in_sample_p50=errors.get("p50"), in_sample_p80=errors.get("p80"),
                objective=float(result.optimum.fun), n=n, k=k, aic=aic, bic=bic, cv_scheme=cv.get("scheme"),
@@ -262,6 +393,17 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
         held_out = problem.designs([result.params], wi=task.held_out.wi, wo=task.held_out.wo)[0] @ train.coefficients
     return CandidateResult(cand, row, params={n_: float(params[n_]) for n_ in problem.free}, free=problem.free,
                            period=float(period), held_out=held_out)
+
+
+def _fit_like(result) -> dict:
+    """The parts of fit.json :func:`clothlab.fit.determined.not_determined` reads, from a FitResult."""
+    problem = result.problem
+    params = {name: {"value": float(result.params[name]), "lower": float(lo), "upper": float(hi), "free": True,
+                     "transform": spec.transform}
+              for name, lo, hi, spec in zip(problem.free, problem.lower, problem.upper, problem.specs, strict=True)}
+    coefficients = {name: {str(i): float(v) for i, v in enumerate(np.atleast_1d(c))}
+                    for name, c in result.coefficients.items()}
+    return {"parameters": params, "coefficients": coefficients, "uncertainty": result.uncertainty or {}}
 
 
 def rank(results: list[CandidateResult]) -> list[CandidateResult]:
@@ -287,6 +429,7 @@ class Selection:
     settings: SelectSettings
     wall_time: float
     nested: dict | None = None  # fit.json selection.nested (clothlab.fit.nested)
+    free_by_kind: dict = field(default_factory=dict)  # kind -> {fit.free name: what it became} (map_free)
 
     def summary(self) -> dict:
         return selection_summary(self)
@@ -299,7 +442,10 @@ def selection_summary(selection: Selection) -> dict:
     return {"candidates": [dict(r.row) for r in selection.ranked], "winner": selection.ranked[0].row["candidate"],
             "ranking": RANKING, "information_criteria": LIKELIHOOD,
             "budget": {"max_evals": s.max_evals, "starts": 1, "polish": s.max_evals // 4, "cv_folds": s.cv_folds},
-            "tried": {"weaves": list(s.weaves), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts},
+            "tried": {"weaves": list(s.weaves), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts,
+                      **({"losses": list(s.losses)} if s.losses else {}),
+                      **({"loss_scales": list(s.loss_scales)} if s.loss_scales else {})},
+            "free_by_kind": selection.free_by_kind,
             "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time,
             **({"nested": selection.nested} if selection.nested else {})}
 
@@ -321,6 +467,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
         measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
                                        else config.measurement.format, **config.measurement.options)
     run_task = run_task or fit_candidate
+    free_by_kind = free_mapping(config, settings.kinds)  # an unmappable fit.free name: an error before any fit
     tasks = [CandidateTask(config, c, settings.max_evals, settings.cv_folds, measurement)
              for c in candidates(settings, measurement.isotropic)]
     if not tasks:
@@ -359,12 +506,16 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
         from clothlab.fit.nested import nested_cross_validation, nested_lines
 
         log.info("select: nested cross-validation, %d outer folds x %d candidates", settings.nested, len(tasks))
-        nested = nested_cross_validation(config, settings, measurement, settings.nested, run_task=run_task,
-                                         runner=runner, full_winner=best.row)
+        nested = nested_cross_validation(
+            config, measurement, settings.nested, candidate_list=[t.candidate for t in tasks],
+            make_task=lambda fold, c, train, held: CandidateTask(config, c, settings.max_evals, settings.cv_folds,
+                                                                 train, held_out=held, outer_fold=fold),
+            run_task=run_task, rank=rank, runner=runner, full_winner=best.row)
         for line in nested_lines(nested):
             log.info("select: %s", line.strip())
     winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir, runner=runner)
-    return Selection(ranked, winner, settings, time.perf_counter() - started, nested=nested)
+    return Selection(ranked, winner, settings, time.perf_counter() - started, nested=nested,
+                     free_by_kind=free_by_kind)
 
 
 def _short(value) -> str:
@@ -385,7 +536,7 @@ def table_columns(selection: Selection) -> dict:
 
 
 DISPLAY_HEAD = ("rank", "candidate", "orientation (deg)", "CV mean %", "CV p50 %", "CV p80 %", "p50 %", "p80 %",
-                "k", "AIC", "BIC", "note")
+                "k", "AIC", "BIC", "free", "note")
 
 
 def display_rows(rows) -> list[tuple[str, ...]]:
@@ -401,7 +552,17 @@ def display_rows(rows) -> list[tuple[str, ...]]:
     return [(str(row.get("rank", "")), str(row.get("candidate", "")), num(row.get("orientation"), 2),
              pct(row.get("cv_mean")), pct(row.get("cv_p50")), pct(row.get("cv_p80")), pct(row.get("in_sample_p50")),
              pct(row.get("in_sample_p80")), "" if row.get("k") is None else str(row["k"]), num(row.get("aic"), 1),
-             num(row.get("bic"), 1), str(row.get("note") or "")) for row in rows]
+             num(row.get("bic"), 1), str(row.get("free") or ""), str(row.get("note") or "")) for row in rows]
+
+
+def free_mapping_lines(free_by_kind: dict) -> list[str]:
+    """fit.free names a kind does not declare and what each became there (:data:`CONCEPTS`), as text lines."""
+    lines = []
+    for kind, mapping in (free_by_kind or {}).items():
+        if mapping:
+            parts = [f"{name} -> {', '.join(t) if t else 'none (no counterpart)'}" for name, t in mapping.items()]
+            lines.append(f"- {kind}: " + "; ".join(parts))
+    return (["", "fit.free mapped per kind (names the kind does not declare):"] + lines) if lines else []
 
 
 def table_markdown(selection: Selection) -> str:
@@ -411,6 +572,7 @@ def table_markdown(selection: Selection) -> str:
              "| " + " | ".join(DISPLAY_HEAD) + " |", "|" + "---|" * len(DISPLAY_HEAD)]
     for cells in display_rows(r.row for r in selection.ranked):
         lines.append("| " + " | ".join(c.replace("|", "/") for c in cells) + " |")
+    lines += free_mapping_lines(selection.free_by_kind)
     if selection.nested:
         from clothlab.fit.nested import nested_lines
 
@@ -453,6 +615,7 @@ def save_selection(selection: Selection, *, force: bool = False, fits_dir=None):
     return out
 
 
-__all__ = ["Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection", "candidate_config",
+__all__ = ["CONCEPTS", "IM_COUNTERPARTS", "map_free", "free_mapping",
+           "Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection", "candidate_config",
            "candidates", "fit_candidate", "information_criteria", "rank", "save_selection",
            "select", "selection_summary", "settings_from_config", "check_settings", "table_columns", "table_markdown"]

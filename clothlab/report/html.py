@@ -202,28 +202,54 @@ def _error_section(fit: dict, errors: dict, percentiles) -> list[str]:
 
 
 def _parameter_section(fit: dict) -> list[str]:
+    """The parameter table: values, bounds, the Gauss-Newton standard error when recorded (with or without a
+    posterior), and the status column with the at-bound and not-determined flags
+    (:func:`clothlab.fit.determined.not_determined`); the Gauss-Newton correlations above 0.5 below it."""
+    from clothlab.fit.determined import not_determined
+    from clothlab.fit.fitreport import correlations
+
     parameters = fit.get("parameters") or {}
+    try:
+        undetermined = not_determined(fit)
+    except (AttributeError, TypeError):  # a malformed document: the table without the flags
+        undetermined = {}
+    unc = fit.get("uncertainty") if isinstance(fit.get("uncertainty"), dict) else {}
+    stderr = unc.get("stderr") if isinstance(unc.get("stderr"), dict) else {}
     with_truth = any(isinstance(e, dict) and e.get("truth") is not None for e in parameters.values())
-    with_status = any(isinstance(e, dict) and e.get("at_bound") for e in parameters.values())
+    with_status = bool(undetermined) or any(isinstance(e, dict) and e.get("at_bound") for e in parameters.values())
     header = ["parameter", "value", "unit", "free", "lower", "upper", "start"] + (["truth"] if with_truth else [])
+    header += ["std. error (Gauss-Newton)"] if stderr else []
     header += ["status"] if with_status else []
     rows, classes = [], []
     for name, entry in parameters.items():
         at_bound = entry.get("at_bound")
-        status = f'<span class="warn">\u26a0 at {esc(at_bound)} bound</span>' if at_bound else ""
+        status = [f'<span class="warn">\u26a0 at {esc(at_bound)} bound</span>'] if at_bound else []
+        if name in undetermined:
+            status.append(f'<span class="warn">\u26a0 not determined: {esc(undetermined[name])}</span>')
         row = [f"<code>{esc(name)}</code>", ("num", fmt_number(entry.get("value"))), esc(entry.get("unit") or ""),
                "free" if entry.get("free", True) else "fixed", ("num", fmt_number(entry.get("lower"))),
                ("num", fmt_number(entry.get("upper"))), ("num", fmt_number(entry.get("start")))]
         if with_truth:
             row.append(("num", fmt_number(entry.get("truth"))))
+        if stderr:
+            row.append(("num", fmt_number(stderr.get(name))) if entry.get("free", True) else "")
         if with_status:
-            row.append(status)
+            row.append("; ".join(status))
         rows.append(row)
-        classes.append("atbound" if at_bound else "")
+        classes.append("atbound" if status else "")
     out = ["<h2>Parameters</h2>", _table(header, rows, row_classes=classes)]
     if any(classes):
-        out.append('<p class="note warn">Parameters at a bound are weakly identified or constrained by the '
-                   "bound: widen the bound or fix the parameter, and do not read the value as measured.</p>")
+        out.append('<p class="note warn">Parameters at a bound, within 2 % of one, or without effect (their '
+                   "component's coefficient is 0) are not determined by these data: widen the bound or fix the "
+                   "parameter, and do not read the value as measured.</p>")
+    try:
+        source, pairs = correlations(fit, None)
+    except (AttributeError, TypeError, KeyError, IndexError):
+        source, pairs = None, []
+    if source is not None:
+        listed = ", ".join(f"{esc(a)} / {esc(b)} {r:+.2f}" for a, b, r in pairs) or "none"
+        out.append(f'<p class="note">Correlations with |r| &gt; 0.5 ({esc(source)} approximation at the optimum): '
+                   f"{listed}.</p>")
     return out
 
 
