@@ -449,3 +449,81 @@ def test_posterior_benchmark_runs_each_proposal_on_the_same_target(no_cv_no_chec
     assert all(r["steps"] >= 1 and r["max_tau"] > 0 and r["cpu_s"] > 0 for r in runs.values())
     text = "\n".join(posterior.lines(out))
     assert "moves de-snooker vs stretch" in text
+
+
+# ------------------------------------------------------------------ provenance: a result that cannot go stale
+
+
+def test_committed_bench_result_is_current():
+    """reports/bench/result.json was measured on the code it reports: every section's recorded hash of the code it
+    measures equals the current one (regenerate with ``clothlab bench --quick`` from the repository root)."""
+    result = json.loads((REPO / "reports" / "bench" / "result.json").read_text())
+    stale = bench.stale_sections(result)
+    assert not stale, f"reports/bench/result.json is stale (run clothlab bench --quick): {stale}"
+    assert result["sections"], "the committed result holds no section"
+    prov = result["provenance_by_section"][result["sections"][0]]
+    assert prov["commit"] and prov["date"][:4].isdigit()
+
+
+@pytest.fixture
+def toy_section(tmp_path, monkeypatch):
+    """A section ``toy`` measuring a module of a temporary package (so its code can be edited here)."""
+    pkg = tmp_path / "toy_measured"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text('"""A package."""\n')
+    (pkg / "core.py").write_text('"""Docstring."""\n\nSCALE = 2.0  # a comment\n\n\ndef f(x):\n    return SCALE * x\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.invalidate_caches()
+    section = bench.Section("toy", "clothlab.studies.cli_startup", "toy", ("toy_measured",))
+    monkeypatch.setattr(bench, "SECTIONS", bench.SECTIONS + (section,))
+    monkeypatch.setattr(bench, "SECTION_NAMES", bench.SECTION_NAMES + ("toy",))
+    return pkg / "core.py", section
+
+
+def test_a_result_goes_stale_when_the_measured_code_changes(toy_section):
+    core, section = toy_section
+    result = {"sections": ["toy"], "provenance": bench.provenance([section])}
+    assert bench.stale_sections(result) == {}  # a fresh result passes
+    text = core.read_text()
+    core.write_text(text.replace("Docstring.", "Another docstring.").replace("a comment", "another comment"))
+    assert bench.stale_sections(result) == {}  # docstrings and comments are not the measured code
+    core.write_text(text.replace("SCALE = 2.0", "SCALE = 3.0"))
+    stale = bench.stale_sections(result)
+    assert set(stale) == {"toy"} and result["provenance"]["sources"]["toy"] in stale["toy"]
+    assert bench.stale_sections({"sections": ["toy"]}) == {"toy": "no source hash recorded"}  # an old result
+
+
+def test_committed_style_result_fails_when_stale_and_passes_when_fresh(toy_section, tmp_path):
+    """The CLI's default result, written by a run, passes the staleness check; edited code makes it fail."""
+    core, section = toy_section
+    path = tmp_path / "result.json"
+    bench.run_bench(sections=("cli",), quick=True, data_dir=None, output=None, json_path=path, emit=lambda _: None,
+                    merge=True)
+    result = json.loads(path.read_text())
+    assert bench.stale_sections(result) == {} and result["provenance"]["commit"]
+    result["provenance_by_section"]["cli"]["sources"]["cli"] = "0" * 16  # as if measured on other code
+    assert set(bench.stale_sections(result)) == {"cli"}
+
+
+def test_a_run_of_some_sections_keeps_the_others():
+    old = {"quick": True, "sections": ["cli", "fit"], "cli": {"a": 1}, "fit": {"b": 2}, "section_seconds": {"cli": 1,
+           "fit": 2}, "provenance": {"commit": "old", "date": "d0", "sources": {"cli": "x", "fit": "y"}}}
+    new = {"quick": True, "sections": ["fit"], "fit": {"b": 3}, "section_seconds": {"fit": 4},
+           "provenance": {"commit": "new", "date": "d1", "sources": {"fit": "z"}}}
+    merged = bench.merge_result(old, new)
+    assert merged["sections"] == ["cli", "fit"] and merged["cli"] == {"a": 1} and merged["fit"] == {"b": 3}
+    assert merged["provenance_by_section"]["cli"]["commit"] == "old"
+    assert merged["provenance_by_section"]["fit"]["commit"] == "new"
+    assert merged["section_seconds"] == {"cli": 1, "fit": 4}
+    full = bench.merge_result({**old, "quick": False}, new)  # a quick run replaces a full one entirely
+    assert full["sections"] == ["fit"] and "cli" not in full
+
+
+def test_clothlab_bench_writes_the_default_result_in_the_working_directory(tmp_path, monkeypatch, capsys):
+    from clothlab.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--quick", "--sections", "cli"]) == 0
+    result = json.loads((tmp_path / "reports" / "bench" / "result.json").read_text())
+    assert result["sections"] == ["cli"] and bench.stale_sections(result) == {}
+    assert "figures written to reports/bench/result.json" in capsys.readouterr().out

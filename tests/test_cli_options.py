@@ -206,11 +206,12 @@ def test_bench_hands_its_options_to_run_bench(bench_api, capsys, tmp_path):
                  "-o", str(tmp_path / "out"), "--json", str(tmp_path / "b.json")])
     assert code == 3  # run_bench's exit code is the command's
     assert bench_api == [{"sections": ("fit", "cli"), "quick": True, "data_dir": tmp_path / "data",
-                          "output": tmp_path / "out", "json_path": tmp_path / "b.json", "emit": print}]
+                          "output": tmp_path / "out", "json_path": tmp_path / "b.json", "emit": print,
+                          "merge": False}]
     assert capsys.readouterr().out == "bench line\n"
-    assert main(["bench"]) == 3
+    assert main(["bench"]) == 3  # without -o / --json: the committed result, updated section by section
     assert bench_api[-1] == {"sections": None, "quick": False, "data_dir": None, "output": None,
-                             "json_path": None, "emit": print}
+                             "json_path": Path("reports") / "bench" / "result.json", "emit": print, "merge": True}
 
 
 def test_bench_unknown_section_names_the_sections(bench_api, capsys):

@@ -21,7 +21,9 @@ def add_parser(sub):
                    help="directory with the example measurements and fits (default: the shipped examples)")
     add_output(p, "report directory: an HTML page of the figures and the benchmark plots (PNG)", metavar="DIR",
                deprecated=("--report", "--figures"))
-    p.add_argument("--json", type=Path, metavar="PATH", help="also write the figures as JSON")
+    p.add_argument("--json", type=Path, metavar="PATH",
+                   help="also write the figures as JSON (default without -o: reports/bench/result.json, the sections "
+                        "run replacing theirs there, with the commit, date and code hash measured)")
     return p
 
 
@@ -41,7 +43,9 @@ def selected_sections(text: str | None) -> tuple[str, ...] | None:
 
 
 def run(args) -> int:
-    from clothlab.studies.bench import run_bench
+    from clothlab.studies.bench import DEFAULT_RESULT, run_bench
 
+    default = args.json is None and args.output is None  # the committed result (tests check it is current)
     return run_bench(sections=selected_sections(args.sections), quick=args.quick, data_dir=args.data,
-                     output=args.output, json_path=args.json, emit=print)
+                     output=args.output, json_path=DEFAULT_RESULT if default else args.json, emit=print,
+                     merge=default)

@@ -50,6 +50,34 @@ def jacobian(problem, x, step=STEP, fixed: dict | None = None) -> np.ndarray:
     return np.stack(columns, axis=1) if columns else np.zeros((problem.y.size, 0))
 
 
+def central_jacobian(residuals_many, x, step=STEP) -> np.ndarray:
+    """(n, k) central-difference derivative of a residual vector at unit coordinates ``x`` (k,) (one-sided at
+    the box's faces), from ``residuals_many(X) -> (2k, n)``: every shifted point in one call."""
+    x = np.asarray(x, dtype=np.float64)
+    k = x.size
+    hi = np.repeat(x[None], k, axis=0)
+    lo = hi.copy()
+    idx = np.arange(k)
+    hi[idx, idx] = np.minimum(x + step, 1.0)
+    lo[idx, idx] = np.maximum(x - step, 0.0)
+    r = np.asarray(residuals_many(np.concatenate([hi, lo])))
+    return ((r[:k] - r[k:]) / (hi[idx, idx] - lo[idx, idx])[:, None]).T
+
+
+def laplace_covariance(J: np.ndarray, scale: float = 1.0) -> np.ndarray | None:
+    """The Laplace (Gauss-Newton) covariance scale (J^T J)^-1 of the coordinates J differentiates, or None
+    when J^T J is singular (condition above :data:`MAX_CONDITION` after unit-diagonal scaling, or a column
+    without effect): the posterior's start (:mod:`clothlab.fit.posterior.sampler`)."""
+    jtj = J.T @ J
+    diag = np.sqrt(np.diag(jtj))
+    if not np.all(diag > 0) or not np.all(np.isfinite(jtj)):
+        return None
+    sub = jtj / np.outer(diag, diag)
+    if np.linalg.cond(sub) >= MAX_CONDITION:
+        return None
+    return scale * np.linalg.inv(sub) / np.outer(diag, diag)
+
+
 def gauss_newton(problem, params: dict, step: float = STEP) -> dict:
     """Standard errors [declared units] and correlations of ``problem``'s free parameters at ``params`` (all
     parameters: the free ones are varied, the others held at their values there).

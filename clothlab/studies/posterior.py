@@ -1,4 +1,4 @@
-"""Posterior studies: a full posterior run to the tau criterion (the benchmark, bench section ``posterior``)
+"""Posterior studies: a full posterior run to its stopping rule (the benchmark, bench section ``posterior``)
 and the coverage of the 95 % intervals over the simulated example sets (emcee docs, "Autocorrelation
 analysis"; the bench section ``coverage`` is :mod:`clothlab.studies.coverage`).
 
@@ -39,33 +39,53 @@ def _study_posterior(fit, **kwargs) -> PosteriorResult:
         return run_posterior(fit.problem, fit.params, checkpoint_path=Path(tmp) / "checkpoint.npz", **kwargs)
 
 
+#: The sampler choices the bench runs side by side (start, moves, stop; :func:`clothlab.fit.posterior.run_posterior`):
+#: the default first, then the previous default (ball start, tau rule), then one choice changed at a time.
+VARIANTS = (("laplace", "de-snooker", "ess"), ("ball", "de-snooker", "tau"), ("laplace", "de-snooker", "tau"),
+            ("ball", "de-snooker", "ess"), ("laplace", "stretch", "ess"), ("laplace", "gaussian", "ess"))
+
+
+def variant_name(start: str, moves: str, stop: str) -> str:
+    return f"{start} start, {moves}, {stop} stop"
+
+
 def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 10.0, *, data: StudyData | None = None,
                         walkers: int = 32, seed: int = 1, progress: bool = True, optimizer: dict | None = None,
-                        moves: tuple[str, ...] = ("de-snooker",)) -> dict:
-    """A full posterior (the fabric's six free parameters, noisy data) run to the tau criterion, with each of
-    ``moves`` (:data:`clothlab.fit.posterior.sampler.MOVES`; the first one's figures at the top level, every
-    one's under ``by_moves``: steps, max tau, wall and CPU seconds).
+                        moves: tuple[str, ...] = ("de-snooker",), variants=None) -> dict:
+    """A full posterior (the fabric's six free parameters, noisy data) run to its stopping rule with each of
+    ``variants`` ((start, moves, stop) triples; default: each of ``moves`` with the default start and stop), the
+    first one's figures at the top level, every one's under ``by_variant`` (and, for the default start and stop,
+    ``by_moves``): steps, max tau, smallest effective sample size, wall and CPU seconds, the 95 % intervals.
 
     The optimum comes from the fabric's fabric.yaml optimiser settings (``optimizer`` replaces some;
     cross-validation and the configured posterior off; its wall time is reported apart); the posterior then
-    runs once, with a minimum of 1,000 steps, and stops by the tau rule, at 50,000 steps or after
+    runs once, with a minimum of 1,000 steps, and stops by its rule (``variants``), at 50,000 steps or after
     ``max_minutes``.  Returns the wall times, tau, steps, acceptance and whether it converged within the limit.
     """
     import os
 
+    from clothlab.fit.posterior.sampler import DEFAULT_START, DEFAULT_STOP
     from clothlab.fit.runner import run_fit
 
     with study_data(data) as d:
         fit = run_fit(optimisation_only(d.load_config(fabric), **(optimizer or {})))
-    by_moves = {}
-    for name in moves:
+    variants = tuple(variants or ((DEFAULT_START, name, DEFAULT_STOP) for name in moves))
+    by_moves, by_variant = {}, {}
+    for start, name, stop in variants:
         c = time.process_time()
         run = _study_posterior(fit, walkers=walkers, steps=1000, max_steps=50_000, seed=seed, progress=progress,
-                               max_seconds=60.0 * max_minutes, moves=name)
-        by_moves[name] = {"steps": run.steps, "converged": run.converged, "wall_s": run.wall_time,
-                          "cpu_s": time.process_time() - c,
-                          "max_tau": float(max(run.to_json()["convergence"]["tau"].values()))}
-        if name == moves[0]:
+                               max_seconds=60.0 * max_minutes, moves=name, start=start, stop=stop)
+        js = run.to_json()
+        row = {"start": start, "moves": name, "stop": stop, "steps": run.steps, "converged": run.converged,
+               "wall_s": run.wall_time, "cpu_s": time.process_time() - c,
+               "max_tau": float(max(js["convergence"]["tau"].values())),
+               "min_ess": float(min(js["convergence"]["ess"].values())),
+               "acceptance_mean": float(np.mean(run.acceptance)),
+               "truth_in_95": {n: e.get("truth_in_95") for n, e in js["parameters"].items()}}
+        by_variant[variant_name(start, name, stop)] = row
+        if (start, stop) == (DEFAULT_START, DEFAULT_STOP):
+            by_moves[name] = row
+        if (start, name, stop) == variants[0]:
             post = run
     summary = post.to_json()
     return {"fabric": fabric, "free": list(fit.problem.free), "fit_wall_time_s": fit.timings["optimisation_s"],
@@ -74,6 +94,7 @@ def posterior_benchmark(fabric: str = "polyester-lining", max_minutes: float = 1
             "steps": post.steps, "walkers": post.walkers, "tau": summary["convergence"]["tau"],
             "ess": summary["convergence"]["ess"], "acceptance_mean": float(np.mean(post.acceptance)),
             "not_determined": summary["not_determined"], "cpu_count": os.cpu_count(), "by_moves": by_moves,
+            "by_variant": by_variant, "rule": summary["convergence"]["rule"],
             "parameters": {n: {k: e[k] for k in ("median", "p2.5", "p97.5", "truth", "truth_in_95") if k in e}
                            for n, e in summary["parameters"].items()}}
 
@@ -91,9 +112,10 @@ def coverage_study(fabrics=COVERAGE_FABRICS, *, data: StudyData | None = None, w
     """Coverage of the 95 % intervals over the noisy simulated sets (measurements/<fabric>/fabric.yaml, six free
     parameters each): each set is fitted with its fabric.yaml optimiser settings (``optimizer`` replaces some,
     e.g. a smaller budget; cross-validation and the configured posterior off), then one posterior runs at the
-    optimum (``steps`` minimum, ``max_steps`` cap, tau rule).  The generating values ("truth") are the simulated
-    data's recorded parameters (measurement provenance).  Returns per fabric the covered flags, intervals,
-    convergence and wall times, and overall the covered / total counts, the fraction and the pass verdict."""
+    optimum (``steps`` minimum, ``max_steps`` cap, the default stopping rule: effective sample size once tau is
+    stable).  The generating values ("truth") are the simulated data's recorded parameters (measurement
+    provenance).  Returns per fabric the covered flags, intervals, convergence and wall times, and overall the
+    covered / total counts, the fraction and the pass verdict."""
     from clothlab.fit.runner import run_fit
 
     rows, inside, total = {}, 0, 0
@@ -158,8 +180,8 @@ def run(context) -> dict:
     paths = likelihood_paths(fit.problem, points, repeats=1 if context.quick else 3)
     t, c = time.perf_counter(), time.process_time()
     result = posterior_benchmark("polyester-lining", max_minutes=1.0 if context.quick else 10.0, data=context.data,
-                                 progress=False, moves=("de-snooker", "stretch"))
-    result["posterior_cpu_s"] = result["by_moves"]["de-snooker"]["cpu_s"]  # the default proposal's run alone
+                                 progress=False, variants=VARIANTS)
+    result["posterior_cpu_s"] = result["by_variant"][variant_name(*VARIANTS[0])]["cpu_s"]  # the default alone
     result["section_cpu_s"] = time.process_time() - c
     result["load_average_1min"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     result["paths"] = paths
@@ -174,11 +196,21 @@ def lines(p: dict) -> list[str]:
            f"  {p['steps']} steps in {p['posterior_wall_time_s']:.0f} s wall"
            + (f", {p['posterior_cpu_s']:.0f} s CPU (load average {p['load_average_1min']:.1f})"
               if p.get("posterior_cpu_s") is not None and p.get("load_average_1min") is not None else "")
-           + f"; converged by the tau rule: {p['converged']} (within {p['limit_minutes']:g} min: "
+           + f"; converged by its rule: {p['converged']} (within {p['limit_minutes']:g} min: "
            f"{p['within_limit']}); max tau {max(p['tau'].values()):.0f}; not determined: "
            f"{p['not_determined'] or 'none'}"]
+    variants = p.get("by_variant") or {}
+    if len(variants) > 1:
+        out.append(f"  sampler choices side by side (same target, {p['walkers']} walkers, seed 1; first = default):")
+        out.append(f"    {'start, moves, stop':34s} {'steps':>6s} {'max tau':>8s} {'min ESS':>8s} {'CPU s':>6s} "
+                   f"{'wall s':>7s} {'accept':>6s} {'conv.':>5s} covered")
+        for name, r in variants.items():
+            hits = [v for v in r["truth_in_95"].values() if v is not None]
+            out.append(f"    {name:34s} {r['steps']:6d} {r['max_tau']:8.1f} {r['min_ess']:8.0f} {r['cpu_s']:6.1f} "
+                       f"{r['wall_s']:7.1f} {r['acceptance_mean']:6.2f} {'yes' if r['converged'] else 'no':>5s} "
+                       f"{sum(hits)}/{len(hits)}")
     runs = p.get("by_moves") or {}
-    if len(runs) > 1:
+    if len(runs) > 1 and len(variants) <= len(runs):
         first, *others = runs.items()
         for name, r in others:
             out.append(f"  moves {first[0]} vs {name}: {first[1]['steps']} vs {r['steps']} steps, max tau "

@@ -27,13 +27,17 @@ path gives (same coordinates; log-probabilities equal to ~1e-14 relative).
 
 Convergence (emcee docs, "Autocorrelation analysis"): sample in chunks of ``check_every`` steps;
 after each, the integrated autocorrelation time tau of every coordinate (``emcee.autocorr.integrated_time``,
-tol=0); stop when ``tol_factor * max(tau) < steps`` and every tau changed by < 1 % since the previous check
-(and at least ``steps`` were run), or at ``max_steps``.  Burn-in 2 max(tau) is discarded and the rest thinned
-by max(1, min(tau) / 2).
+tol=0); by default (``stop="ess"``) stop once tau is stable (every tau changed by < 5 % since the previous
+check, steps >= 20 max(tau)) and the smallest effective sample size walkers x (steps - burn-in) / max(tau)
+reaches 1,000 (and at least ``steps`` were run), or at ``max_steps``; ``stop="tau"`` is the emcee docs' rule
+``tol_factor * max(tau) < steps`` with every tau changed by < 1 %.  Burn-in 2 max(tau) is discarded and the
+rest thinned by max(1, min(tau) / 2).
 
-Reproducible and resumable: the walkers start in a ball of radius ``BALL_RADIUS`` (unit coordinates, reflected
-into the box) drawn from ``numpy.random.RandomState(seed)``, whose following state seeds the sampler (emcee has
-no seed argument).  The checkpoint (``.npz``, written atomically after every chunk and on KeyboardInterrupt)
+Reproducible and resumable: the walkers start from the Laplace approximation at the optimum (the Gauss-Newton
+covariance of the likelihood's residuals, :func:`~clothlab.fit.posterior.sampler.laplace_start`; or, with
+``start="ball"`` or a singular Gauss-Newton matrix, in a ball of radius ``BALL_RADIUS``), unit coordinates
+reflected into the box, drawn from ``numpy.random.RandomState(seed)``, whose following state seeds the sampler
+(emcee has no seed argument).  The checkpoint (``.npz``, written atomically after every chunk and on KeyboardInterrupt)
 holds the chain, log-probabilities and the sampler's random state after the last completed step, so a resumed
 run yields the same chain as an uninterrupted one.
 

@@ -23,7 +23,7 @@ import numpy as np
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError
 
-CHECKPOINT_VERSION = 2
+CHECKPOINT_VERSION = 3  # 3: the walkers' start (Laplace approximation or ball) in the fingerprint
 
 
 def _model_settings(model) -> dict:
@@ -46,12 +46,13 @@ def _model_settings(model) -> dict:
     return out
 
 
-def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray, moves: str = "de-snooker") -> str:
+def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray, moves: str = "de-snooker", *,
+                 start: str = "laplace") -> str:
     """What fixes the target distribution and the chain: a resumed run must match it exactly.
 
     Keys of the target (:data:`TARGET_KEYS`: data, model and its quadrature, free / fixed parameters, bounds,
-    noise model, the optimum the walkers start from) and of the sampler (walkers, seed, moves, version; a
-    checkpoint without ``moves`` was made with the stretch move).  The optimum
+    noise model, the optimum the walkers start from) and of the sampler (walkers, seed, moves, the walkers'
+    start, version; a checkpoint without ``moves`` was made with the stretch move).  The optimum
     is recorded in unit coordinates rounded to 10 significant digits (a rerun of the same seeded fit reproduces
     it; a changed fit budget or start does not)."""
     m = problem.measurement
@@ -62,7 +63,7 @@ def _fingerprint(problem, like, walkers: int, seed: int, x_opt: np.ndarray, move
     fixed = {k: v for k, v in sorted(problem.start.items()) if k not in problem.free}
     return json.dumps({"version": CHECKPOINT_VERSION, "model": _model_settings(problem.model), "free": like.names,
                        "lower": problem.lower.tolist(), "upper": problem.upper.tolist(), "fixed": fixed,
-                       "noise": like.noise, "walkers": walkers, "seed": seed, "moves": moves,
+                       "noise": like.noise, "walkers": walkers, "seed": seed, "moves": moves, "start": start,
                        "data": digest.hexdigest(),
                        "optimum": [f"{float(v):.10g}" for v in np.asarray(x_opt, dtype=np.float64)]},
                       sort_keys=True)

@@ -63,6 +63,7 @@ class PosteriorResult:
     warnings: list = field(default_factory=list)
     _like: object = None
     convergence_rule: str = ""
+    start: str = "ball"  # the walkers' start: "laplace" (the Laplace approximation) or "ball"
 
     def __repr__(self) -> str:
         state = "converged" if self.converged else f"not converged ({self.stop_reason})"
@@ -162,6 +163,7 @@ class PosteriorResult:
         return {
             "method": "emcee EnsembleSampler (vectorised log-probability)",
             "moves": self.moves,
+            "start": self.start,
             "prior": PRIOR_TEXT,
             "likelihood": self.likelihood,
             "noise_model": self.noise,

@@ -2,9 +2,12 @@
 
 Convergence (emcee docs, "Autocorrelation analysis"): sample in chunks of ``check_every`` steps; after each,
 the integrated autocorrelation time tau of every coordinate (``emcee.autocorr.integrated_time``, tol=0); stop
-when ``tol_factor * max(tau) < steps`` and every tau changed by < :data:`TAU_CHANGE` since the previous check
-(and at least ``steps`` were run), or at ``max_steps``.  Burn-in 2 max(tau) is discarded and the rest thinned
-by max(1, min(tau) / 2).
+(the default ``ess`` rule) once tau is stable - every tau changed by < :data:`TAU_STABLE` since the previous
+check and steps >= :data:`TAU_RELIABLE` x max(tau) - and the smallest effective sample size reaches
+:data:`ESS_TARGET`, or (the ``tau`` rule) when ``tol_factor * max(tau) < steps`` and every tau changed by
+< :data:`TAU_CHANGE`; in both at least ``steps`` steps, at most ``max_steps``.  Burn-in 2 max(tau) is
+discarded and the rest thinned by max(1, min(tau) / 2).  Measured side by side: ``clothlab bench --sections
+posterior`` (docs/notes/speed.md).
 
 Through a pool (issue 13): with a :class:`clothlab.parallel.Runner` the log-probability of the walkers emcee
 hands over in one call is split into one chunk per worker slot, each chunk a task (the likelihood is placed on
@@ -13,9 +16,10 @@ one bit for bit.  ``pool="auto"`` (the default) times both ways on the initial h
 pool only when it is faster (small problems: the transfer costs more than the work); in-process is the
 default without a runner.
 
-Reproducible and resumable: the walkers start in a ball of radius :data:`BALL_RADIUS` (unit coordinates,
-reflected into the box) drawn from ``numpy.random.RandomState(seed)``, whose following state seeds the sampler
-(emcee has no seed argument); :mod:`clothlab.fit.posterior.checkpoint` keeps the state between sessions.
+Reproducible and resumable: the walkers start from the Laplace approximation (:data:`DEFAULT_START`) or in a
+ball of radius :data:`BALL_RADIUS` (unit coordinates, reflected into the box), drawn from
+``numpy.random.RandomState(seed)``, whose following state seeds the sampler (emcee has no seed argument);
+:mod:`clothlab.fit.posterior.checkpoint` keeps the state between sessions.
 """
 
 from __future__ import annotations
@@ -49,16 +53,95 @@ BALL_RADIUS = 1e-3
 """Standard deviation of the initial walker ball around the optimum, in unit-box coordinates."""
 
 TAU_CHANGE = 0.01
-"""Convergence needs every tau to change by less than this fraction between successive checks."""
+"""The ``tau`` rule needs every tau to change by less than this fraction between successive checks."""
+
+STOPS = ("ess", "tau")
+DEFAULT_STOP = "ess"
+ESS_TARGET = 1000.0
+"""The ``ess`` rule: stop when the smallest effective sample size, walkers x (steps - burn-in) / max(tau), reaches
+this (the 2.5 % and 97.5 % quantiles then carry a Monte Carlo error below 0.1 posterior standard deviations)."""
+TAU_STABLE = 0.05
+"""The ``ess`` rule needs every tau to change by less than this fraction between successive checks (tau is
+stable: its estimate on a chain of a few hundred steps fluctuates by several per cent, so the 1 % of the
+``tau`` rule waits for chance agreement)."""
+TAU_RELIABLE = 20.0
+"""The ``ess`` rule needs steps >= this x max(tau) (the estimate of tau itself is biased low on shorter
+chains; emcee docs, "Autocorrelation analysis")."""
+
+LAPLACE_MAX_SD = 0.1
+"""The Laplace start's standard deviation per unit coordinate is capped at this (a tenth of the box): where the
+data hardly determine a coordinate the approximation means nothing and the prior's box is the scale."""
+STARTS = ("laplace", "ball")
+DEFAULT_START = "laplace"
+"""Walkers start from the Laplace approximation at the optimum: the Gauss-Newton covariance of the likelihood's
+own residuals (:func:`clothlab.fit.uncertainty.laplace_covariance`), so the ensemble starts with the
+posterior's spread and orientation and burn-in is short; ``ball`` is the tiny ball of :data:`BALL_RADIUS` (the
+ensemble has to grow to the posterior's width first).  A singular Gauss-Newton matrix falls back to the ball."""
 
 
-def _initial_state(like: _Likelihood, x_opt: np.ndarray, walkers: int, seed: int) -> _ChainState:
-    """Walkers in a ball around the optimum (unit coordinates, reflected into the box), checked finite."""
+def laplace_start(like: _Likelihood, x_opt: np.ndarray) -> np.ndarray | None:
+    """(D, D) covariance of the sampled coordinates at ``x_opt`` by the Laplace approximation of the likelihood:
+    Gauss-Newton on its own residuals (r = (m - y) / sigma; or log(m / y) with the noise scale s, the
+    covariance then s^2 (J^T J)^-1 and the noise coordinate's variance 1 / (2 n) in log s), the coefficients
+    profiled at every point (one batched call for all 2 k shifted points).  None when singular."""
+    from clothlab.fit.uncertainty import STEP, central_jacobian, laplace_covariance
+
+    k = like.k
+
+    def residuals_many(X):
+        _, model = like.solve_many(like.problem.from_unit_many(X))
+        if like.noise == "gaussian-sigma":
+            return ((model - like.y[None]) * like.weights[None]).reshape(len(X), -1)
+        return np.log(np.maximum(model, LOG_FLOOR * like.y[None]) / like.y[None]).reshape(len(X), -1)
+
+    if k == 0:
+        return None
+    J = central_jacobian(residuals_many, x_opt[:k], STEP)
+    scale = 1.0
+    if like.noise != "gaussian-sigma":
+        s = like.noise_scale(x_opt[k])
+        scale = float(s * s)
+    cov = laplace_covariance(J, scale)
+    if cov is None:
+        return None
+    sd = np.sqrt(np.diag(cov))  # a coordinate the data hardly determine: the prior's box bounds it, not J
+    cap = np.minimum(1.0, LAPLACE_MAX_SD / sd)
+    cov = cov * np.outer(cap, cap)
+    if like.ndim > k:  # log s has variance 1 / (2 n); the unit coordinate is log s / log(hi / lo)
+        span = np.log(NOISE_RANGE[1] / NOISE_RANGE[0])
+        full = np.zeros((like.ndim, like.ndim))
+        full[:k, :k] = cov
+        full[k, k] = 1.0 / (2.0 * like.y.size) / span**2
+        cov = full
+    return cov
+
+
+def _initial_state(like: _Likelihood, x_opt: np.ndarray, walkers: int, seed: int,
+                   cov: np.ndarray | None = None) -> _ChainState:
+    """Walkers around the optimum (unit coordinates, reflected into the box), checked finite: drawn from
+    N(x_opt, cov) (the Laplace start; walkers whose log-probability is not finite are drawn again at half the
+    spread, up to 8 times, then from the ball), or in the ball of :data:`BALL_RADIUS` when ``cov`` is None."""
     rng = np.random.RandomState(seed)
-    p0 = x_opt[None, :] + BALL_RADIUS * rng.standard_normal((walkers, like.ndim))
-    p0 = np.abs(p0)  # reflect at 0 ...
-    p0 = 1.0 - np.abs(1.0 - p0)  # ... and at 1: distinct walkers even for an optimum on a bound
+    z = rng.standard_normal((walkers, like.ndim))
+    root = BALL_RADIUS * np.eye(like.ndim) if cov is None else np.linalg.cholesky(cov)
+
+    def place(offsets):
+        p = np.abs(x_opt[None, :] + offsets)  # reflect at 0 ...
+        p = 1.0 - np.abs(1.0 - p)  # ... and at 1: distinct walkers even for an optimum on a bound
+        if cov is None:
+            return p
+        p = np.mod(p, 2.0)  # a wide Laplace spread: reflected as often as it takes (still distinct walkers)
+        return np.where(p > 1.0, 2.0 - p, p)
+
+    p0 = place(z @ root.T)
     lp = like(p0)
+    for attempt in range(9 if cov is not None else 0):  # the Laplace start: redraw the walkers outside
+        bad = ~np.isfinite(lp)
+        if not bad.any():
+            break
+        spread = 0.5 ** (attempt + 1) if attempt < 8 else BALL_RADIUS / np.sqrt(np.max(np.diag(cov)))
+        p0[bad] = place(spread * (z[bad] @ root.T))
+        lp[bad] = like(p0[bad])
     if not np.isfinite(lp).all():
         bad = np.flatnonzero(~np.isfinite(lp))
         raise ParameterError(f"log-probability is not finite for {bad.size} of {walkers} initial walkers around "
@@ -180,24 +263,33 @@ class _StepProgress:
 #: ``clothlab bench --sections posterior`` measures both side by side).
 DEFAULT_MOVES = "de-snooker"
 MOVES = {"stretch": "emcee stretch move (a = 2)",
-         "de-snooker": "emcee DEMove 0.8 + DESnookerMove 0.2 (differential evolution)"}
+         "de-snooker": "emcee DEMove 0.8 + DESnookerMove 0.2 (differential evolution)",
+         "gaussian": "emcee GaussianMove, Metropolis with the Laplace covariance x 2.38^2 / D"}
 
 
-def make_moves(name: str = DEFAULT_MOVES):
-    """The emcee moves called ``name`` (:data:`MOVES`)."""
+def make_moves(name: str = DEFAULT_MOVES, cov: np.ndarray | None = None):
+    """The emcee moves called ``name`` (:data:`MOVES`); ``gaussian`` needs ``cov``, the Laplace covariance of
+    the sampled coordinates (:func:`laplace_start`), scaled by 2.38^2 / D (the optimal random-walk scale for a
+    Gaussian target, Gelman, Roberts & Gilks 1996)."""
     import emcee
 
     if name == "stretch":
         return emcee.moves.StretchMove()
     if name == "de-snooker":
         return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    if name == "gaussian":
+        if cov is None:
+            raise ValueError("the gaussian moves need the Laplace covariance, which is singular here")
+        return emcee.moves.GaussianMove(cov * 2.38**2 / cov.shape[0])
     raise ValueError(f"unknown moves {name!r}; expected one of {', '.join(MOVES)}")
 
 
 def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, max_steps: int, seed: int,
                   checkpoint_path=None, progress: bool = True, tol_factor: float = 50.0, check_every: int = 100,
                   max_seconds: float | None = None, moves: str = DEFAULT_MOVES,
-                  on_step: Callable[[int], None] | None = None, runner=None, pool="auto") -> PosteriorResult:
+                  on_step: Callable[[int], None] | None = None, runner=None, pool="auto",
+                  start: str = DEFAULT_START, stop: str = DEFAULT_STOP,
+                  ess_target: float = ESS_TARGET) -> PosteriorResult:
     """Sample the posterior of ``problem``'s free parameters with emcee (see the module docstring).
 
     Parameters
@@ -214,13 +306,19 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
         with other walkers or seed is refused (InputError).
     progress : show progress ("posterior (min 1000, max 12000): 1200/12000 step") through
         :class:`clothlab.progress.Progress` when it is enabled; False: never.
-    tol_factor : convergence needs ``tol_factor * max(tau) < steps`` (and tau settled to 1 %).
+    tol_factor : the ``tau`` rule needs ``tol_factor * max(tau) < steps`` (and tau settled to 1 %).
     max_seconds : optional wall-time cap (the run then stops unconverged after the current step).
     moves : the proposal, a name of :data:`MOVES` (default :data:`DEFAULT_MOVES`); part of the checkpoint's
         sampler settings (a checkpoint made with other moves is refused, like other walkers or seed).
     on_step : called with the number of completed steps after each step (tests raise KeyboardInterrupt here).
     runner, pool : a :class:`clothlab.parallel.Runner` to evaluate chunks of walkers on, and whether to use it
         (True, False or "auto": measured, :func:`choose_log_prob`); the chain is the same either way.
+    start : ``laplace`` (default: walkers drawn from the Laplace approximation, :func:`laplace_start`) or
+        ``ball`` (:data:`BALL_RADIUS`); part of the checkpoint's sampler settings.
+    stop : ``ess`` (default): at least ``steps``, every tau changed < :data:`TAU_STABLE` since the previous
+        check, steps >= :data:`TAU_RELIABLE` x max(tau) and the smallest effective sample size
+        walkers x (steps - burn-in) / max(tau) >= ``ess_target``; ``tau``: the emcee docs' rule,
+        ``tol_factor`` x max(tau) < steps and every tau changed < :data:`TAU_CHANGE`.
     """
     import emcee
 
@@ -246,7 +344,13 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
         x_opt = np.append(x_opt, like.noise_unit(max(float(np.sqrt(np.mean(r**2))), NOISE_RANGE[0])))
     if moves not in MOVES:
         raise ValueError(f"unknown moves {moves!r}; expected one of {', '.join(MOVES)}")
-    fingerprint = _fingerprint(problem, like, walkers, seed, x_opt, moves)
+    if start not in STARTS or stop not in STOPS:
+        raise ValueError(f"start must be one of {', '.join(STARTS)} and stop one of {', '.join(STOPS)}, got "
+                         f"{start!r}, {stop!r}")
+    cov = laplace_start(like, x_opt) if start == "laplace" or moves == "gaussian" else None
+    if cov is None and start == "laplace":
+        notes.append("the Gauss-Newton matrix at the optimum is singular: the walkers start in the small ball")
+    fingerprint = _fingerprint(problem, like, walkers, seed, x_opt, moves, start=start)
     path = Path(checkpoint_path) if checkpoint_path is not None else None
     resumed_from = 0
     st = None
@@ -260,11 +364,11 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
             notes.append(message)
             log.warning(message)
     if st is None:
-        st = _initial_state(like, x_opt, walkers, seed)
+        st = _initial_state(like, x_opt, walkers, seed, cov if start == "laplace" else None)
     st.started = started
 
     log_prob, _ = choose_log_prob(like, runner, pool, st.coords[: walkers // 2])
-    sampler = emcee.EnsembleSampler(walkers, like.ndim, log_prob, vectorize=True, moves=make_moves(moves))
+    sampler = emcee.EnsembleSampler(walkers, like.ndim, log_prob, vectorize=True, moves=make_moves(moves, cov))
     bar = _StepProgress(progress, steps, max_steps, resumed=st.steps)
     chain_chunks, lp_chunks = [st.chain], [st.log_prob]
     n = st.steps
@@ -289,12 +393,14 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
                 if n > 0 and (n % check_every == 0 or n >= max_steps):
                     tau = tau_at(n)
                     prev = n - check_every
-                    settled = prev > 0 and np.all(np.abs(tau_at(prev) - tau) < TAU_CHANGE * tau)
-                    bar.note(f"tau_max {np.max(tau):.1f}, needs {tol_factor * np.max(tau):.0f} steps, acceptance "
+                    need = (tol_factor * np.max(tau) if stop == "tau" else
+                            max(TAU_RELIABLE, ess_target / walkers + 2.0) * np.max(tau))
+                    bar.note(f"tau_max {np.max(tau):.1f}, needs {need:.0f} steps, acceptance "
                              f"{np.mean(_acceptance(np.concatenate(chain_chunks), st.initial)):.2f}")
                     if path is not None:
                         _save_checkpoint(path, fingerprint, snapshot())
-                    if n >= steps and tol_factor * np.max(tau) < n and settled:
+                    if n >= steps and _converged(stop, n, tau, tau_at(prev) if prev > 0 else None, walkers,
+                                                 tol_factor, ess_target):
                         stop_reason = "converged"
                         break
                     if n >= max_steps:
@@ -336,11 +442,42 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
     return _summarise(problem, like, optimum_params, x_opt, st, seed=seed, walkers=walkers, min_steps=steps,
                       max_steps=max_steps, tol_factor=tol_factor, check_every=check_every, stop_reason=stop_reason,
                       wall_time=st.elapsed + st.session(), resumed_from=resumed_from, notes=notes,
-                      moves_text=MOVES[moves])
+                      moves_text=MOVES[moves], rule=_rule_text(stop, tol_factor, ess_target, check_every, steps,
+                                                               max_steps), start=start if cov is not None else "ball")
+
+
+def _burn_in(tau: np.ndarray, n: int) -> int:
+    """Steps discarded as burn-in: 2 max(tau), at most half the chain."""
+    return min(int(2 * np.max(tau)), n // 2)
+
+
+def _converged(stop: str, n: int, tau: np.ndarray, previous: np.ndarray | None, walkers: int, tol_factor: float,
+               ess_target: float) -> bool:
+    """The stopping rule ``stop`` (:func:`run_posterior`) at ``n`` steps with the tau estimates at ``n`` and at
+    the previous check (None: no previous check)."""
+    if previous is None:
+        return False
+    change = np.abs(previous - tau)
+    if stop == "tau":
+        return bool(tol_factor * np.max(tau) < n and np.all(change < TAU_CHANGE * tau))
+    ess = walkers * (n - _burn_in(tau, n)) / np.max(tau)
+    return bool(np.all(change < TAU_STABLE * tau) and n >= TAU_RELIABLE * np.max(tau) and ess >= ess_target)
+
+
+def _rule_text(stop, tol_factor, ess_target, check_every, min_steps, max_steps) -> str:
+    if stop == "tau":
+        head = (f"{tol_factor:g} x max(tau) < steps and every tau changed < {100 * TAU_CHANGE:g} % between checks "
+                f"every {check_every} steps")
+    else:
+        head = (f"effective sample size walkers x (steps - burn-in) / max(tau) >= {ess_target:g}, every tau changed "
+                f"< {100 * TAU_STABLE:g} % between checks every {check_every} steps, steps >= {TAU_RELIABLE:g} x "
+                "max(tau)")
+    return f"{head}, at least {min_steps} steps, at most {max_steps}"
 
 
 def _summarise(problem, like, optimum_params, x_opt, st, *, seed, walkers, min_steps, max_steps, tol_factor,
-               check_every, stop_reason, wall_time, resumed_from, notes, moves_text) -> PosteriorResult:
+               check_every, stop_reason, wall_time, resumed_from, notes, moves_text, rule,
+               start) -> PosteriorResult:
     n = st.steps
     if n < 2:
         raise ValueError("the posterior run stopped before two steps were sampled (max_seconds too small?)")
@@ -348,14 +485,15 @@ def _summarise(problem, like, optimum_params, x_opt, st, *, seed, walkers, min_s
     if tau is None:
         tau = _tau(st.chain)
     converged = stop_reason == "converged"
-    burn = min(int(2 * np.max(tau)), n // 2)
+    burn = _burn_in(tau, n)
     thin = max(1, int(0.5 * np.min(tau)))
     kept = st.chain[burn::thin]
     unit = kept.reshape(-1, like.ndim)
     samples = _to_declared(problem, like, unit)
     if not converged:
-        notes.append(f"not converged ({stop_reason}): {n} steps, {tol_factor:g} x max tau = "
-                     f"{tol_factor * np.max(tau):.0f}; treat the intervals as indicative only")
+        notes.append(f"not converged ({stop_reason}): {n} steps, max tau {np.max(tau):.1f}, effective sample "
+                     f"size {walkers * (n - burn) / np.max(tau):.0f} (rule: {rule}); treat the intervals as "
+                     "indicative only")
     return PosteriorResult(problem=problem, names=list(like.names), units=list(like.units), samples=samples,
                            unit_samples=unit, chain=st.chain, log_prob=st.log_prob, tau=tau,
                            acceptance=_acceptance(st.chain, st.initial), burn_in=burn, thin=thin, converged=converged,
@@ -363,10 +501,7 @@ def _summarise(problem, like, optimum_params, x_opt, st, *, seed, walkers, min_s
                            likelihood=like.description, optimum=dict(optimum_params), optimum_unit=x_opt,
                            min_steps=min_steps, max_steps=max_steps, tol_factor=tol_factor, check_every=check_every,
                            stop_reason=stop_reason, resumed_from=resumed_from, warnings=notes, _like=like,
-                           moves=moves_text, convergence_rule=(
-                               f"{tol_factor:g} x max(tau) < steps and every tau changed < {100 * TAU_CHANGE:g} % "
-                               f"between checks every {check_every} steps, at least {min_steps} steps, "
-                               f"at most {max_steps}"))
+                           moves=moves_text, convergence_rule=rule, start=start)
 
 
 def _to_declared(problem, like, unit: np.ndarray) -> np.ndarray:
