@@ -6,12 +6,14 @@ Directions are in the fabric frame (z normal, docs/design.md principle 1).  ``vi
 (cos theta, azimuth), in which the solid angle is uniform (d omega = dz dphi), and cut into ``nz`` x ``nphi``
 cells.  For the bin of ``view`` (``n_theta`` x ``n_phi`` bins of (theta, phi), built on first use), cell k gets
 
-    P_k  proportional to  g(w_k) = mean_c f_r(w_k, view) * cos theta(w_k)     (w_k: the cell centre)
+    P_k  proportional to  g(w_k) C_k,   g = mean_c f_r(w_k, view),   C_k = integral over the cell of cos theta
+                                                                       = dphi (z1^2 - z0^2) / 2
 
-the tile-averaged reflectance model (its texture varies over the tile; the table is the tile's mean lobe).
-The sampling density is the mixture
+(w_k: the cell centre; the tile-averaged reflectance model - its texture varies over the tile, the table is
+the tile's mean lobe), and inside a cell the density follows cos theta exactly, so a lobe that is constant
+over a cell (Lambert) is sampled with zero variance.  The sampling density is the mixture
 
-    pdf(w) = c cos theta / pi + (1 - c) P_k(w) nz nphi / (2 pi)
+    pdf(w) = c cos theta / pi + (1 - c) P_k(w) cos theta(w) / C_k(w)
 
 with the cosine share ``c`` (``cosine_share``; 1 where the table is empty), so every direction of the upper
 hemisphere has a positive density and the estimator f cos / pdf stays bounded by the table's resolution.
@@ -31,7 +33,7 @@ class LobeSampler:
     """Mixture of cosine and a table per incident bin (module docstring).  ``lobe(w, view)`` -> (N,) >= 0 is
     the function tabulated (mean f_r over channels, 1/sr) at fabric-frame direction pairs (N, 3)."""
 
-    def __init__(self, lobe, *, n_theta: int = 8, n_phi: int = 16, nz: int = 16, nphi: int = 32,
+    def __init__(self, lobe, *, n_theta: int = 16, n_phi: int = 32, nz: int = 16, nphi: int = 32,
                  cosine_share: float = 0.25):
         self.lobe = lobe
         self.n_theta, self.n_phi, self.nz, self.nphi = int(n_theta), int(n_phi), int(nz), int(nphi)
@@ -45,6 +47,9 @@ class LobeSampler:
         zz, pp = np.meshgrid(z, phi, indexing="ij")  # cell k = iz * nphi + ip
         s = np.sqrt(np.maximum(0.0, 1.0 - zz * zz))
         self.centres = np.stack([s * np.cos(pp), s * np.sin(pp), zz], axis=-1).reshape(-1, 3)
+        edges = np.arange(self.nz + 1) / self.nz
+        #: C_k per cell (row iz of the (z, phi) grid): the integral of cos theta over the cell
+        self.cell_cosine = np.repeat(0.5 * (edges[1:] ** 2 - edges[:-1] ** 2) * TWO_PI / self.nphi, self.nphi)
 
     # -------------------------------------------------------------------------------------------- bins
 
@@ -75,7 +80,7 @@ class LobeSampler:
         w = np.tile(self.centres, (todo.size, 1))
         view = np.repeat(views, m, axis=0)
         g = np.asarray(self.lobe(w, view), dtype=np.float64).reshape(todo.size, m)
-        g = np.where(np.isfinite(g) & (g > 0.0), g, 0.0) * self.centres[None, :, 2]
+        g = np.where(np.isfinite(g) & (g > 0.0), g, 0.0) * self.cell_cosine[None, :]
         total = g.sum(axis=1)
         ok = total > 0.0
         cdf = np.cumsum(g, axis=1) / np.where(ok, total, 1.0)[:, None]
@@ -107,9 +112,10 @@ class LobeSampler:
         phi = np.mod(np.arctan2(w[ok, 1], w[ok, 0]), TWO_PI)
         iz = np.clip((z * self.nz).astype(np.int64), 0, self.nz - 1)
         ip = np.clip((phi / TWO_PI * self.nphi).astype(np.int64), 0, self.nphi - 1)
-        p = self._cell_probability(b, iz * self.nphi + ip)
+        cell = iz * self.nphi + ip
+        p = self._cell_probability(b, cell)
         c = self.share[b]
-        out[ok] = c * z / math.pi + (1.0 - c) * p * self.cells / TWO_PI
+        out[ok] = c * z / math.pi + (1.0 - c) * p * z / self.cell_cosine[cell]
         return out
 
     def sample(self, view, u1, u2) -> tuple[np.ndarray, np.ndarray]:
@@ -139,7 +145,8 @@ class LobeSampler:
             lower = np.where(cell > 0, self.cdf[b, np.maximum(cell - 1, 0)], 0.0)
             width = upper - lower
             frac = np.clip(np.where(width > 0.0, (a - lower) / np.where(width > 0.0, width, 1.0), 0.5), 0.0, 1.0)
-            z = np.clip((cell // self.nphi + frac) / self.nz, 1e-12, 1.0)
+            z0, z1 = (cell // self.nphi) / self.nz, (cell // self.nphi + 1) / self.nz
+            z = np.clip(np.sqrt(z0 * z0 + frac * (z1 * z1 - z0 * z0)), 1e-12, 1.0)  # density ~ z in the cell
             phi = (cell % self.nphi + r) * TWO_PI / self.nphi
             s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
             wt = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
