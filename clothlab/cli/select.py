@@ -144,7 +144,15 @@ def run(args) -> int:
 def present_selection(selection, saved_to) -> str:
     """The ranked table (as saved in selection.md, with the nested CV when run), the winner's refit summary as a
     plain fit prints it (``fit_report()``, as :func:`clothlab.cli.fit.present_fit`) and where it went."""
+    from clothlab.fit.noise_floor import floor_sentence, measurement_noise_floor
     from clothlab.fit.select import table_markdown
 
-    return (f"{table_markdown(selection)}\n  winner: {selection.ranked[0].row['candidate']}; its refit:\n\n"
-            f"{selection.winner.fit_report()}\n  saved to {saved_to}")
+    winner = selection.winner
+    if selection.nested:
+        error, label = selection.nested["held_out"], "outer held-out, nested CV"
+    else:
+        error, label = (winner.cross_validation or {}).get("held_out") or winner.errors["overall"], "held out"
+    floor = floor_sentence(measurement_noise_floor(winner.problem.measurement), error, label)
+    return (f"{table_markdown(selection)}\n  noise floor: {floor}\n\n"
+            f"  winner: {selection.ranked[0].row['candidate']}; its refit:\n\n"
+            f"{winner.fit_report()}\n  saved to {saved_to}")

@@ -233,6 +233,19 @@ def _agreement_notes(recorded, computed: dict, percentiles) -> list[str]:
     return notes
 
 
+def noise_floor_of(record: FitRecord) -> dict | None:
+    """The measurement's scatter from repeated / reciprocal direction pairs of predictions.csv
+    (:mod:`clothlab.fit.noise_floor`), or None when the table has no direction columns."""
+    from clothlab.fit.noise_floor import noise_floor
+
+    p = record.predictions
+    columns = [f"measured_{c}" for c in record.channels]
+    if not all(k in p for k in ("theta_i", "phi_i", "theta_o", "phi_o", *columns)):
+        return None
+    values = np.stack([np.asarray(p[c], dtype=np.float64) for c in columns], axis=1)
+    return noise_floor(p["theta_i"], p["phi_i"], p["theta_o"], p["phi_o"], values)
+
+
 def _write_page(tmp: Path, record: FitRecord, figures: dict, errors: dict, notes: list, percentiles,
                 layout: SamplingLayout) -> None:
     """summary.json and index.html of one fit's report in ``tmp``."""
@@ -263,12 +276,13 @@ def _write_page(tmp: Path, record: FitRecord, figures: dict, errors: dict, notes
         "posterior_present": record.posterior is not None,
         "sampling": {"kind": layout.kind, "reason": layout.reason},
         "selection": selection_rows(fit),
+        "noise_floor": noise_floor_of(record),
     }
     (tmp / "summary.json").write_text(
         json.dumps(_finite_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     page = html.render_report_html(fit, figures, {"errors": errors, "percentiles": percentiles,
                                                   "notes": notes, "posterior": record.posterior,
-                                                  "sampling": layout})
+                                                  "sampling": layout, "noise_floor": summary["noise_floor"]})
     (tmp / "index.html").write_text(page, encoding="utf-8")
 
 

@@ -342,6 +342,31 @@ def _selection_section(fit: dict) -> list[str]:
     return out + [_table([esc(h) for h in DISPLAY_HEAD], cells)] + _nested_section(selection.get("nested"))
 
 
+def model_error_for_floor(fit: dict, errors: dict) -> tuple[dict, str]:
+    """The model's error compared with the noise floor: the nested outer held-out error of a selection, else
+    the cross-validated one, else the in-sample one (``errors``), with its label."""
+    nested = (fit.get("selection") or {}).get("nested") if isinstance(fit.get("selection"), dict) else None
+    if isinstance(nested, dict) and isinstance(nested.get("held_out"), dict):
+        return nested["held_out"], "outer held-out, nested CV"
+    cv = fit.get("cross_validation")
+    if isinstance(cv, dict) and isinstance(cv.get("held_out"), dict):
+        return cv["held_out"], "held out by cross-validation"
+    return (errors or {}).get("overall") or {}, "in-sample"
+
+
+def _noise_floor_section(fit: dict, floor, errors: dict) -> list[str]:
+    """The measurement's own scatter next to the model's error (:mod:`clothlab.fit.noise_floor`), or the
+    statement that this table has no repeated or reciprocal pairs to estimate it from."""
+    from clothlab.fit.noise_floor import floor_sentence
+
+    if not isinstance(floor, dict):
+        return []
+    model, label = model_error_for_floor(fit, errors)
+    cls = "note" if "sigma" in floor else "warn"
+    return ["<h3>Noise floor</h3>", f'<p class="{cls}">{esc(floor_sentence(floor, model, label))}.</p>',
+            f'<p class="note">{esc(floor.get("rule", ""))}.</p>']
+
+
 def _nested_section(nested) -> list[str]:
     """fit.json ``selection.nested`` (:mod:`clothlab.fit.nested`): the selected model's outer held-out error
     (the figure to quote) beside the selection score (the winner's inner CV, optimistic), each outer fold's
@@ -454,6 +479,7 @@ def render_report_html(fit: dict, figures: dict, tables: dict) -> str:
     sampling = tables.get("sampling")
     body = _header_section(fit, sampling)
     body += _error_section(fit, tables["errors"], percentiles)
+    body += _noise_floor_section(fit, tables.get("noise_floor"), tables["errors"])
     body += _selection_section(fit)
     body += _parameter_section(fit)
     body += _coefficient_section(fit)
