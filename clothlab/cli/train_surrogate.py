@@ -116,29 +116,57 @@ def _labels(choice: str, model, params: dict, samples: int, seed: int):
                                    tile_average=ModelLabels(model, params))
 
 
+MAX_VARY_STEPS = 64
+"""Most values N of one ``--vary NAME=LO:HI:N``."""
+MAX_VARY_MATERIALS = 4096
+"""Most materials of a ``--vary`` grid, the held-out midpoints included (each one is labelled)."""
+
+
 def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
     """Parameter sets of ``--vary NAME=LO:HI:N`` (all combinations, then the held-out midpoints) and the
-    indices of the held-out ones; ``[base], []`` without ``--vary``."""
+    indices of the held-out ones; ``[base], []`` without ``--vary``.  LO and HI are plain decimal numbers
+    (:func:`clothlab.strict.parse_number`) inside NAME's fit bounds with LO < HI, N an integer from 2 to
+    :data:`MAX_VARY_STEPS`, NAME a parameter given once; the grid holds at most :data:`MAX_VARY_MATERIALS`
+    materials.  ConfigError at ``--vary`` otherwise."""
     import itertools
+    import math
+    import re
 
     import numpy as np
 
     from clothlab.errors import ConfigError
+    from clothlab.strict import parse_number
 
     axes, mids = [], []
     for text in vary:
-        try:
-            name, rng = text.split("=", 1)
-            lo, hi, n = rng.split(":")
-            lo, hi, n = float(lo), float(hi), int(n)
-        except ValueError:
-            raise ConfigError(f"expected NAME=LO:HI:N, got {text!r}", field="--vary") from None
+        shown = repr(text) if len(text) <= 60 else repr(text[:57] + "...")
+        parts = text.split("=", 1)
+        pieces = parts[1].split(":") if len(parts) == 2 else []
+        if len(pieces) != 3:
+            raise ConfigError(f"expected NAME=LO:HI:N, got {shown}", field="--vary")
+        name = parts[0].strip()
         if name not in table.names():
-            raise ConfigError(f"unknown parameter {name!r}; parameters: {', '.join(table.names())}", field="--vary")
-        spec = table[name]
-        if n < 2 or not (spec.bounds[0] <= lo < hi <= spec.bounds[1]):
-            raise ConfigError(f"{name}: need N >= 2 and {spec.bounds[0]:g} <= LO < HI <= {spec.bounds[1]:g}",
+            raise ConfigError(f"unknown parameter {name[:60]!r} in {shown}; parameters: {', '.join(table.names())}",
                               field="--vary")
+        if name in [a[0] for a in axes]:
+            raise ConfigError(f"parameter {name!r} is varied twice", field="--vary")
+        if name == "orientation":  # models.base.ORIENTATION: a rotation of the directions, not an encoder input
+            raise ConfigError("orientation is a rotation applied outside the network and cannot be varied",
+                              field="--vary")
+        lo, hi = (parse_number(x, error=ConfigError, field="--vary") for x in pieces[:2])
+        if not re.fullmatch(r"[0-9]{1,6}", pieces[2].strip()):
+            raise ConfigError(f"N = {pieces[2][:20]!r} in {shown} is not an integer from 2 to {MAX_VARY_STEPS}",
+                              field="--vary")
+        n = int(pieces[2])
+        spec = table[name]
+        if not 2 <= n <= MAX_VARY_STEPS or not (spec.bounds[0] <= lo < hi <= spec.bounds[1]):
+            raise ConfigError(f"{name}: need 2 <= N <= {MAX_VARY_STEPS} and {spec.bounds[0]:g} <= LO < HI <= "
+                              f"{spec.bounds[1]:g}, got {shown}", field="--vary")
+        steps = [len(a[1]) for a in axes] + [n]
+        total = math.prod(steps) + math.prod(k - 1 for k in steps)
+        if total > MAX_VARY_MATERIALS:
+            raise ConfigError(f"the --vary grid has {total} materials (with its held-out midpoints); at most "
+                              f"{MAX_VARY_MATERIALS}", field="--vary")
         t = np.linspace(spec.to_internal(lo), spec.to_internal(hi), 2 * n - 1)
         values = [float(spec.from_internal(x)) for x in t]
         axes.append((name, values[::2]))

@@ -76,7 +76,7 @@ from clothlab.config.schema import (
 from clothlab.errors import ConfigError, InputError, ParameterError
 from clothlab.io.loader import check_reader_options
 from clothlab.models.base import ORIENTATION
-from clothlab.models.registry import MODEL_KINDS, model_class
+from clothlab.models.registry import MODEL_KINDS, WEAVE_STAND_IN, model_class, needs_weave
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 NODES_RANGE = (2, 1000)
@@ -84,6 +84,7 @@ MAX_NAME_CHARS = 200
 MAX_EVALS = 2**31 - 1  # nlopt's maxeval is a C int
 MAX_ORIENTATION_AVERAGE = 1024  # orientations of the isotropic average (each one model evaluation)
 SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
+LOSS_SCALE_RANGE = (1e-9, 1e9)  # fit.loss_scale, the metric's units (a denormal scale overflows r / s)
 
 
 class _Validator:
@@ -256,6 +257,13 @@ class _Validator:
                 if not self.is_there(path, need_file=True):
                     raise at.error(f"file not found: {path} (from {value!r}, relative to {self.base_dir})")
                 resolved[name] = str(path)
+        together = getattr(model_class(kind), "check_options", None)  # options that must agree with each other
+        if together is not None:
+            try:
+                together(options)
+            except ConfigError as exc:
+                name = (exc.field or "").removeprefix("model.options.")
+                raise self.at(p + (name,) if name in options else p).error(exc.detail) from None
         return resolved
 
     def model(self, value: Any) -> ModelConfig:
@@ -265,6 +273,8 @@ class _Validator:
         weave = None
         if m.get("weave") is not None:
             weave = self.weave(m["weave"], self.at(p + ("weave",)))
+        elif not needs_weave(kind):  # lambert, oren-nayar: the weave changes nothing; a stand-in is recorded
+            weave = self.weave(WEAVE_STAND_IN, self.at(p, key=True))
         else:
             where = self.at(p, key=True)
             raise ConfigError(f"missing required key 'weave' (preset:<name> or a .wv file) for kind {kind}",
@@ -369,8 +379,10 @@ class _Validator:
         loss = as_choice(f.get("loss", FitConfig.loss), self.at(p + ("loss",)), LOSSES)
         scale_at = self.at(p + ("loss_scale",))
         loss_scale = as_number(f.get("loss_scale", FitConfig.loss_scale), scale_at)
-        if not loss_scale > 0:
-            raise scale_at.error(f"expected a positive scale (the metric's units, e.g. 0.1 = 10 %), got {loss_scale:g}")
+        if not LOSS_SCALE_RANGE[0] <= loss_scale <= LOSS_SCALE_RANGE[1]:
+            lo, hi = LOSS_SCALE_RANGE
+            raise scale_at.error(f"expected a scale in [{lo:g}, {hi:g}] (the metric's units, e.g. 0.1 = 10 %), "
+                                 f"got {loss_scale:g}")
         valid_geometry = f.get("valid_geometry", FitConfig.valid_geometry)
         if not isinstance(valid_geometry, bool):
             raise self.at(p + ("valid_geometry",)).error(f"expected true or false, got {shown(valid_geometry)}")

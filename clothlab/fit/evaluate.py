@@ -31,16 +31,33 @@ from clothlab.io.table import ANGLE_COLUMNS as ANGLES
 
 TEXTURE = ("u", "v")
 FOOTPRINT = "footprint"
+MAX_AZIMUTH = 360.0
+"""Largest |phi_i|, |phi_o| (deg) read: one turn, as the measurement tables (:mod:`clothlab.io.table`)."""
+MAX_TEXTURE_COORDINATE = 1e6
+"""Largest |u|, |v| (tiles) read: float64 still resolves 1e-10 tile there."""
+MAX_FOOTPRINT = 1e6
+"""Largest footprint side (tiles) read; any footprint of a whole number of tiles averages the whole tile
+(beyond ~1e11 tiles the summed-area differences lose every digit and a footprint of 1e30 gave 0)."""
+MAX_FOOTPRINT_SAMPLES = 1_000_000
+"""Most ``--footprint-samples`` (Monte Carlo samples per row; the paper's ground truth uses 2,048), as the CLI."""
+MAX_FOOTPRINT_RESOLUTION = 8192
+"""Most ``--footprint-resolution`` (summed-area table texels per tile side; default 128), as the CLI."""
 
 
 def read_directions(path) -> dict[str, np.ndarray]:
     """The four angle columns of a CSV (degrees) and, when present, u and v (tiles) and footprint (tiles, > 0,
-    only with u and v); file/line/column errors."""
+    only with u and v); every number through :func:`clothlab.strict.parse_number` (plain decimal notation),
+    theta in [0, 90], |phi| <= :data:`MAX_AZIMUTH`, |u|, |v| <= :data:`MAX_TEXTURE_COORDINATE`, footprint in
+    (0, :data:`MAX_FOOTPRINT`]; errors name the file, line and column."""
+    from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError("directions file not found", path=path)
-    with path.open(newline="") as fh:
-        rows = [(i, r) for i, r in enumerate(csv.reader(fh), start=1) if r and not r[0].lstrip().startswith("#")]
+    text = read_text(path, limit=MAX_TABLE_BYTES, what="directions file")
+    try:
+        rows = [(i, r) for i, r in enumerate(csv.reader(io.StringIO(text, newline="")), start=1)
+                if r and not r[0].lstrip().startswith("#")]
+    except csv.Error as exc:
+        raise InputError(f"not a CSV file: {exc}", path=path, line=None) from None
     if not rows:
         raise InputError("empty directions file", path=path)
     header = [h.strip() for h in rows[0][1]]
@@ -48,6 +65,10 @@ def read_directions(path) -> dict[str, np.ndarray]:
     if missing:
         raise InputError(f"missing column(s) {', '.join(missing)}; expected {', '.join(ANGLES)} in degrees",
                          path=path, line=rows[0][0])
+    twice = sorted({c for c in header if c and header.count(c) > 1} & set(ANGLES + TEXTURE + (FOOTPRINT,)))
+    if twice:
+        raise InputError(f"column {twice[0]!r} appears twice in the header", path=path, line=rows[0][0],
+                         field=twice[0])
     names = ANGLES + tuple(c for c in TEXTURE if c in header)
     if len(names) == len(ANGLES) + 1:
         raise InputError("texture coordinates need both columns u and v", path=path, line=rows[0][0])
@@ -60,18 +81,21 @@ def read_directions(path) -> dict[str, np.ndarray]:
     out = np.empty((len(rows) - 1, len(names)))
     for k, (line, row) in enumerate(rows[1:]):
         for j, (col, i) in enumerate(zip(names, idx, strict=True)):
-            try:
-                value = float(row[i])
-            except (IndexError, ValueError):
-                raise InputError(f"expected a number, found {row[i] if i < len(row) else '(nothing)'!r}",
-                                 path=path, line=line, field=col) from None
-            limit = 90.0 if col.startswith("theta") else None
-            if not np.isfinite(value) or (limit is not None and not 0.0 <= value <= limit):
-                raise InputError(f"{col} = {value!r} deg is outside [0, 90]" if limit else f"{col} is not finite",
-                                 path=path, line=line, field=col)
-            if col == FOOTPRINT and not value > 0.0:
-                raise InputError(f"footprint = {value!r}: expected a footprint size > 0 (tiles)", path=path,
+            if i >= len(row):
+                raise InputError(f"row has {len(row)} fields; column {col!r} is field {i + 1}", path=path,
                                  line=line, field=col)
+            value = parse_number(row[i], path=path, line=line, field=col)
+            if col.startswith("theta") and not 0.0 <= value <= 90.0:
+                raise InputError(f"{col} = {value!r} deg is outside [0, 90]", path=path, line=line, field=col)
+            if col.startswith("phi") and not abs(value) <= MAX_AZIMUTH:
+                raise InputError(f"{col} = {value!r} deg is outside [-{MAX_AZIMUTH:g}, {MAX_AZIMUTH:g}]", path=path,
+                                 line=line, field=col)
+            if col in TEXTURE and not abs(value) <= MAX_TEXTURE_COORDINATE:
+                raise InputError(f"{col} = {value!r} tiles is outside [-{MAX_TEXTURE_COORDINATE:g}, "
+                                 f"{MAX_TEXTURE_COORDINATE:g}]", path=path, line=line, field=col)
+            if col == FOOTPRINT and not 0.0 < value <= MAX_FOOTPRINT:
+                raise InputError(f"footprint = {value!r}: expected a footprint size > 0 and <= {MAX_FOOTPRINT:g} "
+                                 "(tiles)", path=path, line=line, field=col)
             out[k, j] = value
     return dict(zip(names, out.T, strict=True))
 
@@ -106,11 +130,12 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
     or ``"mc"`` (``samples`` stratified samples per row, ``seed``)."""
     from clothlab.models.components import coefficient_name
 
-    for name, value in (("--footprint-samples", samples), ("--footprint-resolution", resolution)):
-        if int(value) < 1:
+    for name, value, most in (("--footprint-samples", samples, MAX_FOOTPRINT_SAMPLES),
+                              ("--footprint-resolution", resolution, MAX_FOOTPRINT_RESOLUTION)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 1 <= value <= most:
             from clothlab.errors import ConfigError
 
-            raise ConfigError(f"expected a positive integer, got {value!r}", field=name)
+            raise ConfigError(f"expected an integer from 1 to {most}, got {value!r}", field=name)
     angles = read_directions(directions)
     model, params, coefficients, channels = _model_source(source, rule, nodes)
     wi = spherical_to_vector(angles["theta_i"], angles["phi_i"])

@@ -23,6 +23,15 @@ MODEL_KINDS = {
 COMPOSITE_KINDS = {f"{s}+{d}": (s, d) for s in ("irawan", "kang") for d in ("lambert", "oren-nayar")}
 MODEL_KINDS.update({name: ("clothlab.models.composite", "composite_class") for name in COMPOSITE_KINDS})
 DEFAULT_KIND = "irawan"
+#: kinds whose reflectance does not depend on the weave (fabric.yaml may leave ``model.weave`` out)
+WEAVE_FREE_KINDS = ("lambert", "oren-nayar")
+#: the weave recorded for a weave-free kind given none (the model ignores it; docs/fabric-yaml.md)
+WEAVE_STAND_IN = "pattern:plain"
+
+
+def needs_weave(kind: str) -> bool:
+    """Whether fabric.yaml must name a weave for ``kind`` (every kind but :data:`WEAVE_FREE_KINDS`)."""
+    return kind not in WEAVE_FREE_KINDS
 
 
 def model_class(kind: str):
@@ -43,8 +52,17 @@ def build_model(kind: str, weave, quadrature=None, **options):
     takes_options = getattr(cls, "specular_class", cls)  # a composite passes its options to its specular part
     accepted = [p.name for p in inspect.signature(takes_options.__init__).parameters.values()
                 if p.kind == p.KEYWORD_ONLY]
-    for name in options:
+    check = getattr(takes_options, "check_option", None)  # the model's own value checks (sizes bounded)
+    for name, value in options.items():
         if name not in accepted:
             raise ConfigError(f"model kind {kind!r} takes no option {name!r}; options: {', '.join(accepted) or 'none'}",
                               field=f"model.options.{name}")
+        if check is not None:
+            try:
+                check(name, value)
+            except ConfigError as exc:
+                raise ConfigError(exc.detail, path=exc.path, line=exc.line, field=f"model.options.{name}") from None
+    together = getattr(takes_options, "check_options", None)  # options that must agree with each other
+    if together is not None:
+        together(options)
     return cls.from_config(weave, quadrature, **options)

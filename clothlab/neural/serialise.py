@@ -42,8 +42,8 @@ MAX_PATTERN_ORDER = 8
 """Highest Fourier order of the pattern descriptor (:func:`clothlab.neural.encodings.pattern_descriptor`)."""
 MAX_WEIGHT = 1e4
 """Largest magnitude of a stored parameter or material value (trained networks stay below 10)."""
-MAX_K_SPECULAR = 1e6
-"""Largest ``k_specular`` of the specular output transform ln(k x + 1) (eq. 9; default 100)."""
+MIN_K_SPECULAR, MAX_K_SPECULAR = 1e-3, 1e6
+"""Range of ``k_specular``, the k of the specular output transform ln(k x + 1) (eq. 9; default 100)."""
 DTYPES = ("float32", "float64")
 ARCHITECTURE_KEYS = ("n_material", "n_spatial", "n_angular", "n_out", "enc_width", "latent", "width", "spatial")
 
@@ -169,7 +169,12 @@ def read_sidecar(path) -> dict:
     """The checked ``.json`` sidecar of a surrogate (module docstring): InputError naming the file and the
     dotted field of the first value outside the schema."""
     path = Path(path).with_suffix(".json")
-    sidecar = load_json_file(path, what="surrogate sidecar", limit=MAX_YAML_BYTES)
+    try:
+        sidecar = load_json_file(path, what="surrogate sidecar", limit=MAX_YAML_BYTES)
+    except InputError as exc:
+        if exc.line is None and exc.field is None and "not a finite number" in exc.detail:
+            raise InputError(exc.detail, path=path, line=_constant_line(path)) from None
+        raise
     check = _Schema(path)
     check.mapping(sidecar, "format")
     if sidecar.get("format") != FORMAT:
@@ -196,13 +201,25 @@ def read_sidecar(path) -> dict:
     if len(components) != arch["n_out"]:
         check.fail("components", f"{len(components)} components, the architecture has n_out = {arch['n_out']}")
     if "k_specular" in sidecar:
-        check.number(sidecar["k_specular"], "k_specular", 0.0, MAX_K_SPECULAR, open_lo=True)
+        check.number(sidecar["k_specular"], "k_specular", MIN_K_SPECULAR, MAX_K_SPECULAR)
     for key in ("data_sha256",):
         if key in sidecar:
             check.string(sidecar[key], key)
     check.mapping(sidecar.get("metrics"), "metrics", required=False)
     _check_encoding(check, check.mapping(sidecar.get("encoding"), "encoding", required=False), arch)
     return sidecar
+
+
+def _constant_line(path: Path) -> int | None:
+    """The line of the first NaN / Infinity constant outside a JSON string (the strict reader refuses them
+    without a position); the file has been read within its bound already."""
+    import re
+
+    text = path.read_text(encoding="utf-8-sig")
+    for match in re.finditer(r'"(?:[^"\\]|\\.)*"|(-?Infinity|NaN)', text):
+        if match.group(1):
+            return text.count("\n", 0, match.start()) + 1
+    return None
 
 
 def materials_count(encoding: dict) -> int:
@@ -217,9 +234,8 @@ def _check_encoding(check: _Schema, enc: dict, arch: dict) -> None:
     for key in ("kind", "weave", "labels", "heldout_pattern_name"):
         if key in enc:
             check.string(enc[key], at + key)
-    for key in ("weave_wv",):
-        if key in enc:
-            check.string(enc[key], at + key, limit=MAX_YAML_BYTES)
+    if "weave_wv" in enc:
+        _check_wv(check, enc["weave_wv"], at + "weave_wv")
     names = None
     if "parameters" in enc:
         names = check.strings(enc["parameters"], at + "parameters", most=MAX_WIDTH, unique=True)
@@ -247,7 +263,7 @@ def _check_encoding(check: _Schema, enc: dict, arch: dict) -> None:
     if "weaves_wv" in enc:
         weaves = check.mapping(enc["weaves_wv"], at + "weaves_wv")
         for name, text in weaves.items():
-            check.string(text, f"{at}weaves_wv.{name}", limit=MAX_YAML_BYTES)
+            _check_wv(check, text, f"{at}weaves_wv.{name}")
     if "materials_weave" in enc and enc["materials_weave"] is not None:
         owners = check.strings(enc["materials_weave"], at + "materials_weave", most=MAX_MATERIALS)
         if len(owners) != n:
@@ -295,6 +311,19 @@ def _check_encoding(check: _Schema, enc: dict, arch: dict) -> None:
     needs_weave = flags["residual"] or flags["residual_input"] or probe
     if needs_weave and "weave_wv" not in enc and not (weaves and "materials_weave" in enc):
         check.fail(at + "weave_wv", "a residual or probing network needs the weave's .wv text")
+
+
+def _check_wv(check: _Schema, text, field: str) -> None:
+    """A recorded ``.wv`` text must parse (:func:`clothlab.weave.wvformat.parse_wv_text`); its error is given
+    at the sidecar's field, with the line of the ``.wv`` text."""
+    from clothlab.weave.wvformat import parse_wv_text
+
+    check.string(text, field, limit=MAX_YAML_BYTES)
+    try:
+        parse_wv_text(text, source=field)
+    except InputError as exc:
+        where = f"line {exc.line} of the .wv text" + (f", field {exc.field!r}" if exc.field else "")
+        check.fail(field, f"{where}: {exc.detail}")
 
 
 def load_surrogate(path) -> tuple[Surrogate, dict]:

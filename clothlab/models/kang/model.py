@@ -63,6 +63,13 @@ TILE_RULES = ("peak", "legendre")
 #: most nodes per perturbation axis (per piece of a split axis) of the ``peak`` rule when ``tile_nodes`` is None
 #: (docs/kang.md).
 PEAK_NODES = 10
+#: largest ``tile_nodes`` (per axis; the most :func:`nodes_for_axis` chooses itself): the legendre rule holds
+#: tile_nodes^2 perturbed normals per direction pair, 256^2 x 3 floats = 1.5 MiB per pair
+MAX_TILE_NODES = 256
+#: largest ``prefilter_max_samples`` (Algorithm 1's samples per point; default 64)
+MAX_PREFILTER_SAMPLES = 4096
+#: largest ``seed`` (a 63-bit integer)
+MAX_SEED = 2**63 - 1
 
 
 class KangModel(Model):
@@ -97,18 +104,12 @@ class KangModel(Model):
     def __init__(self, weave: Weave, *, alternating: bool = True, tile_rule: str = "peak",
                  tile_nodes: int | None = None, weave_level: str = "prefiltered", prefilter_min_samples: int = 5,
                  prefilter_max_samples: int = 64, seed: int = 0):
-        if not isinstance(alternating, bool | np.bool_):
-            raise ConfigError(f"alternating must be true or false, got {alternating!r}", field="alternating")
-        if tile_nodes is not None and (not isinstance(tile_nodes, int | np.integer) or tile_nodes < 1):
-            raise ConfigError(f"tile_nodes must be a positive integer, got {tile_nodes!r}", field="tile_nodes")
-        if tile_rule not in TILE_RULES:
-            raise ConfigError(f"tile_rule must be one of {TILE_RULES}, got {tile_rule!r}", field="tile_rule")
-        if weave_level not in WEAVE_LEVELS:
-            raise ConfigError(f"weave_level must be one of {WEAVE_LEVELS}, got {weave_level!r}",
-                              field="weave_level")
-        if not 1 <= prefilter_min_samples < prefilter_max_samples:
-            raise ConfigError(f"need 1 <= prefilter_min_samples < prefilter_max_samples, got "
-                              f"{prefilter_min_samples!r}, {prefilter_max_samples!r}", field="prefilter_max_samples")
+        for name, value in (("alternating", alternating), ("tile_rule", tile_rule), ("tile_nodes", tile_nodes),
+                            ("weave_level", weave_level), ("prefilter_min_samples", prefilter_min_samples),
+                            ("prefilter_max_samples", prefilter_max_samples), ("seed", seed)):
+            self.check_option(name, value)
+        self.check_options({"prefilter_min_samples": prefilter_min_samples,
+                            "prefilter_max_samples": prefilter_max_samples})
         self.weave = weave
         self.alternating = bool(alternating)
         self.params = KANG_ALTERNATING_PARAMS if self.alternating else KANG_PARAMS
@@ -121,6 +122,40 @@ class KangModel(Model):
         self.shares = {kind: weave.cell_share(kind) for kind in YARN_KINDS}
         self._segment_is_weft = np.array([s.kind == "weft" for s in weave.segments])
         self._directions: dict | None = None  # the parameter-free quantities of the last directions; see _at
+
+    @classmethod
+    def check_option(cls, name: str, value) -> None:
+        """ConfigError at ``model.options.<name>`` for a value the model cannot take (config validation names
+        the yaml line): ``tile_nodes`` None or 1 to :data:`MAX_TILE_NODES`, sample counts 1 to
+        :data:`MAX_PREFILTER_SAMPLES`, ``seed`` 0 to :data:`MAX_SEED`, the named choices."""
+        field = f"model.options.{name}"
+
+        def integer(lo, hi):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or not lo <= value <= hi:
+                raise ConfigError(f"{name} must be an integer from {lo} to {hi}, got {value!r}", field=field)
+
+        if name == "alternating" and not isinstance(value, bool | np.bool_):
+            raise ConfigError(f"alternating must be true or false, got {value!r}", field=field)
+        if name == "tile_nodes" and value is not None:
+            integer(1, MAX_TILE_NODES)
+        if name in ("prefilter_min_samples", "prefilter_max_samples"):
+            integer(1, MAX_PREFILTER_SAMPLES)
+        if name == "seed":
+            integer(0, MAX_SEED)
+        if name == "tile_rule" and value not in TILE_RULES:
+            raise ConfigError(f"tile_rule must be one of {TILE_RULES}, got {value!r}", field=field)
+        if name == "weave_level" and value not in WEAVE_LEVELS:
+            raise ConfigError(f"weave_level must be one of {WEAVE_LEVELS}, got {value!r}", field=field)
+
+    @classmethod
+    def check_options(cls, options: dict) -> None:
+        """ConfigError for options that do not go together (each checked by :meth:`check_option`):
+        ``prefilter_min_samples`` < ``prefilter_max_samples`` (the defaults 5 and 64 where not given)."""
+        low, high = options.get("prefilter_min_samples", 5), options.get("prefilter_max_samples", 64)
+        if not low < high:
+            name = "prefilter_max_samples" if "prefilter_max_samples" in options else "prefilter_min_samples"
+            raise ConfigError(f"need 1 <= prefilter_min_samples < prefilter_max_samples, got {low!r}, {high!r}",
+                              field=f"model.options.{name}")
 
     # --- one yarn type, yarn frame -------------------------------------------------------------------
 

@@ -126,9 +126,9 @@ class NeuralModel(Model):
         except InputError as exc:  # the file named, and its member or field in the message
             raise as_option_error(exc) from None
         if tuple(self.surrogate.component_names) != tuple(target.component_names):
-            raise ConfigError(f"{weights}: components {list(self.surrogate.component_names)}, expected "
+            raise ConfigError(f"components: {list(self.surrogate.component_names)}, expected "
                               f"{list(target.component_names)} of its target kind {target.kind!r}",
-                              field="model.options.weights")
+                              path=Path(weights).with_suffix(".json"), field="model.options.weights")
         self.target = target.kind
         self.params = target.declared_parameters()
         self.component_names = tuple(target.component_names)
@@ -353,11 +353,19 @@ def check_sidecar_names(sidecar: dict, path) -> None:
     if kind not in TARGET_KINDS:
         raise InputError(f"surrogate target kind {kind!r}: kind neural takes networks of {', '.join(TARGET_KINDS)}",
                          path=path, field="encoding.kind")
+    from clothlab.neural.serialise import pattern_length
+
     table = target_class(sidecar).declared_parameters()
     for i, name in enumerate(enc.get("parameters", ())):
-        if name not in table:
-            raise InputError(f"{name!r} is not a parameter of kind {kind!r}", path=path,
+        if name not in table or name == ORIENTATION:
+            raise InputError(f"{name!r} is not an encoder parameter of kind {kind!r}", path=path,
                              field=f"encoding.parameters[{i}]")
+    if "parameters" not in enc:  # an older file: the encoder reads every declared parameter but orientation
+        n = len([name for name in table.names() if name != ORIENTATION]) + pattern_length(enc.get("pattern_order", 2))
+        if n != sidecar["architecture"]["n_material"]:
+            raise InputError(f"n_material = {sidecar['architecture']['n_material']}, but the parameters of kind "
+                             f"{kind!r} and the pattern descriptor make {n} (and encoding.parameters is not given)",
+                             path=path, field="architecture.n_material")
     sets = [("encoding.params", enc.get("params") or {})]
     sets += [(f"encoding.materials_params[{i}]", q) for i, q in enumerate(enc.get("materials_params") or ())]
     for where, values in sets:

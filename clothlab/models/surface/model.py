@@ -85,16 +85,27 @@ def ply_nodes(p: dict, kind: str, nodes: tuple[int, int]) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([n_p, t_p], axis=1))
 
 
+MAX_TILE_NODES = 1024
+"""Most midpoint nodes per axis of ``tile_nodes``."""
+MAX_TILE_POINTS = 1 << 18
+"""Most nodes of the tile average per ply, across x along (262,144: a frame of 12 MiB; default 512)."""
+
+
 def _tile_nodes(value) -> tuple[int, int]:
+    """``tile_nodes`` as (across, along): each 1 to :data:`MAX_TILE_NODES`, their product at most
+    :data:`MAX_TILE_POINTS`; ConfigError at ``model.options.tile_nodes`` otherwise."""
     if value is None:
         return DEFAULT_TILE_NODES
-    if isinstance(value, int | np.integer):
+    if isinstance(value, int | np.integer) and not isinstance(value, bool):
         pair = (value, value)
     else:
         pair = tuple(value) if isinstance(value, list | tuple) else ()
     if len(pair) != 2 or not all(isinstance(n, int | np.integer) and not isinstance(n, bool) and n >= 1 for n in pair):
         raise ConfigError(f"tile_nodes must be a positive integer or a pair [across, along] of them, got {value!r}",
                           field="model.options.tile_nodes")
+    if max(pair) > MAX_TILE_NODES or pair[0] * pair[1] > MAX_TILE_POINTS:
+        raise ConfigError(f"tile_nodes {value!r}: at most {MAX_TILE_NODES} per axis and {MAX_TILE_POINTS} in all "
+                          "(across x along)", field="model.options.tile_nodes")
     return int(pair[0]), int(pair[1])
 
 
@@ -102,7 +113,8 @@ class SurfaceModel(Model):
     """The fabric surface model of Chen, Wang & Wang 2024 (module docstring).
 
     Option ``tile_nodes``: midpoint nodes of the tile average, one integer or [across, along] (default
-    [32, 16]; the texture evaluates points and needs none)."""
+    [32, 16], at most :data:`MAX_TILE_NODES` per axis and :data:`MAX_TILE_POINTS` in all; the texture
+    evaluates points and needs none)."""
 
     kind = "surface"
     params = SURFACE_PARAMS
@@ -125,6 +137,13 @@ class SurfaceModel(Model):
     @classmethod
     def from_config(cls, weave, quadrature=None, **options) -> SurfaceModel:
         return cls(weave, **options)
+
+    @classmethod
+    def check_option(cls, name: str, value) -> None:
+        """ConfigError at ``model.options.<name>`` for a value the model cannot take (config validation names
+        the yaml line): ``tile_nodes`` as :func:`_tile_nodes` takes it."""
+        if name == "tile_nodes":
+            _tile_nodes(value)
 
     def default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
