@@ -188,6 +188,45 @@ def _deferred_sigint():
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+class _Interruptible:
+    """The log-probability as emcee calls it, with a Ctrl-C (and any other exception) kept out of emcee.
+
+    emcee wraps the function in ``_FunctionWrapper``, whose bare ``except`` prints "emcee: Exception while
+    calling your likelihood function" and a traceback for any exception, KeyboardInterrupt included (and a
+    Ctrl-C landing in a compiled kernel comes out as a SystemError).  Here an exception inside the call is
+    kept and every walker gets -inf (the call returns normally, so emcee prints nothing); the step that saw it
+    is then discarded by the sampling loop, which raises it itself (:meth:`raise_kept`): the chain and its
+    checkpoint hold only whole steps of the uninterrupted chain."""
+
+    def __init__(self, log_prob):
+        self.log_prob = log_prob
+        self.kept: BaseException | None = None
+
+    @property
+    def interrupted(self) -> bool:
+        return self.kept is not None
+
+    def __call__(self, X) -> np.ndarray:
+        if self.kept is None:
+            try:
+                return self.log_prob(X)
+            except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - raised again outside emcee
+                self.kept = exc
+        return np.full(len(np.atleast_2d(X)), -np.inf)
+
+    def raise_kept(self) -> None:
+        """KeyboardInterrupt for an interrupt (also one a compiled kernel turned into another error while a
+        Ctrl-C was recorded, :func:`clothlab.atomic.was_interrupted`), else the exception itself."""
+        from clothlab.atomic import was_interrupted
+
+        exc, self.kept = self.kept, None
+        if exc is None:
+            return
+        if isinstance(exc, KeyboardInterrupt) or was_interrupted():
+            raise KeyboardInterrupt
+        raise exc
+
+
 def _chunk_log_prob(like, X):
     """One pool task: the log-probabilities of a chunk of walkers."""
     return like(X)
@@ -335,6 +374,11 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
         walkers = fixed
     if not 1 <= steps <= max_steps:
         raise ValueError(f"need 1 <= steps <= max_steps, got steps = {steps}, max_steps = {max_steps}")
+    from clothlab.config.validate import MAX_POSTERIOR_STEPS, MAX_WALKERS
+
+    if max_steps > MAX_POSTERIOR_STEPS or walkers > MAX_WALKERS:  # the documented limits of fabric.yaml
+        raise ValueError(f"at most {MAX_POSTERIOR_STEPS} steps and {MAX_WALKERS} walkers, got max_steps = "
+                         f"{max_steps}, walkers = {walkers}")
     if check_every < 1:
         raise ValueError(f"check_every must be >= 1, got {check_every}")
     x_opt = problem.to_unit(optimum_params)
@@ -368,6 +412,7 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
     st.started = started
 
     log_prob, _ = choose_log_prob(like, runner, pool, st.coords[: walkers // 2])
+    log_prob = guarded = _Interruptible(log_prob)  # a Ctrl-C never passes through emcee's wrapper (it prints)
     sampler = emcee.EnsembleSampler(walkers, like.ndim, log_prob, vectorize=True, moves=make_moves(moves, cov))
     bar = _StepProgress(progress, steps, max_steps, resumed=st.steps)
     chain_chunks, lp_chunks = [st.chain], [st.log_prob]
@@ -417,11 +462,14 @@ def run_posterior(problem, optimum_params: dict, *, walkers: int, steps: int, ma
                     for state in sampler.sample(emcee.State(st.coords, log_prob=st.last_log_prob,
                                                             random_state=st.random_state),
                                                 iterations=todo, store=False, skip_initial_state_check=True):
+                        if guarded.interrupted:  # a Ctrl-C inside this step's log-probability: not a real step
+                            guarded.raise_kept()
                         record.append((state.coords.copy(), state.log_prob.copy(), state.random_state))
                         n = sum(len(c) for c in chain_chunks) + len(record)
                         bar.step()
                         if on_step is not None:
                             on_step(n)
+                    guarded.raise_kept()
                     if sigint["hit"]:
                         raise KeyboardInterrupt
                 finally:
