@@ -323,3 +323,17 @@ def test_random_folds_are_shuffled_by_the_seed():
         assert not all(np.array_equal(labels[i::5], np.full(8, labels[i])) for i in range(5))  # not a stride
     assert not np.array_equal(splits[0], splits[1]) and not np.array_equal(splits[1], splits[2])
     np.testing.assert_array_equal(splits[0], fold_labels(m, 5, seed=0, scheme="random"))
+
+
+def test_exactly_k_rows_per_direction_suffice_for_the_grouped_scheme_and_k_minus_1_do_not():
+    """The boundary of the grouped scheme: 5 rows in every exitant direction make 5 folds (each row of a direction
+    in its own fold) and ``auto`` chooses it; 4 rows are refused by name and ``auto`` falls back."""
+    enough = _grid_measurement(7, 5)
+    assert choose_scheme(enough, 5)[0] == "grouped"
+    labels = fold_labels(enough, 5, seed=0, scheme="grouped")
+    for g in range(7):
+        assert sorted(labels[g * 5:(g + 1) * 5].tolist()) == [0, 1, 2, 3, 4]
+    short = _grid_measurement(7, 4)
+    with pytest.raises(CrossValidationError, match="has 4 rows, fewer than k = 5 folds"):
+        fold_labels(short, 5, seed=0, scheme="grouped")
+    assert choose_scheme(short, 5)[0] == "grouped-incident"

@@ -338,3 +338,27 @@ def test_checkpoint_of_other_data_starts_afresh(tmp_path, warnings_logged, chang
     assert fresh.resumed_from == 0
     assert "belongs to another fit (differs in: data)" in warnings_logged.text
     assert run_posterior(moved, truth, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 60
+
+
+def test_checkpoint_of_another_rule_with_the_same_nodes_or_a_slightly_moved_optimum_starts_afresh(
+        tmp_path, warnings_logged):
+    """The fingerprint records the quadrature rule itself (the same node count under another rule is another
+    likelihood) and the optimum to 10 significant digits (an optimum moved by a relative 1e-6, as a changed fit
+    budget moves it, is another starting point)."""
+    from clothlab.models.irawan.model import IrawanModel, Quadrature
+
+    problem, truth = _problem()
+    assert problem.model.quadrature.rule == "trapezoid"
+    checkpoint = tmp_path / "posterior.npz"
+    run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    gauss = FitProblem(IrawanModel(problem.model.weave, Quadrature("gauss", problem.model.quadrature.nodes)),
+                       problem.measurement, problem.free, problem.start,
+                       dict(zip(problem.free, zip(problem.lower, problem.upper, strict=True), strict=True)),
+                       problem.metric)
+    warnings_logged.clear()
+    assert run_posterior(gauss, truth, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 0
+    assert "(differs in: model)" in warnings_logged.text
+    moved = {**truth, "beta": truth["beta"] * (1.0 + 1e-6)}
+    warnings_logged.clear()
+    assert run_posterior(gauss, moved, seed=7, checkpoint_path=checkpoint, **FAST).resumed_from == 0
+    assert "(differs in: optimum)" in warnings_logged.text
