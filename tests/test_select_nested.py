@@ -100,3 +100,34 @@ def test_cli_refuses_one_outer_fold(capsys):
 
     code = main(["fit", "--select", str(EXAMPLE), "--nested", "1", "-o", "/tmp/clothlab-nested-x"])
     assert code == 2 and "--nested" in capsys.readouterr().err
+
+
+def test_cross_validation_counts_the_directions_the_report_counts():
+    """CUReT gives one direction as 11.24997 and 11.25003 deg: CV and the report both count 144 exitant
+    directions on the shared corduroy table (they counted 154 and 144)."""
+    from clothlab.fit.crossval import DIRECTION_DECIMALS, _exitant_groups
+    from clothlab.io.loader import load_measurement
+    from clothlab.report.data import EXITANT_DECIMALS, exitant_groups
+
+    assert DIRECTION_DECIMALS == EXITANT_DECIMALS
+    from clothlab.io.measurement import Measurement
+
+    t = np.array([11.24996901, 11.25002631, 22.5, 22.5])
+    p = np.array([0.0, 0.0, 180.00001985, 180.0])
+    synthetic = Measurement(t, p, t, p, np.ones((4, 1)), ("grey",))
+    assert int(_exitant_groups(synthetic).max()) + 1 == 2 == len(exitant_groups({"theta_o": t, "phi_o": p}))
+    path = Path("/work/shared/data/curet/corduroy.csv")
+    if not path.is_file():
+        pytest.skip("shared CUReT data not present")
+    m = load_measurement(path)
+    table = {"theta_o": m.theta_o, "phi_o": m.phi_o}
+    assert int(_exitant_groups(m).max()) + 1 == len(exitant_groups(table))
+
+
+def test_report_header_names_the_fabric_not_the_winning_preset():
+    from clothlab.report import html
+
+    fit = {"name": "corduroy", "config": {"name": "corduroy"}, "model": {"weave": "preset:silk-shantung"},
+           "selection": {"candidates": []}}
+    assert html._header_fabric(fit) == "corduroy (selected weave preset:silk-shantung)"
+    assert html._header_fabric({"name": "x", "model": {"weave": "preset:silk-shantung"}}) == "silk-shantung"

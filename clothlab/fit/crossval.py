@@ -77,8 +77,16 @@ class CrossValidationError(ValueError):
     """Cross-validation cannot run on these data (e.g. fewer rows than folds)."""
 
 
+DIRECTION_DECIMALS = 3
+"""Directions are grouped after rounding (theta, phi) to this many decimals of a degree - the rule of the
+report's direction counts (:data:`clothlab.report.data.EXITANT_DECIMALS`), so both count the same directions
+(CUReT's tables give one direction as e.g. 11.24997 and 11.25003 deg)."""
+
+
 def _groups(theta, phi) -> np.ndarray:
-    return np.unique(np.stack([theta, phi], axis=1), axis=0, return_inverse=True)[1].reshape(-1)
+    key = np.stack([np.round(np.asarray(theta, dtype=np.float64), DIRECTION_DECIMALS),
+                    np.round(np.asarray(phi, dtype=np.float64), DIRECTION_DECIMALS)], axis=1)
+    return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1)
 
 
 def _exitant_groups(measurement) -> np.ndarray:

@@ -142,6 +142,16 @@ def _page(title: str, body: list[str]) -> str:
     ])
 
 
+def _header_fabric(fit: dict) -> str:
+    """The fabric the header names: a selection's fit is about the fabric of fabric.yaml (its ``name``), not
+    the preset that won (:func:`clothlab.report.data.fabric_name` otherwise)."""
+    if isinstance(fit.get("selection"), dict):
+        name = (fit.get("config") or {}).get("name") or fit.get("name")
+        winner = (fit.get("model") or {}).get("weave")
+        return f"{name} (selected weave {winner})" if winner else str(name)
+    return fabric_name(fit)
+
+
 def _header_section(fit: dict, sampling=None) -> list[str]:
     model = fit.get("model") or {}
     measurement = fit.get("measurement") or {}
@@ -152,7 +162,7 @@ def _header_section(fit: dict, sampling=None) -> list[str]:
                    "not to a real one.</div>")
     channels = measurement.get("channels")
     rows = [
-        ("fabric", esc(fabric_name(fit))),
+        ("fabric", esc(_header_fabric(fit))),
         ("model", esc(model.get("kind"))),
         ("weave", esc(model.get("weave"))),
         ("setting", esc(model_setting(fit))),
