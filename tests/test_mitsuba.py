@@ -56,6 +56,38 @@ def test_sampler_samples_follow_its_density():
     assert np.all(np.abs(observed[big] - expected[big]) < 5 * np.sqrt(expected[big]) + 1e-3 * n)
 
 
+def _one_fit_per_kind():
+    """One shipped fit directory (fits/) per model kind found there."""
+    import json
+    from pathlib import Path
+
+    found = {}
+    for path in sorted((Path(__file__).resolve().parents[1] / "fits").glob("*/fit.json")):
+        found.setdefault(json.loads(path.read_text())["model"]["kind"], path.parent)
+    return sorted(found.items())
+
+
+@pytest.mark.parametrize("kind, path", _one_fit_per_kind(), ids=lambda v: v if isinstance(v, str) else v.name)
+def test_fit_directory_material_is_the_fit(kind, path):
+    """A fit directory as a material evaluates to the fitted model's f_r (fit.store.load_fitted + Model.evaluate)
+    in the reflectance policy, and its texture policy is the renderer's for that kind."""
+    from clothlab.fit.store import load_fitted
+    from clothlab.mitsuba.material import load_material
+
+    model, params, coefficients, _ = load_fitted(path)
+    material = load_material(fit=path, lod="reflectance")
+    assert material.kind == kind
+    rng = np.random.default_rng(7)
+    z1, z2 = rng.uniform(0.1, 1, 50), rng.uniform(0.1, 1, 50)
+    p1, p2 = rng.uniform(0, 2 * math.pi, 50), rng.uniform(0, 2 * math.pi, 50)
+    wi = np.stack([np.sqrt(1 - z1 ** 2) * np.cos(p1), np.sqrt(1 - z1 ** 2) * np.sin(p1), z1], axis=1)
+    wo = np.stack([np.sqrt(1 - z2 ** 2) * np.cos(p2), np.sqrt(1 - z2 ** 2) * np.sin(p2), z2], axis=1)
+    assert np.allclose(material.values(wi, wo), model.evaluate(wi, wo, coefficients, params), rtol=1e-12, atol=0)
+    expected = ("reflectance" if not model.has_texture else
+                "footprint-texture" if model.texture_filters else "im-lod")
+    assert load_material(fit=path).policy == expected
+
+
 def test_material_requires_one_source():
     from clothlab.mitsuba.material import load_material
 
@@ -114,6 +146,25 @@ def test_weight_is_eval_over_pdf_and_furnace(llvm, kind):
     # midpoint rule's (a few 1e-3 at 96 x 192 for the narrow lobes)
     assert np.all(plugin <= model + 5 * error + 5e-3 * np.maximum(model, 0.05))
     assert np.all(np.abs(plugin - model) <= 5 * error + 5e-3 * np.maximum(model, 0.05))
+
+
+@pytest.mark.parametrize("kind, path", _one_fit_per_kind(), ids=lambda v: v if isinstance(v, str) else v.name)
+def test_plugin_loads_fit_directories(llvm, kind, path):
+    """``fit: fits/<name>`` in the plugin dict: the sampler passes the chi-square test at 45 deg and eval is the
+    fit's f_r cos."""
+    import mitsuba as mi
+
+    from clothlab.mitsuba.checks import _si, _vec, chi2_check, direction, plugin_dict
+
+    bsdf = plugin_dict(fit=str(path), lod="reflectance")
+    assert chi2_check(bsdf, 45.0, sample_count=20_000, test_count=6)["passed"]
+    plugin = mi.load_dict(bsdf)
+    view = np.asarray(direction(45.0, 17.0))
+    light = np.array([[0.3, -0.2, 0.9], [-0.5, 0.1, 0.6]])
+    light /= np.linalg.norm(light, axis=1, keepdims=True)
+    value = np.asarray(plugin.eval(mi.BSDFContext(), _si(2, view), _vec(light)).numpy()).reshape(3, -1).T
+    expected = plugin.material.values(light, np.tile(view, (2, 1))) * light[:, 2:3]
+    assert np.allclose(value, expected, rtol=1e-5)
 
 
 @pytest.mark.parametrize("kind", [k for k in KINDS if k != "neural"])  # the network is fitted, not reciprocal
