@@ -73,6 +73,8 @@ def mitsuba_study(quick: bool) -> dict:
         from clothlab.mitsuba.checks import chi2_check, plugin_dict
         from clothlab.models.registry import MODEL_KINDS
 
+        use_variant(variant)  # back from the scalar row
+
         angles = ANGLES if big else (0.0, 87.0)
         for kind in MODEL_KINDS:
             for theta in angles:
