@@ -492,6 +492,19 @@ def test_weights_that_overflow_float32_in_the_network_are_refused(tmp_path):
     assert err.value.path == str(npz) and "overflow" in err.value.detail
 
 
+def test_weights_larger_than_the_architecture_allows_are_not_read(tmp_path):
+    """The archive's size is bounded by the members the sidecar implies: a padded file is refused from its
+    size, before it is read."""
+    from clothlab.neural.serialise import load_surrogate
+
+    npz = copy_weights(tmp_path)
+    with npz.open("ab") as handle:
+        handle.truncate(8 << 20)
+    with pytest.raises(InputError) as err:
+        load_surrogate(npz)
+    assert err.value.path == str(npz) and "bytes; at most" in err.value.detail
+
+
 def test_pickled_or_complex_members_are_refused(tmp_path):
     from clothlab.neural.serialise import load_surrogate
 
@@ -707,6 +720,22 @@ def test_eval_csv_numbers_are_strict_and_bounded(tmp_path, column, token):
     assert err.value.path == str(path) and err.value.line == 3 and err.value.field == column
 
 
+def test_eval_csv_errors_give_the_physical_line(tmp_path):
+    """A quoted field spanning two lines shifts the record count; the error names the file's own line (before:
+    the record number)."""
+    from clothlab.fit.evaluate import read_directions
+
+    path = tmp_path / "dirs.csv"
+    path.write_text('theta_i,phi_i,theta_o,phi_o,note\n30,0,30,180,"two\nlines"\n30,0,95,180,x\n')
+    with pytest.raises(InputError) as err:
+        read_directions(path)
+    assert err.value.line == 4 and err.value.field == "theta_o"
+    path.write_text("theta_i,phi_i,theta_o,phi_o,note\n30,0,30,180,x\n30,0,30,180," + "y" * 200_000 + "\n")
+    with pytest.raises(InputError) as err:  # csv's field size limit
+        read_directions(path)
+    assert err.value.line == 3 and str(path) in str(err.value)
+
+
 def test_the_largest_footprint_and_coordinates_give_the_tile_average(tmp_path):
     """At the documented limits (footprint MAX_FOOTPRINT tiles centred at u = MAX_TEXTURE_COORDINATE) a box
     footprint of a whole number of tiles is the tile average: the summed-area tables still resolve it
@@ -719,7 +748,7 @@ def test_the_largest_footprint_and_coordinates_give_the_tile_average(tmp_path):
     path = tmp_path / "dirs.csv"
     path.write_text(f"theta_i,phi_i,theta_o,phi_o,u,v,footprint\n30,0,30,180,0,0,1\n"
                     f"30,0,30,180,{MAX_TEXTURE_COORDINATE!r},{-MAX_TEXTURE_COORDINATE!r},{MAX_FOOTPRINT!r}\n")
-    text = evaluate_directions_file(tmp_path / "fabric.yaml", path, resolution=32)
+    text = evaluate_directions_file(tmp_path / "fabric.yaml", path, resolution=8)
     rows = [line.split(",") for line in text.strip().splitlines()]
     one, big = (np.array([float(x) for x in r[7:]]) for r in rows[1:])
     assert (one > 0).all() and np.allclose(big, one, rtol=1e-9, atol=0)

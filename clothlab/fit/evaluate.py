@@ -53,11 +53,14 @@ def read_directions(path) -> dict[str, np.ndarray]:
 
     path = Path(path)
     text = read_text(path, limit=MAX_TABLE_BYTES, what="directions file")
+    reader = csv.reader(io.StringIO(text, newline=""))
+    rows = []
     try:
-        rows = [(i, r) for i, r in enumerate(csv.reader(io.StringIO(text, newline="")), start=1)
-                if r and not r[0].lstrip().startswith("#")]
+        for r in reader:  # line_num: the physical line a record ends on (a quoted field may span lines)
+            if r and not r[0].lstrip().startswith("#"):
+                rows.append((reader.line_num, r))
     except csv.Error as exc:
-        raise InputError(f"not a CSV file: {exc}", path=path, line=None) from None
+        raise InputError(f"not a CSV file: {exc}", path=path, line=reader.line_num) from None
     if not rows:
         raise InputError("empty directions file", path=path)
     header = [h.strip() for h in rows[0][1]]

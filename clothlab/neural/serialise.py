@@ -25,15 +25,15 @@ from clothlab.errors import InputError
 from clothlab.neural.encodings import n_direction_features, n_yarn_features
 from clothlab.neural.network import Architecture, SurrogateNetwork
 from clothlab.neural.surrogate import Surrogate
-from clothlab.strict import MAX_YAML_BYTES, load_json_file, read_npz
+from clothlab.strict import MAX_YAML_BYTES, NPY_HEADER_BYTES, load_json_file, read_npz
 
 FORMAT = "clothlab-neural-surrogate/1"
 MAX_WIDTH = 1024
 """Largest input size or layer width of a surrogate's architecture (the shipped networks: at most 128)."""
 MAX_PARAMETERS = 1 << 23
 """Most parameter values of a surrogate (8.4 M, 32 MiB in float32; the shipped networks: 70,563)."""
-MAX_MATERIALS = 1 << 16
-"""Most material rows (encoder inputs) of a surrogate."""
+MAX_MATERIALS = 4096
+"""Most material rows (encoder inputs) of a surrogate (as ``train-surrogate --vary``'s largest grid)."""
 MAX_BINS = 64
 """Most one-blob bins per input (position, size, yarn coordinates; the paper: 8)."""
 MAX_PROBE_POINTS = 8
@@ -339,7 +339,9 @@ def load_surrogate(path) -> tuple[Surrogate, dict]:
     members = {f"param/{k}": v.shape for k, v in network.params().items()}
     n_materials = materials_count(sidecar.get("encoding") or {})
     members["materials"] = (n_materials, arch.n_material)
-    arrays = read_npz(npz, members, what="surrogate weights", magnitude=MAX_WEIGHT)
+    # the largest archive these members make (8-byte values, headers, zip entries): larger files are not read
+    limit = sum(NPY_HEADER_BYTES + 512 + 8 * math.prod(shape) for shape in members.values()) + (1 << 16)
+    arrays = read_npz(npz, members, what="surrogate weights", magnitude=MAX_WEIGHT, limit=limit)
     network.set_params({k.removeprefix("param/"): v for k, v in arrays.items() if k.startswith("param/")})
     materials = arrays["materials"].astype(np.float64)
     _check_outputs(network, materials, npz)
