@@ -32,8 +32,8 @@ MAX_WIDTH = 1024
 """Largest input size or layer width of a surrogate's architecture (the shipped networks: at most 128)."""
 MAX_PARAMETERS = 1 << 23
 """Most parameter values of a surrogate (8.4 M, 32 MiB in float32; the shipped networks: 70,563)."""
-MAX_MATERIALS = 4096
-"""Most material rows (encoder inputs) of a surrogate (as ``train-surrogate --vary``'s largest grid)."""
+MAX_MATERIALS = 1 << 16
+"""Most material rows (encoder inputs) of a surrogate (``--vary`` grids have at most 4,096; ``--draw`` more)."""
 MAX_BINS = 64
 """Most one-blob bins per input (position, size, yarn coordinates; the paper: 8)."""
 MAX_PROBE_POINTS = 8
