@@ -337,3 +337,197 @@ def test_a_scattered_names_only_stack_is_not_taken_for_a_grid(tmp_path, names_on
         if not image.name.startswith(("tl015_pl000", "tl030_pl180", "tl060_pl000")):
             image.unlink()
     assert len(BtfStack.open(stack)) == 3  # 3 of 3 x 2: a scattered sampling
+
+
+# ---------------------------------------------------------------------------------------------------------
+# F. Ctrl-C in the posterior, train-surrogate's run directory
+
+
+@pytest.mark.parametrize("at_call", [3, 4, 9, 20])
+def test_ctrl_c_inside_the_log_probability_prints_nothing_and_keeps_whole_steps(tmp_path, capfd, monkeypatch,
+                                                                               at_call):
+    """A KeyboardInterrupt raised inside the likelihood (where a Ctrl-C lands most of the time): before,
+    emcee's wrapper printed "emcee: Exception while calling your likelihood function" and a traceback; now
+    nothing is printed, the checkpoint holds whole steps of the uninterrupted chain, and a resume gives it."""
+    import numpy as np
+    from test_posterior import FAST, _problem
+
+    from clothlab.fit.posterior import _Likelihood, run_posterior
+
+    problem, truth = _problem()
+    reference = run_posterior(problem, truth, seed=7, **FAST)
+    calls = {"n": 0}
+    original = _Likelihood.__call__
+
+    def counting(self, X):
+        calls["n"] += 1
+        if calls["n"] == at_call:
+            raise KeyboardInterrupt
+        return original(self, X)
+
+    checkpoint = tmp_path / "posterior.npz"
+    monkeypatch.setattr(_Likelihood, "__call__", counting)
+    capfd.readouterr()
+    with pytest.raises(KeyboardInterrupt):
+        run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    out, err = capfd.readouterr()
+    assert "emcee" not in out + err and "Traceback" not in out + err, out + err
+    monkeypatch.setattr(_Likelihood, "__call__", original)
+    if checkpoint.exists():
+        with np.load(checkpoint) as z:
+            done = len(z["chain"])
+            np.testing.assert_array_equal(z["chain"], reference.chain[:done])
+    resumed = run_posterior(problem, truth, seed=7, checkpoint_path=checkpoint, **FAST)
+    np.testing.assert_array_equal(resumed.chain, reference.chain)
+    np.testing.assert_array_equal(resumed.log_prob, reference.log_prob)
+
+
+POSTERIOR_FABRIC = """\
+name: sig
+measurement: {path: m.csv}
+model: {kind: irawan, weave: preset:cotton-denim}
+fit:
+  free: [alpha, beta]
+  optimizer: {global: null, local: LN_BOBYQA, max_evals: 30, seed: 1}
+  posterior: {walkers: 8, steps: 200000, max_steps: 200000}
+output: {fits: fits, reports: reports}
+"""
+
+
+def test_ctrl_c_during_the_posterior_exits_130_with_one_line(tmp_path):
+    """SIGINT a few times while the posterior samples (its checkpoint exists): exit 130, one line, nothing on
+    stdout from emcee, the hidden checkpoint kept for the next run and no fit directory committed."""
+    import signal
+
+    rows = (REPO / "measurements" / "cotton-denim" / "noisy.csv").read_text().splitlines()
+    header = [r for r in rows if r.startswith("#") or not r[:1].isdigit()]
+    data = [r for r in rows if r[:1].isdigit()]
+    (tmp_path / "m.csv").write_text("\n".join(header + data[::8]) + "\n")
+    (tmp_path / "fabric.yaml").write_text(POSTERIOR_FABRIC)
+    checkpoint = tmp_path / "fits" / ".sig.posterior-checkpoint.npz"
+    for delay in (0.0, 0.13, 0.31):
+        child = subprocess.Popen([sys.executable, "-m", "clothlab", "fit", "fabric.yaml", "--force"], cwd=tmp_path,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                 env=dict(os.environ, PYTHONPATH=str(REPO)))
+        def stamp():
+            return checkpoint.stat().st_mtime_ns if checkpoint.exists() else None
+
+        before, deadline = stamp(), time.monotonic() + 240
+        while stamp() == before and child.poll() is None and time.monotonic() < deadline:  # sampling in this run
+            time.sleep(0.05)
+        assert child.poll() is None, child.communicate()
+        time.sleep(delay)
+        child.send_signal(signal.SIGINT)
+        out, err = child.communicate(timeout=120)
+        assert child.returncode == 130, (out, err)
+        assert "emcee" not in out + err and "Traceback" not in out + err, (out, err)
+        assert err.strip().splitlines()[-1] == "clothlab: interrupted", err
+        assert [line for line in err.strip().splitlines() if line.startswith("clothlab:")] == \
+            ["clothlab: interrupted"], err
+        assert checkpoint.exists() and not (tmp_path / "fits" / "sig").exists()
+
+
+TINY_SURROGATE = ["--budget", "0.02", "--labels", "model", "--pairs", "4", "--width", "8", "--spatial", "8", "-q"]
+
+
+def test_train_surrogate_replaces_its_directory_atomically(tmp_path, capsys, monkeypatch):
+    """--force builds the new run next to the old one and swaps it in when complete: a run that fails half way
+    leaves the previous directory as it was (before: shutil.rmtree first, then a half-written directory)."""
+    import clothlab.neural.run
+
+    out = tmp_path / "run"
+    args = ["train-surrogate", "preset:cotton-denim", "-o", str(out), *TINY_SURROGATE]
+    assert main(args) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert (out / "surrogate.npz").is_file() and (out / "materials.json").is_file()
+
+    def broken(*a, **k):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr(clothlab.neural.run, "write_plots", broken)
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        main([*args, "--force", "--seed", "3"])
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before  # the previous run, byte for byte
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no temporary or lock left
+    monkeypatch.undo()
+    capsys.readouterr()
+    assert main([*args, "--force", "--seed", "3"]) == 0
+    assert capsys.readouterr().out.startswith(f"{out / 'surrogate.npz'}: ")  # the final path, not the temporary
+    assert json.loads((out / "training.json").read_text())["train_spec"]["seed"] == 3
+
+
+@pytest.mark.parametrize("prepare", ["missing", "empty", "other files"])
+def test_resume_without_a_run_directory_is_refused(tmp_path, capsys, prepare):
+    """Before: --resume with nothing to resume silently started a new run."""
+    out = tmp_path / "run"
+    if prepare != "missing":
+        out.mkdir()
+    if prepare == "other files":
+        (out / "notes.txt").write_text("x")
+    assert main(["train-surrogate", "preset:cotton-denim", "-o", str(out), "--resume", *TINY_SURROGATE]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "field '--resume'" in line and "nothing to resume" in line and str(out) in line
+    assert not (out / "surrogate.npz").exists()
+
+
+@pytest.mark.parametrize("source", ["pattern:plain,,pattern:twill-3x3", "pattern:plain,", ",pattern:plain",
+                                    "pattern:plain, ,pattern:satin-5x5"])
+def test_an_empty_item_of_the_weave_list_is_refused_not_dropped(tmp_path, capsys, source):
+    assert main(["train-surrogate", source, "-o", str(tmp_path / "run"), *TINY_SURROGATE]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "field 'source'" in line and "is empty" in line
+    assert not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# E. fabric.yaml: size-like fields have documented limits, select.weaves: [] says nothing to try
+
+BASE_YAML = "name: x\nmeasurement: {path: m.csv}\nmodel: {kind: irawan, weave: preset:cotton-denim}\n"
+
+
+@pytest.mark.parametrize("extra, field, line", [
+    ("fit:\n  free: [alpha]\n  posterior: {steps: 1000000000000000}\n", "fit.posterior.steps", 6),
+    ("fit:\n  free: [alpha]\n  posterior:\n    max_steps: 1000001\n", "fit.posterior.max_steps", 7),
+    ("fit:\n  free: [alpha]\n  posterior: {walkers: 100000}\n", "fit.posterior.walkers", 6),
+    ("fit:\n  free: [alpha]\n  posterior: {walkers: 4096, max_steps: 1000000}\n", "fit.posterior.max_steps", 6),
+    ("fit:\n  cv_folds: 1000000000\n", "fit.cv_folds", 5),
+    ("fit:\n  optimizer: {max_evals: 2147483648}\n", "fit.optimizer.max_evals", 5),
+    ("select:\n  max_evals: 2147483648\n", "select.max_evals", 5),
+    ("select:\n  cv_folds: 123456789\n", "select.cv_folds", 5),
+    ("select:\n  weaves: []\n", "select.weaves", 5),
+])
+def test_size_like_fields_have_a_limit_named_at_file_line_field(tmp_path, extra, field, line):
+    """Before: accepted (posterior.steps 1e15 then hung, select.weaves [] silently meant every preset)."""
+    from clothlab.config import load_config
+    from clothlab.errors import ConfigError
+
+    shutil.copy(REPO / "measurements" / "cotton-denim" / "noisy.csv", tmp_path / "m.csv")
+    path = tmp_path / "fabric.yaml"
+    path.write_text(BASE_YAML + extra)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert str(info.value).startswith(f"{path}:{line}, field '{field}': "), str(info.value)
+
+
+def test_the_limits_still_accept_the_shipped_settings(tmp_path):
+    from clothlab.config import load_config
+
+    shutil.copy(REPO / "measurements" / "cotton-denim" / "noisy.csv", tmp_path / "m.csv")
+    path = tmp_path / "fabric.yaml"
+    path.write_text(BASE_YAML + "fit:\n  free: [alpha]\n  cv_folds: 100000\n  optimizer: {max_evals: 2147483647}\n"
+                    "  posterior: {walkers: 4096, steps: 4000, max_steps: 20000}\n")
+    cfg = load_config(path)
+    assert cfg.fit.posterior.walkers == 4096 and cfg.fit.cv_folds == 100000
+    for shipped in sorted((REPO / "measurements").glob("*/fabric.yaml")):
+        load_config(shipped)
+
+
+def test_cv_override_is_limited_naming_the_option(tmp_path, capsys):
+    from test_parallel import make_project
+
+    [config] = make_project(tmp_path, fabrics=("polyester-lining",), max_evals=10)
+    with pytest.raises(SystemExit) as info:  # beyond --cv's documented limit (fit.cv_folds's)
+        main(["fit", str(config), "--cv", "100001"])
+    assert info.value.code == 2
+    assert "field '--cv'" in one_error_line(capsys.readouterr().err)

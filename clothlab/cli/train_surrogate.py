@@ -185,10 +185,13 @@ def _weave_specs(args) -> tuple[list[str], str | None]:
     for an empty list or a held-out weave that is also trained."""
     from clothlab.errors import ConfigError
 
-    specs = [t.strip() for t in str(args.source).split(",") if t.strip()]
-    if not specs:
+    specs = [t.strip() for t in str(args.source).split(",")]
+    if not any(specs):
         raise ConfigError("give at least one weave (preset:<name>, pattern:<name>, a .wv file or a fabric.yaml)",
                           field="source")
+    if not all(specs):  # 'a,,b' or a trailing comma: an item lost, not a shorter list
+        raise ConfigError(f"item {specs.index('') + 1} of the weave list {str(args.source)[:80]!r} is empty; "
+                          "separate the weaves by single commas", field="source")
     held = args.heldout_pattern.strip() if args.heldout_pattern else None
     if args.heldout_pattern is not None and not held:
         raise ConfigError("give a weave, e.g. pattern:twill-5x5", field="--heldout-pattern")
@@ -223,11 +226,40 @@ def material_draw(weave_name: str, base: dict, n: int, share: float, seed: int, 
 
 
 def run(args) -> int:
+    """Train in the run directory: a new run (or ``--force``) is built in a hidden temporary directory next to
+    it and swapped into place when complete (:func:`clothlab.atomic.atomic_directory`, the fits' swap: an
+    interrupted or failed run leaves the previous directory as it was); ``--resume`` continues the run in
+    place under its lock (every file written atomically)."""
+    lines: list[str] = []
+    with contextlib.ExitStack() as held:
+        code = _run(args, held, lines)
+    print("\n".join(lines))  # after the swap: the files named exist
+    return code
+
+
+def _run_directory(held, out: Path, *, resume: bool, force: bool) -> Path:
+    """The directory this run writes: ``out`` itself (locked) for ``--resume``, else the temporary directory
+    of :func:`clothlab.atomic.atomic_directory` that replaces ``out`` when the ``held`` stack closes cleanly."""
+    from clothlab.atomic import atomic_directory, result_lock
+    from clothlab.errors import ConfigError, ResultExistsError
+
+    used = out.is_dir() and any(out.iterdir())
+    if resume:
+        if not (out / "materials.json").is_file():
+            what = "does not exist" if not out.exists() else "holds no run (no materials.json)"
+            raise ConfigError(f"nothing to resume: {out} {what}; run without --resume to start it", path=out,
+                              field="--resume")
+        return held.enter_context(result_lock(out))
+    if used and not force:
+        raise ResultExistsError(f"{out} exists; give --resume to continue it or --force to replace it", path=out)
+    return held.enter_context(atomic_directory(out, force=out.exists()))
+
+
+def _run(args, held, lines: list[str]) -> int:
     import json
-    import shutil
 
     from clothlab.atomic import atomic_write_bytes
-    from clothlab.errors import ConfigError, ResultExistsError
+    from clothlab.errors import ConfigError
     from clothlab.neural.data import DataSpec
     from clothlab.neural.encodings import PATTERN_ORDER, material_vector, yarn_extent
     from clothlab.neural.run import run_training
@@ -260,12 +292,8 @@ def run(args) -> int:
     if several and args.yarn_bins:
         raise ConfigError("yarn features with several weaves are not supported yet (they need the weave of each "
                           "row); leave --yarn-bins at 0", field="--yarn-bins")
-    out = Path(args.output)
-    if out.exists() and any(out.iterdir()) and not args.resume:
-        if not args.force:
-            raise ResultExistsError(f"{out} exists; give --resume to continue it or --force to replace it",
-                                    path=out)
-        shutil.rmtree(out)
+    final = Path(args.output)
+    out = _run_directory(held, final, resume=args.resume, force=args.force)
     import numpy as np
 
     from clothlab.models.base import ORIENTATION
@@ -350,16 +378,16 @@ def run(args) -> int:
         atomic_write_bytes(out / "latent.json", (json.dumps(latent, indent=2) + "\n").encode())
     write_report_page(out, result.metrics, latent=latent)
     m = result.metrics
-    print(f"{out / 'surrogate.npz'}: {m['steps']} steps, {m['queries']:,} queries, "
-          f"{m['label_cpu_s'] + m['cpu_s']:.0f} CPU-s")
+    lines.append(f"{final / 'surrogate.npz'}: {m['steps']} steps, {m['queries']:,} queries, "
+                 f"{m['label_cpu_s'] + m['cpu_s']:.0f} CPU-s")
     for key, what in (("heldout_pairs", "held-out pairs"), ("heldout_materials", "unseen materials"),
                       ("heldout_pattern", "unseen pattern")):
         for b in m.get(key, []):
             interval = b.get("relative_rmse_interval")
             spread = f", 90 % bootstrap {interval[0]:.3f}-{interval[1]:.3f}" if interval else ""
-            print(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
-                  f"{b['relative_rmse']:.3f} ({b['rows']} queries{spread})")
+            lines.append(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
+                         f"{b['relative_rmse']:.3f} ({b['rows']} queries{spread})")
     if m.get("far_view", {}).get("rows"):
-        print(f"  far view (>= 4 tiles, held-out pairs): {m['far_view']['relative_rms_vs_reflectance']:.3f} "
-              "relative RMS from the reflectance model")
+        lines.append(f"  far view (>= 4 tiles, held-out pairs): {m['far_view']['relative_rms_vs_reflectance']:.3f} "
+                     "relative RMS from the reflectance model")
     return 0

@@ -81,7 +81,19 @@ from clothlab.models.registry import MODEL_KINDS, WEAVE_STAND_IN, model_class, n
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 NODES_RANGE = (2, 1000)
 MAX_NAME_CHARS = 200
-MAX_EVALS = 2**31 - 1  # nlopt's maxeval is a C int
+MAX_EVALS = 2**31 - 1
+"""Most optimiser evaluations of a fit or a candidate (``fit.optimizer.max_evals``, ``--max-evals``,
+``select.max_evals``): nlopt's maxeval is a C int.  A budget is an upper bound, not an allocation: the search
+stops at convergence (the fits here use 2,000-20,000)."""
+MAX_CV_FOLDS = 100_000
+"""Most cross-validation folds (``fit.cv_folds``, ``select.cv_folds``; as ``--cv``): each fold is a refit."""
+MAX_WALKERS = 4096
+"""Most emcee walkers of the posterior (``fit.posterior.walkers``)."""
+MAX_POSTERIOR_STEPS = 1_000_000
+"""Most posterior steps (``fit.posterior.steps`` and ``max_steps``): a chain of 32 walkers and 6 parameters
+at this cap holds 1.5 GB."""
+MAX_CHAIN_BYTES = 2 << 30
+"""Largest posterior chain kept in memory: max_steps x walkers x (free parameters + 1 noise scale) float64."""
 MAX_ORIENTATION_AVERAGE = 1024  # orientations of the isotropic average (each one model evaluation)
 SEED_RANGE = (0, 2**32 - 1)  # what nlopt.srand and numpy's legacy seeding both accept
 LOSS_SCALE_RANGE = (1e-9, 1e9)  # fit.loss_scale, the metric's units (a denormal scale overflows r / s)
@@ -175,6 +187,9 @@ class _Validator:
         d = SelectConfig()
         weaves = tuple(self.weave(w, self.at(p + ("weaves", i)))
                        for i, w in enumerate(as_list(s.get("weaves", []), self.at(p + ("weaves",)))))
+        if "weaves" in s and not weaves:  # absent = every shipped preset; an empty list says nothing to try
+            raise self.at(p + ("weaves",)).error("expected at least one weave (preset:<name>, pattern:<name> or a "
+                                                 ".wv file), got []; leave select.weaves out to try every preset")
         kinds = tuple(as_choice(k, self.at(p + ("kinds", i)), MODEL_KINDS)
                       for i, k in enumerate(as_list(s.get("kinds", list(d.kinds)), self.at(p + ("kinds",)))))
         if not kinds:
@@ -185,7 +200,7 @@ class _Validator:
                     raise self.at(p + (key, i)).error(f"{item!r} is listed twice (as entry {items.index(item)})")
         starts = as_int(s.get("orientation_starts", d.orientation_starts), self.at(p + ("orientation_starts",)), 1, 8)
         max_evals = as_int(s.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1, MAX_EVALS)
-        cv_folds = as_int(s.get("cv_folds", d.cv_folds), self.at(p + ("cv_folds",)), 0)
+        cv_folds = as_int(s.get("cv_folds", d.cv_folds), self.at(p + ("cv_folds",)), 0, MAX_CV_FOLDS)
         if cv_folds == 1:
             raise self.at(p + ("cv_folds",)).error("expected 0 (no cross-validation) or at least 2 folds, got 1")
         return SelectConfig(weaves, kinds, starts, max_evals, cv_folds)
@@ -371,7 +386,7 @@ class _Validator:
         at = self.at(p + ("cv_folds",))
         if cv_folds is None or cv_folds is False:
             cv_folds = 0
-        as_int(cv_folds, at, 0)
+        as_int(cv_folds, at, 0, MAX_CV_FOLDS)
         if cv_folds == 1:
             raise at.error("expected 0 (no cross-validation) or at least 2 folds, got 1")
         cv_scheme = as_choice(f.get("cv_scheme", FitConfig.cv_scheme), self.at(p + ("cv_scheme",)), CV_SCHEMES)
@@ -475,15 +490,20 @@ class _Validator:
         if not free:
             raise self.at(p).error("a posterior needs at least one parameter in fit.free")
         walkers_at = self.at(p + ("walkers",))
-        walkers = as_int(o.get("walkers", max(DEFAULT_WALKERS, 2 * len(free))), walkers_at, 1)
+        walkers = as_int(o.get("walkers", max(DEFAULT_WALKERS, 2 * len(free))), walkers_at, 1, MAX_WALKERS)
         if walkers < 2 * len(free):
             raise walkers_at.error(f"walkers = {walkers} is below 2 x {len(free)} free parameters "
                                    f"= {2 * len(free)} (emcee needs at least twice as many walkers)")
-        steps = as_int(o.get("steps", DEFAULT_STEPS), self.at(p + ("steps",)), 1)
+        steps = as_int(o.get("steps", DEFAULT_STEPS), self.at(p + ("steps",)), 1, MAX_POSTERIOR_STEPS)
         max_at = self.at(p + ("max_steps",))
-        max_steps = as_int(o.get("max_steps", max(DEFAULT_MAX_STEPS, steps)), max_at, 1)
+        max_steps = as_int(o.get("max_steps", max(DEFAULT_MAX_STEPS, steps)), max_at, 1, MAX_POSTERIOR_STEPS)
         if max_steps < steps:
             raise max_at.error(f"max_steps = {max_steps} is below steps = {steps}")
+        chain = max_steps * walkers * (len(free) + 1) * 8
+        if chain > MAX_CHAIN_BYTES:
+            raise (max_at if "max_steps" in o else walkers_at).error(
+                f"a chain of {max_steps} steps x {walkers} walkers x {len(free) + 1} coordinates holds "
+                f"{chain / 2**30:.1f} GiB; at most {MAX_CHAIN_BYTES / 2**30:g} GiB (fewer steps or walkers)")
         return PosteriorConfig(walkers, steps, max_steps)
 
     def report(self, value: Any) -> ReportConfig:
