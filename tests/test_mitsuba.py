@@ -88,6 +88,20 @@ def test_fit_directory_material_is_the_fit(kind, path):
     assert load_material(fit=path).policy == expected
 
 
+def test_cli_without_mitsuba_is_a_user_error(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from clothlab.cli.main import main
+
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # as if not installed
+    scene = tmp_path / "scene.yaml"
+    scene.write_text("patch: {shape: flat, size_mm: [100, 100], tile_mm: [1, 2]}\n"
+                     "camera: {position: [0, -60, 60], resolution: [4, 3]}\nlight: {direction: [0, 0, 1]}\n")
+    assert main(["render", str(scene), "--renderer", "mitsuba", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clothlab: error:") and "clothlab[mitsuba]" in err and len(err.strip().splitlines()) == 1
+
+
 def test_material_requires_one_source():
     from clothlab.mitsuba.material import load_material
 
