@@ -131,3 +131,13 @@ def test_report_header_names_the_fabric_not_the_winning_preset():
            "selection": {"candidates": []}}
     assert html._header_fabric(fit) == "corduroy (selected weave preset:silk-shantung)"
     assert html._header_fabric({"name": "x", "model": {"weave": "preset:silk-shantung"}}) == "silk-shantung"
+
+
+def test_the_winner_refit_is_never_worse_than_its_row(tmp_path):
+    from clothlab.fit.select import select
+
+    cfg = _config()
+    settings = replace(SETTINGS, nested=0, cv_folds=0)
+    s = select(cfg, settings, fits_dir=tmp_path)
+    assert s.refit["not_worse"] and s.refit["refit_objective"] <= s.ranked[0].row["objective"]
+    assert "refit" in s.summary() and s.summary()["refit"]["candidate_objective"] == s.ranked[0].row["objective"]

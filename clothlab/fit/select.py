@@ -358,7 +358,10 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
             cfg = candidate_config(task.config, cand, max_evals=task.max_evals, cv_folds=task.cv_folds,
                                    orientation=row["orientation_start"])
         row["free"] = " ".join(cfg.fit.free)
-        result = run_fit(cfg, measurement=task.measurement, posterior_progress=False)
+        result = run_fit(replace(cfg, fit=replace(cfg.fit, cv_folds=0)), measurement=task.measurement,
+                         posterior_progress=False)
+        if task.cv_folds >= 2:
+            result.cross_validation = _candidate_cv(result, cfg)
     except ClothlabError as exc:
         row.update(note=f"not fitted: {exc}", wall_time_s=time.perf_counter() - started)
         return CandidateResult(cand, row)
@@ -393,6 +396,22 @@ def fit_candidate(task: CandidateTask) -> CandidateResult:
         held_out = problem.designs([result.params], wi=task.held_out.wi, wo=task.held_out.wo)[0] @ train.coefficients
     return CandidateResult(cand, row, params={n_: float(params[n_]) for n_ in problem.free}, free=problem.free,
                            period=float(period), held_out=held_out)
+
+
+def _candidate_cv(result, cfg) -> dict:
+    """The candidate's cross-validation: each fold repeats the candidate's own search (neutral refit from its
+    start values with the candidate budget ``select.max_evals``, :mod:`clothlab.fit.crossval`), so the score
+    is that of the procedure the candidate ran - not of a longer search (a plain fit's CV refits with
+    :data:`clothlab.fit.crossval.NEUTRAL_EVALS`).  Data too few for the folds: a ``failed`` entry."""
+    from clothlab.fit import crossval
+
+    opt = cfg.fit.optimizer
+    try:
+        return crossval.cross_validate(result.problem, result.params, k=cfg.fit.cv_folds, seed=opt.seed,
+                                       percentiles=cfg.report.percentiles, scheme=cfg.fit.cv_scheme,
+                                       refit=cfg.fit.cv_refit, optimizer=opt, max_evals=opt.max_evals)
+    except crossval.CrossValidationError as exc:
+        return {"k": cfg.fit.cv_folds, "failed": str(exc)}
 
 
 def _fit_like(result) -> dict:
@@ -430,6 +449,7 @@ class Selection:
     wall_time: float
     nested: dict | None = None  # fit.json selection.nested (clothlab.fit.nested)
     free_by_kind: dict = field(default_factory=dict)  # kind -> {fit.free name: what it became} (map_free)
+    refit: dict | None = None  # the winner's refit against its candidate row (refit_check)
 
     def summary(self) -> dict:
         return selection_summary(self)
@@ -445,7 +465,7 @@ def selection_summary(selection: Selection) -> dict:
             "tried": {"weaves": list(s.weaves), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts,
                       **({"losses": list(s.losses)} if s.losses else {}),
                       **({"loss_scales": list(s.loss_scales)} if s.loss_scales else {})},
-            "free_by_kind": selection.free_by_kind,
+            "free_by_kind": selection.free_by_kind, "refit": selection.refit,
             "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time,
             **({"nested": selection.nested} if selection.nested else {})}
 
@@ -514,8 +534,27 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
         for line in nested_lines(nested):
             log.info("select: %s", line.strip())
     winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir, runner=runner)
+    refit = refit_check(best.row, winner)
+    if not refit["not_worse"]:
+        winner.warnings.append(refit["note"])
     return Selection(ranked, winner, settings, time.perf_counter() - started, nested=nested,
-                     free_by_kind=free_by_kind)
+                     free_by_kind=free_by_kind, refit=refit)
+
+
+def refit_check(row: dict, winner) -> dict:
+    """The winner's refit against its candidate row: it starts at the candidate's optimum (which its search
+    screens first, :func:`clothlab.fit.optimize.multistart_minimize`), so its objective is never larger; the
+    in-sample percentiles are listed beside (they need not order as the objective does)."""
+    errors = winner.errors["overall"]
+    fun = float(winner.optimum.fun)
+    worse = row.get("objective") is not None and fun > float(row["objective"]) * (1.0 + 1e-9)
+    out = {"candidate_objective": row.get("objective"), "refit_objective": fun, "not_worse": not worse,
+           "candidate_in_sample": {"p50": row.get("in_sample_p50"), "p80": row.get("in_sample_p80")},
+           "refit_in_sample": {"p50": errors.get("p50"), "p80": errors.get("p80")}}
+    out["note"] = (f"the winner's refit objective {fun:.6g} is WORSE than its candidate row's "
+                   f"{row.get('objective'):.6g}" if worse else
+                   f"the winner's refit objective {fun:.6g} <= its candidate row's {row.get('objective'):.6g}")
+    return out
 
 
 def _short(value) -> str:
@@ -573,6 +612,8 @@ def table_markdown(selection: Selection) -> str:
     for cells in display_rows(r.row for r in selection.ranked):
         lines.append("| " + " | ".join(c.replace("|", "/") for c in cells) + " |")
     lines += free_mapping_lines(selection.free_by_kind)
+    if selection.refit:
+        lines += ["", f"Refit of the winner with the full budget: {selection.refit['note']}."]
     if selection.nested:
         from clothlab.fit.nested import nested_lines
 
