@@ -15,7 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from clothlab.models.jit import njit
 
 PIVOT_MIN = 1e-12
 """Smallest squared Cholesky pivot (unit-norm columns) of a support treated as independent."""

@@ -21,7 +21,7 @@ from clothlab.studies.posterior import COVERAGE_FABRICS, COVERAGE_TARGET, covera
 REDUCED = {"walkers": 16, "steps": 400, "max_steps": 400, "optimizer": {"max_evals": 3000, "starts": 2}}
 """Settings of the live reduced study."""
 FULL = {"walkers": 32, "steps": 1000, "max_steps": 20_000}
-"""Settings of the live full study (``rerun``): 32 walkers, at least 1,000 steps, tau rule, at most 20,000."""
+"""Settings of the live full study (``rerun``): 32 walkers, at least 1,000 steps, the default stopping rule, at most 20,000."""
 
 
 def saved_coverage(fits_dir: Path, fabrics) -> dict | None:
@@ -74,7 +74,7 @@ def run(context) -> dict:
 def lines(c: dict) -> list[str]:
     s = c["settings"]
     steps = (f"{s['steps']} steps" if s["steps"] == s["max_steps"] else
-             f"{s['steps']:,d} to {s['max_steps']:,d} steps by the tau rule")
+             f"{s['steps']:,d} to {s['max_steps']:,d} steps by the stopping rule")
     extra = "; reduced: indicative only" if c.get("reduced") else ""
     if c.get("source"):
         extra += f"; from the {c['source']}"

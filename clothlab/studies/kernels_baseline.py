@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from clothlab.models.irawan.quadrature import (
     ADAPTIVE_MAX_NODES,
@@ -23,6 +22,7 @@ from clothlab.models.irawan.quadrature import (
     unit_rule,
 )
 from clothlab.models.irawan.yarn import staple_path
+from clothlab.models.jit import njit
 
 
 @njit(cache=True, inline="always")

@@ -22,7 +22,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from clothlab.models.jit import njit
 
 # ------------------------------------------------------------------------ spine geometry (sec. 5.3-5.4)
 # Written with numpy ufuncs so that the same functions serve scalars inside the kernels and arrays from

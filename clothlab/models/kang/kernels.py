@@ -43,7 +43,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from clothlab.models.jit import njit
 
 #: scale of the map in units of the lobe's first-order width: lam = LAM_WIDTHS * sigma.
 LAM_WIDTHS = 2.0

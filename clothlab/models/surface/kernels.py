@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from clothlab.models.jit import njit
 
 T_RHO = 2.0  # sec. 3.1: "T rho is always assigned a value of 2 for fabrics"
 
