@@ -21,7 +21,8 @@ from clothlab.studies.posterior import COVERAGE_FABRICS, COVERAGE_TARGET, covera
 REDUCED = {"walkers": 16, "steps": 400, "max_steps": 400, "optimizer": {"max_evals": 3000, "starts": 2}}
 """Settings of the live reduced study."""
 FULL = {"walkers": 32, "steps": 1000, "max_steps": 20_000}
-"""Settings of the live full study (``rerun``): 32 walkers, at least 1,000 steps, the default stopping rule, at most 20,000."""
+"""Settings of the live full study (``rerun``): 32 walkers, at least 1,000 steps, the default stopping rule, at
+most 20,000."""
 
 
 def saved_coverage(fits_dir: Path, fabrics) -> dict | None:
