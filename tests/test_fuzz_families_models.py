@@ -672,6 +672,37 @@ def test_build_model_checks_option_sizes_and_names_the_option(kind, options):
     assert err.value.field == f"model.options.{next(iter(options))}"
 
 
+@pytest.mark.parametrize(("value", "refused"), [("4", False), ("1000000", True), ("true", True)])
+def test_composite_kinds_take_their_specular_parts_options(tmp_path, value, refused):
+    """docs/fabric-yaml.md: a composite's model.options go to its specular part (before: every option was
+    refused as unknown, and the registry accepted unchecked sizes)."""
+    from clothlab.config import load_config
+    from clothlab.fit.problem import build_problem
+
+    (tmp_path / "m.csv").write_text("\n".join(clothlab_lines()) + "\n")
+    path = tmp_path / "fabric.yaml"
+    path.write_text(_option_yaml("kang+oren-nayar", "tile_nodes", value))
+    if refused:
+        with pytest.raises(ConfigError) as err:
+            load_config(path)
+        assert err.value.line == 7 and err.value.field == "model.options.tile_nodes"
+    else:
+        assert build_problem(load_config(path)).model.specular.tile_nodes == int(value)
+
+
+@pytest.mark.parametrize(("options", "field"), [({"weights": 5}, "model.options.weights"),
+                                                ({"refine": "yes"}, "model.options.refine")])
+def test_neural_options_are_checked_by_the_registry(options, field):
+    """A fit directory's recorded options rebuild the model through the registry (before: Path(5) raised a
+    TypeError)."""
+    from clothlab.models.registry import build_model
+    from clothlab.weave.presets import get_preset
+
+    with pytest.raises(ConfigError) as err:
+        build_model("neural", get_preset("cotton-denim"), None, **options)
+    assert err.value.field == field
+
+
 def test_the_largest_documented_tile_nodes_are_accepted():
     from clothlab.models.kang.model import MAX_TILE_NODES as KANG_MAX
     from clothlab.models.registry import build_model

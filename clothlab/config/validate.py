@@ -243,8 +243,9 @@ class _Validator:
         the type of the default where it has one; options the model names in ``path_options`` (files) are
         resolved against the yaml's directory and must exist.  Returns the options so resolved."""
         resolved = copy.deepcopy(options)
-        path_options = getattr(model_class(kind), "path_options", ())
-        declared = {q.name: q.default for q in inspect.signature(model_class(kind).__init__).parameters.values()
+        takes = getattr(model_class(kind), "specular_class", model_class(kind))  # a composite: its specular part
+        path_options = getattr(takes, "path_options", ())
+        declared = {q.name: q.default for q in inspect.signature(takes.__init__).parameters.values()
                     if q.kind == q.KEYWORD_ONLY}
         for name, value in options.items():
             if name not in declared:
@@ -261,7 +262,7 @@ class _Validator:
                 as_number(value, at)
             elif isinstance(default, str):
                 as_str(value, at)
-            check = getattr(model_class(kind), "check_option", None)  # a model's own value check, if it has one
+            check = getattr(takes, "check_option", None)  # a model's own value check, if it has one
             if check is not None:
                 try:
                     check(name, value)
@@ -272,7 +273,7 @@ class _Validator:
                 if not self.is_there(path, need_file=True):
                     raise at.error(f"file not found: {path} (from {value!r}, relative to {self.base_dir})")
                 resolved[name] = str(path)
-        together = getattr(model_class(kind), "check_options", None)  # options that must agree with each other
+        together = getattr(takes, "check_options", None)  # options that must agree with each other
         if together is not None:
             try:
                 together(options)

@@ -145,6 +145,16 @@ class NeuralModel(Model):
         self._pattern = pattern_descriptor(weave, self._encoding.get("pattern_order", 2))  # the encoder's pattern part
 
     @classmethod
+    def check_option(cls, name: str, value) -> None:
+        """ConfigError at ``model.options.<name>``: ``weights`` a path (string) or null, ``refine`` true or false
+        (config validation names the yaml line; a fit directory's recorded options go through it too)."""
+        if name == "weights" and value is not None and not isinstance(value, str | Path):
+            raise ConfigError(f"weights must be the path of a .npz, got {type(value).__name__} {value!r:.40}",
+                              field="model.options.weights")
+        if name == "refine" and not isinstance(value, bool):
+            raise ConfigError(f"refine must be true or false, got {value!r:.40}", field="model.options.refine")
+
+    @classmethod
     def declared_parameters(cls, options: dict | None = None):
         """The declarations of the target kind of ``options["weights"]`` (its sidecar's ``encoding.kind``);
         without weights those of the shipped per-preset networks (Irawan-Marschner)."""
