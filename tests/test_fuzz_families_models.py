@@ -751,6 +751,19 @@ def test_eval_csv_numbers_are_strict_and_bounded(tmp_path, column, token):
     assert err.value.path == str(path) and err.value.line == 3 and err.value.field == column
 
 
+@pytest.mark.parametrize("header", ["theta_i,phi_i,theta_o,phi_o", "theta_i,phi_i,theta_o,phi_o,u,v,footprint"])
+def test_eval_csv_with_only_a_header_is_refused(tmp_path, capsys, header):
+    """Before: a header alone wrote a header alone (exit 0) or, with a footprint column, a TypeError."""
+    from clothlab.cli.main import main
+
+    path = tmp_path / "dirs.csv"
+    path.write_text(f"# directions\n{header}\n")
+    rc = main(["eval", str(REPO / "fits" / "polyester-lining"), str(path), "-o", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and f"{path}:2" in err, err
+    assert not (tmp_path / "out.csv").exists()
+
+
 def test_eval_csv_errors_give_the_physical_line(tmp_path):
     """A quoted field spanning two lines shifts the record count; the error names the file's own line (before:
     the record number)."""

@@ -63,6 +63,9 @@ def read_directions(path) -> dict[str, np.ndarray]:
         raise InputError(f"not a CSV file: {exc}", path=path, line=reader.line_num) from None
     if not rows:
         raise InputError("empty directions file", path=path)
+    if len(rows) == 1:
+        raise InputError("no directions after the header; expected rows theta_i, phi_i, theta_o, phi_o (deg)",
+                         path=path, line=rows[0][0])
     header = [h.strip() for h in rows[0][1]]
     missing = [c for c in ANGLES if c not in header]
     if missing:
