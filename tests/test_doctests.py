@@ -16,6 +16,7 @@ MODULES = (
     "clothlab.frames",
     "clothlab.io.measurement",
     "clothlab.io.table",
+    "clothlab.models.registry",
     "clothlab.fit.metrics",
     "clothlab.fit.nnls",
 )

@@ -35,7 +35,15 @@ def needs_weave(kind: str) -> bool:
 
 
 def model_class(kind: str):
-    """The model class registered as ``kind`` (ConfigError at ``model.kind`` for an unknown one)."""
+    """The model class registered as ``kind`` (ConfigError at ``model.kind`` for an unknown one).
+
+    >>> model_class("kang").__name__, model_class("irawan+lambert").__name__
+    ('KangModel', 'Composite[irawan+lambert]')
+    >>> model_class("phong")
+    Traceback (most recent call last):
+    ...
+    clothlab.errors.ConfigError: field 'model.kind': unknown model kind 'phong'; choose one of irawan, kang, ...
+    """
     try:
         module, name = MODEL_KINDS[kind]
     except KeyError:
@@ -47,7 +55,17 @@ def model_class(kind: str):
 
 
 def build_model(kind: str, weave, quadrature=None, **options):
-    """An instance of the model ``kind`` for ``weave``; ``quadrature`` = (rule, nodes) for integrating models."""
+    """An instance of the model ``kind`` for ``weave``; ``quadrature`` = (rule, nodes) for integrating models.
+
+    >>> from clothlab.weave.presets import get_preset
+    >>> model = build_model("irawan", get_preset("cotton-twill"), ("gauss", 8))
+    >>> model.component_names  # the linear parts whose coefficients a fit solves (kd, ks_warp, ks_weft)
+    ('diffuse', 'specular_warp', 'specular_weft')
+    >>> build_model("irawan", get_preset("cotton-twill"), tile_nodes=3)
+    Traceback (most recent call last):
+    ...
+    clothlab.errors.ConfigError: field 'model.options.tile_nodes': model kind 'irawan' takes no option ...
+    """
     cls = model_class(kind)
     takes_options = getattr(cls, "specular_class", cls)  # a composite passes its options to its specular part
     accepted = [p.name for p in inspect.signature(takes_options.__init__).parameters.values()
