@@ -114,3 +114,26 @@ def test_fit_report_and_report_page_show_the_flags():
     assert "NOT DETERMINED" in text and "ks_warp is 0" in text and "within 2 %" in text
     page = "".join(html._parameter_section(fit))
     assert "not determined" in page and "std. error (Gauss-Newton)" in page
+
+
+def test_the_box_check_recognises_a_warp_weft_swapped_twin():
+    """A point outside the box whose warp/weft-swapped twin (orientation + half a period) is inside with the
+    same objective is another in-box basin, not a bound problem (issue 28: Kang's 'optimum MOVES')."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from clothlab.fit.optimize import _swapped_twin
+
+    def objective(p):  # symmetric under warp <-> weft with the orientation turned by 90 deg
+        a, b = (p["warp.nx"], p["weft.nx"]) if (p["orientation"] % 180.0) < 90.0 else (p["weft.nx"], p["warp.nx"])
+        return SimpleNamespace(objective=(a - 3.0) ** 2 + (b - 40.0) ** 2)
+
+    spec = [SimpleNamespace(name="warp.nx", period=None), SimpleNamespace(name="weft.nx", period=None),
+            SimpleNamespace(name="orientation", period=180.0)]
+    problem = SimpleNamespace(free=("warp.nx", "weft.nx", "orientation"), specs=spec,
+                              lower=np.array([1.0, 1.0, -90.0]), upper=np.array([50.0, 50.0, 90.0]), solve=objective)
+    outside = {"warp.nx": 40.0, "weft.nx": 3.0, "orientation": 100.0}  # orientation beyond the box
+    twin = _swapped_twin(problem, outside, objective(outside).objective)
+    assert twin == {"warp.nx": 3.0, "weft.nx": 40.0, "orientation": 10.0}
+    assert _swapped_twin(problem, outside, objective(outside).objective + 1.0) is None  # not the same value
