@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 
 import numpy as np
 
@@ -189,6 +190,9 @@ def bsdf_class():
             self.m_components = [self.m_flags]
             self.calls = 0  # model calls (for the batching measurements)
             self.lanes = 0
+            # scalar variants call the plugin from Mitsuba's render threads; clothlab's models keep per-instance
+            # memos and are not shared between threads (models.base), so calls into them are serialised
+            self.lock = threading.RLock()
 
         # ------------------------------------------------------------------------------------ geometry
 
@@ -251,10 +255,15 @@ def bsdf_class():
 
         def _values(self, si, wi, wo):
             u, v = self._texture_point(si, len(wi)) if self.material.policy != "reflectance" else (None, None)
-            self.calls += 1
-            self.lanes += len(wi)
-            f = self.material.values(wi, wo, u, v, self._footprint(si, len(wi)))
-            return f
+            footprint = self._footprint(si, len(wi))
+            with self.lock:
+                self.calls += 1
+                self.lanes += len(wi)
+                return self.material.values(wi, wo, u, v, footprint)
+
+        def _pdf(self, view, other):
+            with self.lock:
+                return self.material.sampler().pdf(view, other)
 
         def _spectrum(self, rgb):
             if mono:
@@ -283,7 +292,7 @@ def bsdf_class():
                 return to_float(np.zeros(n))
             _, _, view = self._pair(ctx, si, wo, n)
             other = self._to_fabric(npv(wo, n))
-            return dr.select(active, to_float(self.material.sampler().pdf(view, other)), 0.0)
+            return dr.select(active, to_float(self._pdf(view, other)), 0.0)
 
         def eval_pdf(self, ctx, si, wo, active=True):
             n = lanes(si, wo)
@@ -292,7 +301,7 @@ def bsdf_class():
             wi_f, wo_f, view = self._pair(ctx, si, wo, n)
             other = self._to_fabric(npv(wo, n))
             f = self._values(si, wi_f, wo_f) * np.abs(npv(wo, n)[:, 2])[:, None]
-            pdf = self.material.sampler().pdf(view, other)
+            pdf = self._pdf(view, other)
             return dr.select(active, self._spectrum(f), 0.0), dr.select(active, to_float(pdf), 0.0)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
@@ -301,7 +310,8 @@ def bsdf_class():
             u1 = np1(sample1, n)
             u2 = npv(sample2, n, 2)
             if self._enabled(ctx):
-                w, pdf = self.material.sampler().sample(view, u1, u2)
+                with self.lock:
+                    w, pdf = self.material.sampler().sample(view, u1, u2)
             else:
                 w, pdf = np.tile([0.0, 0.0, 1.0], (n, 1)), np.zeros(n)
             importance = ctx.mode == mi.TransportMode.Importance
