@@ -44,6 +44,9 @@ def add_selection_options(p) -> None:
     p.add_argument("--loss-scales", metavar="LIST",
                    help="comma-separated scales of the huber / cauchy candidates, in the metric's units (0.1 = 10 %%; "
                         "default fit.loss_scale)")
+    p.add_argument("--stability", type=count_type(0, 1000), metavar="B",
+                   help="selection stability: the selection repeated on B seeded subsamples of 80 %% of the rows; "
+                        "how often each weave, kind, loss and orientation range wins (about B more selections)")
     p.add_argument("--nested", type=count_type(0, 100), metavar="K",
                    help="nested cross-validation with K outer folds (K >= 2; 0: none, the default): the whole "
                         "selection repeated inside each outer fold; its outer held-out error is the figure of the "
@@ -106,7 +109,8 @@ def _settings(cfg, args):
                               field=flag)
     settings = settings_from_config(cfg, weaves=weaves, kinds=kinds, orientation_starts=args.orientation_starts,
                                     max_evals=args.candidate_evals, cv_folds=args.candidate_cv,
-                                    nested=getattr(args, "nested", None), losses=losses, loss_scales=scales)
+                                    nested=getattr(args, "nested", None), losses=losses, loss_scales=scales,
+                                    stability=getattr(args, "stability", None))
     check_settings(settings, cfg.base_dir)  # every weave reads, before any candidate is fitted
     return settings
 

@@ -115,7 +115,8 @@ def nested_cross_validation(config, measurement, k: int, *, candidate_list, make
         test = labels == fold
         entry = {"fold": fold, "n_train": int((~test).sum()), "n_test": int(test.sum()),
                  "winner": best.row["candidate"], "weave": best.row["weave"], "kind": best.row["kind"],
-                 "loss": best.row.get("loss"), "orientation": best.row.get("orientation"),
+                 "loss": best.row.get("loss"), "loss_scale": best.row.get("loss_scale"),
+                 "orientation": best.row.get("orientation"),
                  "selection_score": _score(best.row), "runner_up": ranked[1].row["candidate"] if len(ranked) > 1
                  else None}
         if best.held_out is None:

@@ -110,6 +110,7 @@ class SelectSettings:
     nested: int = 0  # outer folds of the nested cross-validation (clothlab.fit.nested); 0: none
     losses: tuple = ()  # candidate losses (clothlab.fit.loss); empty: fabric.yaml's fit.loss only
     loss_scales: tuple = ()  # scales tried for huber / cauchy (the CV ranking chooses); empty: fit.loss_scale
+    stability: int = 0  # subsamples of the selection-stability check (clothlab.fit.stability); 0: none
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,8 @@ class CandidateResult:
 
 
 def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=None, max_evals=None,
-                         cv_folds=None, nested=None, losses=None, loss_scales=None) -> SelectSettings:
+                         cv_folds=None, nested=None, losses=None, loss_scales=None,
+                         stability=None) -> SelectSettings:
     """The :class:`SelectSettings` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
     with the given values (command-line options) replacing it."""
     sel = config.select
@@ -151,7 +153,8 @@ def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=
                           nested=int(getattr(sel, "nested", 0) if nested is None else nested),
                           losses=tuple(losses if losses is not None else getattr(sel, "losses", ())),
                           loss_scales=tuple(float(x) for x in (loss_scales if loss_scales is not None
-                                                               else getattr(sel, "loss_scales", ()))))
+                                                               else getattr(sel, "loss_scales", ()))),
+                          stability=int(getattr(sel, "stability", 0) if stability is None else stability))
 
 
 def check_settings(settings: SelectSettings, base_dir=".") -> None:
@@ -450,6 +453,7 @@ class Selection:
     nested: dict | None = None  # fit.json selection.nested (clothlab.fit.nested)
     free_by_kind: dict = field(default_factory=dict)  # kind -> {fit.free name: what it became} (map_free)
     refit: dict | None = None  # the winner's refit against its candidate row (refit_check)
+    stability: dict | None = None  # fit.json selection.stability (clothlab.fit.stability)
 
     def summary(self) -> dict:
         return selection_summary(self)
@@ -467,7 +471,8 @@ def selection_summary(selection: Selection) -> dict:
                       **({"loss_scales": list(s.loss_scales)} if s.loss_scales else {})},
             "free_by_kind": selection.free_by_kind, "refit": selection.refit,
             "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time,
-            **({"nested": selection.nested} if selection.nested else {})}
+            **({"nested": selection.nested} if selection.nested else {}),
+            **({"stability": selection.stability} if selection.stability else {})}
 
 
 def select(config, settings: SelectSettings | None = None, *, measurement=None, run_task=None,
@@ -533,12 +538,25 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
             run_task=run_task, rank=rank, runner=runner, full_winner=best.row)
         for line in nested_lines(nested):
             log.info("select: %s", line.strip())
+    stab = None
+    if settings.stability >= 1:  # the selection on seeded subsamples of the rows (clothlab.fit.stability)
+        from clothlab.fit.stability import stability, stability_lines
+
+        log.info("select: stability, %d subsamples x %d candidates", settings.stability, len(tasks))
+        stab = stability(measurement, settings.stability, seed=config.fit.optimizer.seed,
+                         candidate_list=[t.candidate for t in tasks],
+                         make_task=lambda b, c, rows: CandidateTask(config, c, settings.max_evals, settings.cv_folds,
+                                                                    rows),
+                         run_task=run_task, rank=rank, runner=runner, nested=nested,
+                         periods={k: orientation_span(k) for k in settings.kinds})
+        for line in stability_lines(stab):
+            log.info("select: %s", line.strip())
     winner = run_fit(winner_cfg, measurement=measurement, fits_dir=fits_dir, runner=runner)
     refit = refit_check(best.row, winner)
     if not refit["not_worse"]:
         winner.warnings.append(refit["note"])
     return Selection(ranked, winner, settings, time.perf_counter() - started, nested=nested,
-                     free_by_kind=free_by_kind, refit=refit)
+                     free_by_kind=free_by_kind, refit=refit, stability=stab)
 
 
 def refit_check(row: dict, winner) -> dict:
@@ -618,6 +636,10 @@ def table_markdown(selection: Selection) -> str:
         from clothlab.fit.nested import nested_lines
 
         lines += [""] + nested_lines(selection.nested)
+    if selection.stability:
+        from clothlab.fit.stability import stability_lines
+
+        lines += [""] + stability_lines(selection.stability)
     return "\n".join(lines) + "\n"
 
 

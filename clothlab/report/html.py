@@ -349,7 +349,27 @@ def _selection_section(fit: dict) -> list[str]:
         parts = [f"{esc(k)}: {esc(', '.join(map(str, v)) if isinstance(v, list) else v)}" for k, v in tried.items()]
         parts += [f"{esc(k)} {esc(v)}" for k, v in budget.items()]
         out.append(f'<p class="note">Candidates tried - {"; ".join(parts)} (per candidate).</p>')
-    return out + [_table([esc(h) for h in DISPLAY_HEAD], cells)] + _nested_section(selection.get("nested"))
+    return (out + [_table([esc(h) for h in DISPLAY_HEAD], cells)] + _nested_section(selection.get("nested"))
+            + _stability_section(selection.get("stability")))
+
+
+def _stability_section(stab) -> list[str]:
+    """fit.json ``selection.stability`` (:mod:`clothlab.fit.stability`): how often each weave, kind, loss and
+    orientation range won on the subsamples (and the nested CV's outer folds), with the verdict per aspect."""
+    if not isinstance(stab, dict) or not isinstance(stab.get("counts"), dict):
+        return []
+    rows = []
+    sources = (("subsamples", stab.get("counts"), stab.get("verdict") or {}),
+               ("nested outer folds", stab.get("nested_counts"), stab.get("nested_verdict") or {}))
+    for source, counts, verdicts in sources:
+        for aspect, c in (counts or {}).items():
+            if not isinstance(c, dict) or not c:
+                continue
+            text = str(verdicts.get(aspect, ""))
+            cell = f'<span class="warn">{esc(text)}</span>' if text.startswith("NOT DETERMINED") else esc(text)
+            rows.append([esc(source), esc(aspect), esc(", ".join(f"{v} {n}" for v, n in c.items())), cell])
+    return ["<h3>Selection stability</h3>", f'<p class="note">{esc(stab.get("rule", ""))}.</p>',
+            _table(["repetitions", "aspect", "wins", "verdict"], rows)]
 
 
 def model_error_for_floor(fit: dict, errors: dict) -> tuple[dict, str]:
