@@ -188,6 +188,26 @@ def test_reciprocity(llvm, kind):
     assert reciprocity_check(plugin_dict(preset="cotton-denim", kind=kind), n=400) < 1e-4
 
 
+def test_importance_transport_is_the_adjoint(llvm):
+    """In importance transport si.wi is the light side: eval_importance(a, b) / cos b = eval_radiance(b, a) / cos a,
+    checked on the non-reciprocal kind (neural), where swapping the roles changes the value."""
+    import mitsuba as mi
+
+    from clothlab.mitsuba.checks import _rgb, _si, _vec, plugin_dict
+
+    plugin = mi.load_dict(plugin_dict(preset="cotton-denim", kind="neural", lod="reflectance"))
+    rng = np.random.default_rng(11)
+    z = rng.uniform(0.2, 1.0, (2, 200))
+    p = rng.uniform(0.0, 2 * math.pi, (2, 200))
+    a, b = (np.stack([np.sqrt(1 - z[k] ** 2) * np.cos(p[k]), np.sqrt(1 - z[k] ** 2) * np.sin(p[k]), z[k]], axis=1)
+            for k in (0, 1))
+    radiance = _rgb(plugin.eval(mi.BSDFContext(), _si(200, b), _vec(a))) / a[:, 2:3]
+    importance = _rgb(plugin.eval(mi.BSDFContext(mi.TransportMode.Importance), _si(200, a), _vec(b))) / b[:, 2:3]
+    swapped = _rgb(plugin.eval(mi.BSDFContext(), _si(200, a), _vec(b))) / b[:, 2:3]
+    assert np.allclose(importance, radiance, rtol=1e-5)
+    assert not np.allclose(swapped, radiance, rtol=1e-2)
+
+
 def _scene(position, resolution, spp, fabric=None, fov=30, size=2000):
     """A flat patch large enough that no pixel sees its edge (an edge pixel's coverage depends on where its
     samples fall, which differs between the two renderers' samplers)."""

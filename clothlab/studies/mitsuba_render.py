@@ -12,13 +12,13 @@ import numpy as np
 ANGLES = (0.0, 30.0, 60.0, 80.0, 87.0)
 
 
-def _scene(position, resolution, spp, fov=30.0):
+def _scene(position, resolution, spp, fov=30.0, light=None):
     from clothlab.render import scene_from_dict
 
     return scene_from_dict({
         "patch": {"shape": "flat", "size_mm": [2000, 2000], "tile_mm": [1.0, 2.0], "warp_angle_deg": 20},
         "camera": {"position": list(position), "look_at": [0, 0, 0], "fov_deg": fov, "resolution": list(resolution)},
-        "light": {"type": "directional", "direction": [0.3, -0.2, 1], "intensity": 1.0},
+        "light": light or {"type": "directional", "direction": [0.3, -0.2, 1], "intensity": 1.0},
         "fabric": {"weave": "preset:cotton-denim"}, "render": {"spp": spp}}, base_dir=".")
 
 
@@ -42,6 +42,7 @@ def _parity(scene, shader, variant, repeats: int = 3):
     rel = np.abs(b.image[mask] - a.image[mask]) / np.maximum(np.abs(a.image[mask]), 1e-30)
     width, height = scene.camera.resolution
     return {"shader": shader, "variant": variant, "spp": scene.spp, "size": f"{width}x{height}",
+            "light": scene.light.type,
             "clothlab_seconds": t_clothlab, "mitsuba_seconds": t_mitsuba, "mitsuba_render_seconds": t_render,
             "plugin_calls": b.stats["plugin_calls"], "repeats": repeats,
             "mean_relative": float(rel.mean()), "p99_relative": float(np.percentile(rel, 99))}
@@ -64,7 +65,9 @@ def mitsuba_study(quick: bool) -> dict:
     cases = [(_scene([0, -300, 300], (48, 36) if big else (16, 12), 4), "im-reflectance"),
              (_scene([0, -6, 6], (48, 36) if big else (16, 12), 256 if big else 64, fov=30.0 if big else 10.0),
               "im-texture"),
-             (_scene([0, -60, 60], (48, 36) if big else (16, 12), 16), "im-lod")]
+             (_scene([0, -60, 60], (48, 36) if big else (16, 12), 16), "im-lod"),
+             (_scene([0, -60, 60], (48, 36) if big else (16, 12), 16,
+                     light={"type": "point", "position": [10, -20, 50], "intensity": 0.002}), "im-lod")]
     rows = [_parity(scene, shader, variant, repeats=3 if big else 1) for scene, shader in cases]
     if variant != "scalar_rgb":  # the scalar variant on a small scene: one plugin call per sample
         rows.append(_parity(_scene([0, -60, 60], (16, 12), 4), "im-lod", "scalar_rgb", repeats=1))
@@ -95,7 +98,7 @@ def lines(result: dict) -> list[str]:
         return out + [f"  skipped: {result['skipped']}"]
     out.append(f"  variant {result['variant']}" + (f" ({result['variant_note']})" if result["variant_note"] else ""))
     for r in result["parity"]:
-        out.append(f"  {r['shader']:<15} {r['size']} px {r['spp']:>4} spp: "
+        out.append(f"  {r['shader']:<15} {r.get('light', 'directional'):<11} {r['size']} px {r['spp']:>4} spp: "
                    f"clothlab render {r['clothlab_seconds']:.2f} s, "
                    f"Mitsuba {r['mitsuba_seconds']:.2f} s (render {r['mitsuba_render_seconds']:.2f} s, "
                    f"{r['plugin_calls']} plugin calls); per pixel mean {100 * r['mean_relative']:.2f} %, "
