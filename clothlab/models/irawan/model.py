@@ -192,17 +192,18 @@ class IrawanModel(Model):
                             "front": (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0), "terms": {}}
         return self._directions
 
-    def _yarn_terms(self, wi, wo, kind) -> YarnTerms:
-        """The parameter-free part of I_j at (wi, wo) (:meth:`_at`)."""
-        terms = self._at(wi, wo)["terms"]
+    def _yarn_terms(self, wi, wo, kind, at: dict | None = None) -> YarnTerms:
+        """The parameter-free part of I_j at (wi, wo) (:meth:`_at`; ``at``: its result for these directions,
+        if already looked up in this call)."""
+        terms = (self._at(wi, wo) if at is None else at)["terms"]
         if kind not in terms:
             terms[kind] = yarn_terms(wi, wo, kind, self.quadrature)
         return terms[kind]
 
-    def _integrals(self, wi, wo, resolved: list[dict], kind) -> np.ndarray:
+    def _integrals(self, wi, wo, resolved: list[dict], kind, at: dict | None = None) -> np.ndarray:
         """I_j (J, N) for J resolved parameter sets.  One set's I_j is remembered (the last few geometries at
         these directions), so a fit varying only alpha / beta computes it once; batches are not memoised."""
-        terms = self._yarn_terms(wi, wo, kind)
+        terms = self._yarn_terms(wi, wo, kind, at)
         if len(resolved) != 1:
             return yarn_integrals(terms, np.array([yarn_geometry_key(p, kind) for p in resolved]), self.quadrature,
                                   self.filament_arc)
@@ -276,7 +277,7 @@ class IrawanModel(Model):
                 alpha = np.array([p["alpha"] for p in resolved])[:, None]
                 beta = np.array([p["beta"] for p in resolved])[:, None]
                 phase = alpha + von_mises(at["cos_x"][None, :], beta)
-            value = phase * self._integrals(wi, wo, resolved, kind)
+            value = phase * self._integrals(wi, wo, resolved, kind, at)  # the directions compared once
             if normalised:
                 for j, p in enumerate(resolved):
                     albedo = specular_albedo(p, kind, self.quadrature, filament_arc=self.filament_arc)
