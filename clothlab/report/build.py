@@ -246,6 +246,21 @@ def noise_floor_of(record: FitRecord) -> dict | None:
     return noise_floor(p["theta_i"], p["phi_i"], p["theta_o"], p["phi_o"], values)
 
 
+def residual_diagnostics_of(record: FitRecord) -> dict | None:
+    """The binned residuals of predictions.csv against the geometry (:mod:`clothlab.fit.residuals`), or None
+    when the table lacks the columns."""
+    from clothlab.fit.residuals import diagnostics
+
+    p = record.predictions
+    measured = [f"measured_{c}" for c in record.channels]
+    model = [f"model_{c}" for c in record.channels]
+    if not all(k in p for k in ("theta_i", "phi_i", "theta_o", "phi_o", *measured, *model)):
+        return None
+    y = np.stack([np.asarray(p[c], dtype=np.float64) for c in measured], axis=1)
+    m = np.stack([np.asarray(p[c], dtype=np.float64) for c in model], axis=1)
+    return diagnostics(p["theta_i"], p["phi_i"], p["theta_o"], p["phi_o"], y, m)
+
+
 def _write_page(tmp: Path, record: FitRecord, figures: dict, errors: dict, notes: list, percentiles,
                 layout: SamplingLayout) -> None:
     """summary.json and index.html of one fit's report in ``tmp``."""
@@ -277,12 +292,14 @@ def _write_page(tmp: Path, record: FitRecord, figures: dict, errors: dict, notes
         "sampling": {"kind": layout.kind, "reason": layout.reason},
         "selection": selection_rows(fit),
         "noise_floor": noise_floor_of(record),
+        "residual_diagnostics": residual_diagnostics_of(record),
     }
     (tmp / "summary.json").write_text(
         json.dumps(_finite_json(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
     page = html.render_report_html(fit, figures, {"errors": errors, "percentiles": percentiles,
                                                   "notes": notes, "posterior": record.posterior,
-                                                  "sampling": layout, "noise_floor": summary["noise_floor"]})
+                                                  "sampling": layout, "noise_floor": summary["noise_floor"],
+                                                  "residual_diagnostics": summary["residual_diagnostics"]})
     (tmp / "index.html").write_text(page, encoding="utf-8")
 
 

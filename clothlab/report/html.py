@@ -384,6 +384,35 @@ def model_error_for_floor(fit: dict, errors: dict) -> tuple[dict, str]:
     return (errors or {}).get("overall") or {}, "in-sample"
 
 
+def _residual_section(diag) -> list[str]:
+    """The residuals binned against the geometry a missing term would follow (:mod:`clothlab.fit.residuals`):
+    per feature and bin the median signed relative residual and the p80-tail enrichment; the worst rows."""
+    from clothlab.fit.residuals import summary_sentence
+
+    if not isinstance(diag, dict) or not isinstance(diag.get("features"), dict):
+        return []
+    rows = []
+    for name, entry in diag["features"].items():
+        cells = []
+        for b in entry.get("bins") or []:
+            if not b.get("n"):
+                cells.append("—")
+                continue
+            text = f"{100 * b['median_r']:+.1f} % ({b['n']}; tail {b['enrichment']:.1f} x)"
+            cells.append(f'<span class="warn">{esc(text)}</span>' if (b.get("enrichment") or 0) > 1.5 and
+                         b["n"] >= 5 else esc(text))
+        edges = ", ".join(f"{b['lo']:g}-{b['hi']:g}" for b in entry.get("bins") or [])
+        rows.append([f"{esc(entry.get('label', name))}<br><small>bins {esc(edges)} deg</small>", *cells])
+    width = max((len(r) for r in rows), default=1)
+    rows = [r + [""] * (width - len(r)) for r in rows]
+    worst = ", ".join(f"({w['theta_i']:.0f}, {w['phi_i']:.0f}) -> ({w['theta_o']:.0f}, {w['phi_o']:.0f}) "
+                      f"{100 * w['r']:+.0f} %" for w in diag.get("worst") or [])
+    return ["<h3>Residual diagnostics</h3>", f'<p class="note">{esc(summary_sentence(diag))}.  {esc(diag["rule"])}; '
+            "each cell: median (model − measured) / measured in the bin (rows; tail enrichment).</p>",
+            _table(["feature", *[f"bin {i + 1}" for i in range(width - 1)]], rows),
+            f'<p class="note">Worst rows (theta_i, phi_i) -&gt; (theta_o, phi_o) deg, signed error: {esc(worst)}.</p>']
+
+
 def _noise_floor_section(fit: dict, floor, errors: dict) -> list[str]:
     """The measurement's own scatter next to the model's error (:mod:`clothlab.fit.noise_floor`), or the
     statement that this table has no repeated or reciprocal pairs to estimate it from."""
@@ -510,6 +539,7 @@ def render_report_html(fit: dict, figures: dict, tables: dict) -> str:
     body = _header_section(fit, sampling)
     body += _error_section(fit, tables["errors"], percentiles)
     body += _noise_floor_section(fit, tables.get("noise_floor"), tables["errors"])
+    body += _residual_section(tables.get("residual_diagnostics"))
     body += _selection_section(fit)
     body += _parameter_section(fit)
     body += _coefficient_section(fit)
