@@ -14,7 +14,12 @@ Policy (the renderer's, by what the model can do; :class:`clothlab.models.base.M
 - ``lod`` = ``texture`` / ``reflectance`` force one model (im-texture / im-reflectance).
 
 Directions are clothlab's fabric frame (z normal, y warp, x weft; docs/design.md principle 1) with
-``wi`` towards the light and ``wo`` towards the viewer, as every clothlab model takes them.
+``wi`` towards the light and ``wo`` towards the viewer, as every clothlab model takes them.  A parameter
+``orientation`` (the weave turned about the normal, :mod:`clothlab.models.base`) is taken out of the parameters
+and applied here to both models: the directions are turned into the weave's frame
+(:func:`clothlab.frames.to_weave_frame`), and texture points (u, v) are the weave's own tile coordinates (the
+plugin turns its uv frame by the orientation), so the texture model - which refuses an orientation itself -
+and the reflectance model see the same weave.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ class ClothMaterial:
     lod: str = "auto"
     noise: bool = True
     source: str = ""
+    orientation: float = 0.0
     _sampler: object = field(default=None, repr=False)
 
     @property
@@ -72,7 +78,7 @@ class ClothMaterial:
         return combine(comps, self.coefficients)
 
     def reflectance_values(self, wi, wo) -> np.ndarray:
-        """f_r (N, C) of the tile-averaged model at fabric-frame wi (to the light), wo (to the viewer)."""
+        """f_r (N, C) of the tile-averaged model at weave-frame wi (to the light), wo (to the viewer)."""
         if not self.need or len(wi) == 0:
             return np.zeros((len(wi), len(self.channels)))
         comps = self.reflectance.components(wi, wo, self.params, need=self.need, warn=False)
@@ -91,17 +97,21 @@ class ClothMaterial:
             comps = self.texture.components(u, v, wi, wo, self.params, need=self.need, noise=self.noise, warn=False)
         return self._combine(comps, len(wi))
 
-    def values(self, wi, wo, u=None, v=None, footprint=None) -> np.ndarray:
+    def values(self, wi, wo, u=None, v=None, footprint=None, *, lod_override=None) -> np.ndarray:
         """f_r (N, C) >= 0 by the policy (module docstring); 0 where wi_z <= 0 or wo_z <= 0 (reflection only).
         ``u``, ``v`` texture coordinates (tiles), ``footprint`` the pixel footprint (tiles; None: 0)."""
         wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+        if self.orientation != 0.0:
+            from clothlab.frames import to_weave_frame
+
+            wi, wo = to_weave_frame(wi, self.orientation), to_weave_frame(wo, self.orientation)
         n = len(wi)
         out = np.zeros((n, len(self.channels)))
         front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
         if front.size == 0:
             return out
-        policy = self.policy
+        policy = lod_override or self.policy
         if policy == "reflectance":
             out[front] = self.reflectance_values(wi[front], wo[front])
             return out
@@ -130,7 +140,7 @@ class ClothMaterial:
         if self._sampler is None:
             from clothlab.mitsuba.sampling import LobeSampler
 
-            self._sampler = LobeSampler(lambda wi, wo: self.reflectance_values(wi, wo).mean(axis=1))
+            self._sampler = LobeSampler(lambda wi, wo: self.values(wi, wo, lod_override="reflectance").mean(axis=1))
         return self._sampler
 
 
@@ -171,15 +181,18 @@ def material_from_model(model, params, coefficients, channels, *, lod: str = "au
         raise ConfigError(f"expected 0 < f0 < f1, got f0 = {f0:g}, f1 = {f1:g}", field="f1")
     channels = tuple(channels)
     coefficients = _coefficients_for(model, coefficients, channels)
+    from clothlab.models.base import split_orientation
+
     resolved = model.resolve(params)  # validates (ParameterError names the parameter)
+    resolved, orientation = split_orientation(resolved)
     texture = None
     if model.has_texture and lod != "reflectance":
         texture = model.texture(seed=seed)
         if not model.texture_filters:
-            texture.resolve(resolved)  # refuses an orientation the texture model cannot take, before rendering
+            texture.resolve(resolved)  # validates before rendering (orientation was taken out above)
     need = _needed(model, coefficients, model.weave, model.component_names)
     return ClothMaterial(model, texture, resolved, coefficients, channels, need, f0=f0, f1=f1, lod=lod,
-                         noise=noise, source=source)
+                         noise=noise, source=source, orientation=orientation)
 
 
 def load_material(*, fit=None, preset=None, kind=None, lod: str = "auto", f0: float = 0.1, f1: float = 0.5,

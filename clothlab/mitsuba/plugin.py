@@ -22,7 +22,9 @@ Plugin properties (all optional except one of ``fit`` / ``preset`` / ``material`
 Frame convention (docs/mitsuba.md, figure there).  Mitsuba's shading frame (s = dp/du, t = n x s, n) with the
 weave rotated by ``warp_angle_deg`` = a about n: weft x_f = cos a s + sin a t, warp y_f = cos a t - sin a s,
 z_f = n, exactly the flat patch of :mod:`clothlab.render.geometry`; texture coordinates (tiles)
-u = (S cos a + T sin a) / tu, v = (-S sin a + T cos a) / tv with S = (uv.x - 0.5) sx, T = (uv.y - 0.5) sy.
+u = (S cos b + T sin b) / tu, v = (-S sin b + T cos b) / tv with S = (uv.x - 0.5) sx, T = (uv.y - 0.5) sy and
+b = a + the fit's ``orientation`` (the weave's own tile frame; the models see the directions turned by the
+orientation, :mod:`clothlab.mitsuba.material`).
 In radiance transport Mitsuba's ``si.wi`` (towards the camera) is clothlab's ``wo`` and the queried ``wo``
 (towards the light) is clothlab's ``wi``; in importance transport the roles swap (the adjoint BSDF).
 ``eval`` returns f_r |cos theta| (Mitsuba's convention) and is zero unless both directions lie above n.
@@ -167,8 +169,12 @@ def bsdf_class():
             self.tile = _vector(props, "tile_mm", 2, (1.0, 1.0))
             if np.any(self.tile <= 0.0):
                 raise ConfigError(f"expected positive tile_mm, got {self.tile.tolist()}", field="tile_mm")
-            angle = math.radians(float(props.get("warp_angle_deg", 0.0)) if "warp_angle_deg" in props else 0.0)
+            degrees = float(props.get("warp_angle_deg", 0.0)) if "warp_angle_deg" in props else 0.0
+            angle = math.radians(degrees)
             self.cos_a, self.sin_a = math.cos(angle), math.sin(angle)
+            # texture coordinates: the weave's own tile frame, turned further by the fit's orientation
+            tile_angle = math.radians(degrees + self.material.orientation)
+            self.cos_t, self.sin_t = math.cos(tile_angle), math.sin(tile_angle)
             self.footprint_scale = float(props.get("footprint_scale", 1.0)) if "footprint_scale" in props else 1.0
             self.camera = None
             if "camera_origin" in props:
@@ -207,7 +213,7 @@ def bsdf_class():
         def _tiles(self, duv):
             """uv offsets (N, 2) -> texture-coordinate offsets (tiles) (N, 2)."""
             ds, dt = duv[:, 0] * self.uv_size[0], duv[:, 1] * self.uv_size[1]
-            c, s = self.cos_a, self.sin_a
+            c, s = self.cos_t, self.sin_t
             return np.stack([(ds * c + dt * s) / self.tile[0], (-ds * s + dt * c) / self.tile[1]], axis=1)
 
         def _texture_point(self, si, n):
@@ -222,8 +228,8 @@ def bsdf_class():
                 eye, forward, right, down, scale = self.camera
                 p, frame = npv(si.p, n), si.sh_frame
                 s_w, t_w, n_w = npv(frame.s, n), npv(frame.t, n), npv(frame.n, n)
-                c, sn = self.cos_a, self.sin_a
-                weft, warp = c * s_w + sn * t_w, c * t_w - sn * s_w
+                c, sn = self.cos_t, self.sin_t
+                weft, warp = c * s_w + sn * t_w, c * t_w - sn * s_w  # the weave's tile axes
                 d = p - eye
                 depth = d @ forward
                 x, y = (d @ right) / depth, (d @ down) / depth
