@@ -66,6 +66,8 @@ def mitsuba_study(quick: bool) -> dict:
              (_scene([0, -6, 6], (48, 36) if big else (16, 12), 256 if big else 64, fov=30.0 if big else 10.0),
               "im-texture"),
              (_scene([0, -60, 60], (48, 36) if big else (16, 12), 16), "im-lod"),
+             (_scene([0, -8, 5], (48, 36) if big else (16, 12), 256 if big else 64, fov=30.0 if big else 10.0),
+              "im-lod"),  # footprint 0.1-0.5 tile: texture, blend and reflectance pixels
              (_scene([0, -60, 60], (48, 36) if big else (16, 12), 16,
                      light={"type": "point", "position": [10, -20, 50], "intensity": 0.002}), "im-lod")]
     rows = [_parity(scene, shader, variant, repeats=3 if big else 1) for scene, shader in cases]
@@ -98,7 +100,8 @@ def lines(result: dict) -> list[str]:
         return out + [f"  skipped: {result['skipped']}"]
     out.append(f"  variant {result['variant']}" + (f" ({result['variant_note']})" if result["variant_note"] else ""))
     for r in result["parity"]:
-        out.append(f"  {r['shader']:<15} {r.get('light', 'directional'):<11} {r['size']} px {r['spp']:>4} spp: "
+        out.append(f"  {r['shader']:<15} {r['variant']:<12} {r.get('light', 'directional'):<11} {r['size']} px "
+                   f"{r['spp']:>4} spp: "
                    f"clothlab render {r['clothlab_seconds']:.2f} s, "
                    f"Mitsuba {r['mitsuba_seconds']:.2f} s (render {r['mitsuba_render_seconds']:.2f} s, "
                    f"{r['plugin_calls']} plugin calls); per pixel mean {100 * r['mean_relative']:.2f} %, "
