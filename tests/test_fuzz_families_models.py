@@ -253,6 +253,51 @@ def test_fuzz_sidecar(tmp_path):
     assert counts["refused (named)"] > 0
 
 
+FAMILY = REPO / "clothlab/models/neural/data/families/surface-table2.npz"
+FAMILY_PATHS = [p for p, _ in _leaves(json.loads(FAMILY.with_suffix(".json").read_text()))
+                if not (p and p[0] == "metrics")]
+
+
+def test_fuzz_sidecar_multi_material(tmp_path):
+    """The same over a network of several weaves and materials (materials_params, held-out rows, weaves_wv,
+    materials_weave, probe points): a named refusal, or a surrogate whose materials and latents are finite
+    and shaped as its sidecar says (the model's query is checked by test_fuzz_sidecar)."""
+    from clothlab.models.neural.model import read_sidecar
+    from clothlab.neural.serialise import load_surrogate, materials_count
+    from clothlab.neural.threads import one_blas_thread
+
+    npz = tmp_path / "f.npz"
+    shutil.copy(FAMILY, npz)
+    sidecar = npz.with_suffix(".json")
+    doc = json.loads(FAMILY.with_suffix(".json").read_text())
+    counts = collections.Counter()
+
+    @SETTINGS
+    @given(path=st.sampled_from(FAMILY_PATHS), op=st.sampled_from(["delete", "set", "set"]),
+           value=st.one_of(st.sampled_from(SIDECAR_VALUES), st.integers(-2, 300), st.text(max_size=8)))
+    def run(path, op, value):
+        if op == "delete" and not path:
+            op = "set"
+        sidecar.write_text(json.dumps(_mutate(doc, path, op, value), indent=1))  # as written (no 64 K lines)
+        try:
+            checked = read_sidecar(npz, as_config=False)
+            surrogate, _ = load_surrogate(npz)
+        except ClothlabError as exc:
+            check_named(exc, sidecar, npz)
+            counts["refused (named)"] += 1
+            return
+        counts["accepted (valid)"] += 1
+        rows = materials_count(checked["encoding"])
+        assert surrogate.materials.shape == (rows, checked["architecture"]["n_material"])
+        with one_blas_thread():  # fusion_biases encodes outside the inference's thread limit
+            assert np.isfinite(surrogate.fusion_biases()).all()
+        assert all(0 <= i < rows for i in surrogate.trained_rows())
+
+    run()
+    report("sidecar .json (several weaves)", counts)
+    assert counts["refused (named)"] > 0
+
+
 # ---------------------------------------------------------------------------------------------------------
 # Model options in fabric.yaml
 

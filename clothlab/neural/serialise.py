@@ -13,6 +13,7 @@ ignored (metrics and notes of later versions)."""
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 import math
@@ -25,6 +26,7 @@ from clothlab.errors import InputError
 from clothlab.neural.encodings import n_direction_features, n_yarn_features
 from clothlab.neural.network import Architecture, SurrogateNetwork
 from clothlab.neural.surrogate import Surrogate
+from clothlab.neural.threads import one_blas_thread
 from clothlab.strict import MAX_YAML_BYTES, NPY_HEADER_BYTES, load_json_file, read_npz
 
 FORMAT = "clothlab-neural-surrogate/1"
@@ -316,14 +318,23 @@ def _check_encoding(check: _Schema, enc: dict, arch: dict) -> None:
 def _check_wv(check: _Schema, text, field: str) -> None:
     """A recorded ``.wv`` text must parse (:func:`clothlab.weave.wvformat.parse_wv_text`); its error is given
     at the sidecar's field, with the line of the ``.wv`` text."""
+    check.string(text, field, limit=MAX_YAML_BYTES)
+    problem = _wv_problem(text)
+    if problem is not None:
+        check.fail(field, problem)
+
+
+@functools.lru_cache(maxsize=64)
+def _wv_problem(text: str) -> str | None:
+    """Why a ``.wv`` text does not parse (None when it does); remembered per text (a sidecar is read by
+    config validation and again by the model)."""
     from clothlab.weave.wvformat import parse_wv_text
 
-    check.string(text, field, limit=MAX_YAML_BYTES)
     try:
-        parse_wv_text(text, source=field)
+        parse_wv_text(text, source="encoding")
     except InputError as exc:
-        where = f"line {exc.line} of the .wv text" + (f", field {exc.field!r}" if exc.field else "")
-        check.fail(field, f"{where}: {exc.detail}")
+        return f"line {exc.line} of the .wv text" + (f", field {exc.field!r}" if exc.field else "") + f": {exc.detail}"
+    return None
 
 
 def load_surrogate(path) -> tuple[Surrogate, dict]:
@@ -355,18 +366,14 @@ def _check_outputs(network: SurrogateNetwork, materials: np.ndarray, path: Path)
     (finite but huge weights overflow float32), on a fixed set of mid-range inputs."""
     a = network.arch
     rows = materials[: min(len(materials), 64)]
-    spatial = np.full((4, a.n_spatial), 0.5, dtype=network.dtype)
-    angular = np.tile(np.linspace(-0.5, 0.9, a.n_angular, dtype=network.dtype), (4, 1)) * \
-        np.array([[1.0], [0.5], [-0.5], [0.25]], dtype=network.dtype)
-    with np.errstate(all="ignore"):
+    scales = np.array([[1.0], [0.5], [-0.5], [0.25]], dtype=network.dtype)  # 4 direction sets per material
+    angular = np.tile(np.linspace(-0.5, 0.9, a.n_angular, dtype=network.dtype) * scales, (len(rows), 1))
+    spatial = np.full((len(angular), a.n_spatial), 0.5, dtype=network.dtype)
+    with np.errstate(all="ignore"), one_blas_thread():  # tiny products: threads only contend
         z = network.encode(rows)
         finite = bool(np.isfinite(z).all())
         if finite:
-            for k in range(len(rows)):
-                out = network.decode(np.repeat(z[k:k + 1], 4, axis=0), spatial, angular)
-                if not np.isfinite(out).all():
-                    finite = False
-                    break
+            finite = bool(np.isfinite(network.decode(np.repeat(z, len(scales), axis=0), spatial, angular)).all())
     if not finite:
         raise InputError("the network's outputs overflow (not finite) at its own materials: the weights are not a "
                          "trained surrogate's", path=path, field="param")
