@@ -146,14 +146,17 @@ def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
             raise ConfigError(f"expected NAME=LO:HI:N, got {shown}", field="--vary")
         name = parts[0].strip()
         if name not in table.names():
-            raise ConfigError(f"unknown parameter {name[:60]!r} in {shown}; parameters: {', '.join(table.names())}",
-                              field="--vary")
+            varied = ", ".join(n for n in table.names() if n != "orientation")
+            raise ConfigError(f"unknown parameter {name[:60]!r} in {shown}; parameters: {varied}", field="--vary")
         if name in [a[0] for a in axes]:
             raise ConfigError(f"parameter {name!r} is varied twice", field="--vary")
         if name == "orientation":  # models.base.ORIENTATION: a rotation of the directions, not an encoder input
             raise ConfigError("orientation is a rotation applied outside the network and cannot be varied",
                               field="--vary")
-        lo, hi = (parse_number(x, error=ConfigError, field="--vary") for x in pieces[:2])
+        try:
+            lo, hi = (parse_number(x, error=ConfigError, field="--vary") for x in pieces[:2])
+        except ConfigError as exc:
+            raise ConfigError(f"{shown}: LO and HI: {exc.detail}", field="--vary") from None
         if not re.fullmatch(r"[0-9]{1,6}", pieces[2].strip()):
             raise ConfigError(f"N = {pieces[2][:20]!r} in {shown} is not an integer from 2 to {MAX_VARY_STEPS}",
                               field="--vary")
