@@ -534,7 +534,8 @@ def _fraction(value, lower, upper):
 def plot_parameters(fit: dict):
     """Each parameter's position within its fit bounds (0 = lower, 1 = upper): fitted, start and truth.
 
-    Red marks a parameter at a bound; grey rows are fixed parameters.  Labels give the values and units.
+    Red marks a parameter at a bound or not determined (:func:`clothlab.fit.determined.not_determined`); grey
+    rows are fixed parameters.  Labels give the values and units.
     """
     parameters = fit.get("parameters") or {}
     names = list(parameters)
@@ -548,6 +549,12 @@ def plot_parameters(fit: dict):
         ax.set_axis_off()
         return fig
     seen = set()
+    from clothlab.fit.determined import not_determined
+
+    try:
+        undetermined = not_determined(fit)  # coefficient 0 / no effect / within 2 % of a bound (issue 28 item 6)
+    except (AttributeError, TypeError):
+        undetermined = {}
 
     def mark(x, y, label, **style):
         ax.plot([x], [y], label=None if label in seen else label, **style)
@@ -559,7 +566,8 @@ def plot_parameters(fit: dict):
         lower, upper = entry.get("lower"), entry.get("upper")
         free = entry.get("free", True)
         at_bound = entry.get("at_bound")
-        colour = "tab:red" if at_bound else ("tab:blue" if free else "0.55")
+        flagged = bool(at_bound) or name in undetermined
+        colour = "tab:red" if flagged else ("tab:blue" if free else "0.55")
         ax.plot([0, 1], [y, y], "-", color="0.85", lw=5, solid_capstyle="butt")
         for key, label, style in (("start", "start", dict(marker="o", mfc="none", color="0.4", ms=6)),
                                   ("truth", "truth", dict(marker="D", mfc="none", color="tab:green", ms=8,
@@ -579,9 +587,11 @@ def plot_parameters(fit: dict):
             text += f"  truth {entry['truth']:.4g}"
         if at_bound:
             text += f"  AT {str(at_bound).upper()} BOUND"
+        elif name in undetermined:
+            text += "  NOT DETERMINED" + ("" if "bound" in undetermined[name] else " (no effect)")
         if not free:
             text += "  (fixed)"
-        ax.text(1.04, y, text, va="center", fontsize=8, color=colour if at_bound else "black")
+        ax.text(1.04, y, text, va="center", fontsize=8, color=colour if flagged else "black")
     ax.set_yticks(range(len(names)), labels=names[::-1], fontsize=8)
     ax.set_xlim(-0.05, 1.9)
     ax.set_ylim(-0.7, len(names) - 0.3)
