@@ -531,3 +531,14 @@ def test_cv_override_is_limited_naming_the_option(tmp_path, capsys):
         main(["fit", str(config), "--cv", "100001"])
     assert info.value.code == 2
     assert "field '--cv'" in one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("crop", ["1_0,0,4,4", "\u0661,0,4,4", "+1,0,4,4", "1,0,4,4e0", "0x1,0,4,4"])
+def test_fit_btf_crop_is_read_strictly(crop):
+    """Before: int() read '1_0' as 10 and Arabic-Indic digits as numbers."""
+    from clothlab.errors import ConfigError
+    from clothlab.texfit.fit import parse_crop
+
+    with pytest.raises(ConfigError) as info:
+        parse_crop(crop)
+    assert info.value.field == "--crop"

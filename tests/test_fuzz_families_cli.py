@@ -404,3 +404,42 @@ def test_fuzz_train_surrogate_weave_list():
 
     run()
     report("train-surrogate weave list", counts)
+
+
+def test_fuzz_fit_btf_options():
+    """--crop and --free / --refine of fit-btf: four non-negative pixel integers in ASCII digits / names of the
+    lists, or one line naming the option."""
+    from clothlab.texfit.fit import REFINABLE, TEXTURE_FREE, parse_crop, parse_names
+
+    numbers = st.one_of(st.integers(-3, 10**10).map(str), st.sampled_from(BAD_TOKENS))
+    counts = collections.Counter()
+
+    @SETTINGS
+    @given(cells=st.lists(numbers, min_size=1, max_size=5), names=st.lists(
+        st.one_of(st.sampled_from(list(TEXTURE_FREE) + list(REFINABLE) + ["", " "]), TOKENS), min_size=1,
+        max_size=4), flag=st.sampled_from(["--free", "--refine"]))
+    def run(cells, names, flag):
+        text = ",".join(cells)
+        try:
+            crop = parse_crop(text)
+        except ClothlabError as exc:
+            assert exc.field == "--crop", str(exc)
+            one_line(exc)
+            counts["crop refused (named)"] += 1
+        else:
+            assert len(crop) == 4 and crop[0] >= 0 and crop[1] >= 0 and crop[2] >= 1 and crop[3] >= 1
+            assert all(c.strip().isascii() and c.strip().isdigit() for c in cells), cells
+            counts["crop accepted (valid)"] += 1
+        allowed = TEXTURE_FREE if flag == "--free" else REFINABLE
+        try:
+            got = parse_names(",".join(names), allowed, flag)
+        except ClothlabError as exc:
+            assert exc.field == flag, str(exc)
+            one_line(exc)
+            counts["names refused (named)"] += 1
+        else:
+            assert all(n in allowed for n in got) and len(set(got)) == len(got) == len(names)
+            counts["names accepted (valid)"] += 1
+
+    run()
+    report("fit-btf options", counts)

@@ -241,13 +241,14 @@ def parse_names(text, allowed, flag: str) -> tuple[str, ...]:
 
 
 def parse_crop(text, flag: str = "--crop") -> tuple[int, int, int, int]:
-    """``x0,y0,width,height`` in pixels (x = column, y = row from the top), as :class:`BtfStack` takes it."""
+    """``x0,y0,width,height`` in pixels (x = column, y = row from the top), as :class:`BtfStack` takes it; each
+    an integer in plain ASCII digits (no ``1_0``, ``+1``, non-ASCII digits; at most 9 digits)."""
+    import re
+
     from clothlab.errors import ConfigError
 
-    try:
-        values = [int(v) for v in str(text).split(",")]
-    except ValueError:
-        values = []
+    cells = str(text).split(",")
+    values = [int(v) for v in cells] if all(re.fullmatch(r"\s*-?[0-9]{1,9}\s*", v) for v in cells) else []
     if len(values) != 4:
         raise ConfigError(f"expected x0,y0,width,height (four integers, pixels), got {text!r}", field=flag)
     x0, y0, w, h = values
