@@ -126,6 +126,24 @@ def _material_from_props(props):
     return _CACHE[key]
 
 
+class SurfacePoints:
+    """Surface points as numpy arrays (N rows): ``uv`` (N, 2), world position ``p``, world shading frame ``s``,
+    ``t``, ``n`` (N, 3), uv partials ``duv_dx``, ``duv_dy`` (N, 2); fields not given are zeros."""
+
+    def __init__(self, count, **fields):
+        self.count = count
+        for name, dim in (("uv", 2), ("p", 3), ("s", 3), ("t", 3), ("n", 3), ("duv_dx", 2), ("duv_dy", 2)):
+            value = fields.get(name)
+            setattr(self, name, np.zeros((count, dim)) if value is None else np.asarray(value, dtype=np.float64))
+
+    @classmethod
+    def of(cls, si, n, npv):
+        """The points of a Mitsuba SurfaceInteraction (``npv``: the variant's array conversion)."""
+        frame = si.sh_frame
+        return cls(n, uv=npv(si.uv, n, 2), p=npv(si.p, n), s=npv(frame.s, n), t=npv(frame.t, n),
+                   n=npv(frame.n, n), duv_dx=npv(si.duv_dx, n, 2), duv_dy=npv(si.duv_dy, n, 2))
+
+
 def bsdf_class():
     """The plugin class for Mitsuba's current variant (a subclass of that variant's ``mi.BSDF``)."""
     import drjit as dr
@@ -216,18 +234,16 @@ def bsdf_class():
             c, s = self.cos_t, self.sin_t
             return np.stack([(ds * c + dt * s) / self.tile[0], (-ds * s + dt * c) / self.tile[1]], axis=1)
 
-        def _texture_point(self, si, n):
-            uv = npv(si.uv, n, 2)
-            tiles = self._tiles(uv - 0.5)
+        def _texture_point(self, points):
+            tiles = self._tiles(points.uv - 0.5)
             return tiles[:, 0], tiles[:, 1]
 
-        def _footprint(self, si, n):
+        def _footprint(self, points):
             if self.material.policy in ("reflectance", "texture"):
                 return None
             if self.camera is not None:
                 eye, forward, right, down, scale = self.camera
-                p, frame = npv(si.p, n), si.sh_frame
-                s_w, t_w, n_w = npv(frame.s, n), npv(frame.t, n), npv(frame.n, n)
+                p, s_w, t_w, n_w = points.p, points.s, points.t, points.n
                 c, sn = self.cos_t, self.sin_t
                 weft, warp = c * s_w + sn * t_w, c * t_w - sn * s_w  # the weave's tile axes
                 d = p - eye
@@ -245,8 +261,7 @@ def bsdf_class():
                     extent.append(np.where((np.abs(along) > 1e-12) & (t > 0.0) & np.isfinite(length), length,
                                            np.inf))
                 return np.maximum(extent[0], extent[1])
-            dx, dy = npv(si.duv_dx, n, 2), npv(si.duv_dy, n, 2)
-            fx, fy = self._tiles(dx), self._tiles(dy)
+            fx, fy = self._tiles(points.duv_dx), self._tiles(points.duv_dy)
             return self.footprint_scale * np.maximum(np.hypot(fx[:, 0], fx[:, 1]), np.hypot(fy[:, 0], fy[:, 1]))
 
         # ------------------------------------------------------------------------------------ evaluation
@@ -260,8 +275,9 @@ def bsdf_class():
             return other, given, given
 
         def _values(self, si, wi, wo):
-            u, v = self._texture_point(si, len(wi)) if self.material.policy != "reflectance" else (None, None)
-            footprint = self._footprint(si, len(wi))
+            points = si if isinstance(si, SurfacePoints) else SurfacePoints.of(si, len(wi), npv)
+            u, v = self._texture_point(points) if self.material.policy != "reflectance" else (None, None)
+            footprint = self._footprint(points)
             with self.lock:
                 self.calls += 1
                 self.lanes += len(wi)
@@ -270,6 +286,13 @@ def bsdf_class():
         def _pdf(self, view, other):
             with self.lock:
                 return self.material.sampler().pdf(view, other)
+
+        def eval_arrays(self, points, view, light):
+            """f_r |cos theta_light| (N, C) in radiance transport for local directions ``view`` (to the camera) and
+            ``light`` (N, 3) at ``points`` (:class:`SurfacePoints`): the plugin's ``eval`` on numpy arrays, one
+            model call (the scalar wavefront path of :mod:`clothlab.mitsuba.scene`)."""
+            f = self._values(points, self._to_fabric(light), self._to_fabric(view))
+            return f * np.abs(light[:, 2])[:, None]
 
         def _spectrum(self, rgb):
             if mono:

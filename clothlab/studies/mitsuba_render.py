@@ -22,27 +22,27 @@ def _scene(position, resolution, spp, fov=30.0, light=None):
         "fabric": {"weave": "preset:cotton-denim"}, "render": {"spp": spp}}, base_dir=".")
 
 
-def _parity(scene, shader, variant, repeats: int = 3):
+def _parity(scene, shader, variant, repeats: int = 3, wavefront=None):
     """Both renderers on ``scene``: the least wall time of ``repeats`` renders each (after a 1-spp warm-up, so
     compilation is not timed), and the per-pixel relative difference over fully covered pixels."""
     from clothlab.mitsuba.scene import render_scene
     from clothlab.render import render
 
     render(scene, shader=shader, spp=1)
-    render_scene(scene, shader=shader, spp=1, variant=variant)
+    render_scene(scene, shader=shader, spp=1, variant=variant, wavefront=wavefront)
     t_clothlab, t_mitsuba = float("inf"), float("inf")
     for _ in range(repeats):
         t = time.perf_counter()
         a = render(scene, shader=shader)
         t_clothlab = min(t_clothlab, time.perf_counter() - t)
-        b = render_scene(scene, shader=shader, variant=variant)
+        b = render_scene(scene, shader=shader, variant=variant, wavefront=wavefront)
         if b.timings["total"] < t_mitsuba:
             t_mitsuba, t_render = b.timings["total"], b.timings["render"]
     mask = a.coverage >= 1.0
     rel = np.abs(b.image[mask] - a.image[mask]) / np.maximum(np.abs(a.image[mask]), 1e-30)
     width, height = scene.camera.resolution
     return {"shader": shader, "variant": variant, "spp": scene.spp, "size": f"{width}x{height}",
-            "light": scene.light.type,
+            "light": scene.light.type, "wavefront": bool(b.stats.get("wavefront")),
             "clothlab_seconds": t_clothlab, "mitsuba_seconds": t_mitsuba, "mitsuba_render_seconds": t_render,
             "plugin_calls": b.stats["plugin_calls"], "repeats": repeats,
             "mean_relative": float(rel.mean()), "p99_relative": float(np.percentile(rel, 99))}
@@ -71,8 +71,9 @@ def mitsuba_study(quick: bool) -> dict:
              (_scene([0, -60, 60], (48, 36) if big else (16, 12), 16,
                      light={"type": "point", "position": [10, -20, 50], "intensity": 0.002}), "im-lod")]
     rows = [_parity(scene, shader, variant, repeats=3 if big else 1) for scene, shader in cases]
-    if variant != "scalar_rgb":  # the scalar variant on a small scene: one plugin call per sample
-        rows.append(_parity(_scene([0, -60, 60], (16, 12), 4), "im-lod", "scalar_rgb", repeats=1))
+    # the scalar variant: mi.render (one plugin call per sample) on a small scene, and the scalar wavefront
+    rows.append(_parity(_scene([0, -60, 60], (16, 12), 4), "im-lod", "scalar_rgb", repeats=1, wavefront=False))
+    rows.append(_parity(cases[1][0], "im-texture", "scalar_rgb", repeats=3 if big else 1))
     chi2 = []
     if variant != "scalar_rgb":
         from clothlab.mitsuba.checks import chi2_check, plugin_dict
@@ -100,7 +101,8 @@ def lines(result: dict) -> list[str]:
         return out + [f"  skipped: {result['skipped']}"]
     out.append(f"  variant {result['variant']}" + (f" ({result['variant_note']})" if result["variant_note"] else ""))
     for r in result["parity"]:
-        out.append(f"  {r['shader']:<15} {r['variant']:<12} {r.get('light', 'directional'):<11} {r['size']} px "
+        variant = r["variant"] + (" wavefront" if r.get("wavefront") else "")
+        out.append(f"  {r['shader']:<15} {variant:<22} {r.get('light', 'directional'):<11} {r['size']} px "
                    f"{r['spp']:>4} spp: "
                    f"clothlab render {r['clothlab_seconds']:.2f} s, "
                    f"Mitsuba {r['mitsuba_seconds']:.2f} s (render {r['mitsuba_render_seconds']:.2f} s, "
