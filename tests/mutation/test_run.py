@@ -6,6 +6,7 @@ a copy, killed by its tests, and the checkout left untouched."""
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ ROOT = HERE.parents[1]
 def _sweep_module():
     spec = importlib.util.spec_from_file_location("clothlab_mutation_run", HERE / "run.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the class is made
     spec.loader.exec_module(module)
     return module
 
