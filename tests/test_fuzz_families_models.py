@@ -564,11 +564,26 @@ def test_pickled_or_complex_members_are_refused(tmp_path):
 
 
 def test_the_shipped_weights_still_load_and_the_parameter_count_matches_the_network():
-    from clothlab.neural.serialise import load_surrogate, parameter_count
+    from clothlab.neural.network import Architecture, SurrogateNetwork
+    from clothlab.neural.serialise import load_surrogate, parameter_count, parameter_shapes
 
     for npz in sorted((REPO / "clothlab/models/neural/data").rglob("*.npz")):
         surrogate, sidecar = load_surrogate(npz)
         assert surrogate.network.n_parameters() == parameter_count(sidecar["architecture"]) == sidecar["parameters"]
+    for dims in ((5, 24, 8, 3, 16, 8, 12, 6), (39, 41, 44, 4, 128, 64, 64, 32)):  # the shapes the loader expects
+        arch = Architecture(*dims)
+        network = SurrogateNetwork(arch)
+        assert {k: v.shape for k, v in network.params().items()} == parameter_shapes(arch.to_dict())
+
+
+def test_the_largest_documented_architecture_is_within_the_parameter_bound():
+    """train-surrogate takes --width / --spatial up to 4,096 and --yarn-bins up to 256: such a network's
+    sidecar passes the schema's bounds (its weights are not built here)."""
+    from clothlab.neural.serialise import MAX_BINS, MAX_PARAMETERS, MAX_WIDTH, parameter_count
+
+    arch = {"n_material": 39, "n_spatial": 2 * 8 + 8 + 1 + 2 * 256, "n_angular": 8, "n_out": 4, "enc_width": 128,
+            "latent": 64, "width": 4096, "spatial": 4096}
+    assert max(arch.values()) <= MAX_WIDTH and MAX_BINS >= 256 and parameter_count(arch) <= MAX_PARAMETERS
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -615,7 +630,7 @@ def test_a_width_of_1e9_is_refused_before_allocating(tmp_path):
     from clothlab.neural.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
-    _write_sidecar(npz, lambda d: d["architecture"].update(width=1000, enc_width=1000, latent=1000, spatial=1000))
+    _write_sidecar(npz, lambda d: d["architecture"].update(width=4096, enc_width=4096, latent=4096, spatial=4096))
     tracemalloc.start()
     try:
         with pytest.raises(InputError) as err:

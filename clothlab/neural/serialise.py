@@ -30,14 +30,16 @@ from clothlab.neural.threads import one_blas_thread
 from clothlab.strict import MAX_YAML_BYTES, NPY_HEADER_BYTES, load_json_file, read_npz
 
 FORMAT = "clothlab-neural-surrogate/1"
-MAX_WIDTH = 1024
-"""Largest input size or layer width of a surrogate's architecture (the shipped networks: at most 128)."""
-MAX_PARAMETERS = 1 << 23
-"""Most parameter values of a surrogate (8.4 M, 32 MiB in float32; the shipped networks: 70,563)."""
+MAX_WIDTH = 4096
+"""Largest input size or layer width of a surrogate's architecture (``train-surrogate --width`` / ``--spatial``
+take up to 4,096; the shipped networks: at most 128)."""
+MAX_PARAMETERS = 1 << 27
+"""Most parameter values of a surrogate (134 M, 512 MiB in float32: ``--width 4096 --spatial 4096``, the
+largest decoder train-surrogate takes, has 86 M; the shipped networks: 70,563)."""
 MAX_MATERIALS = 1 << 16
 """Most material rows (encoder inputs) of a surrogate (``--vary`` grids have at most 4,096; ``--draw`` more)."""
-MAX_BINS = 64
-"""Most one-blob bins per input (position, size, yarn coordinates; the paper: 8)."""
+MAX_BINS = 256
+"""Most one-blob bins per input (position, size, yarn coordinates; the paper: 8; ``--yarn-bins`` up to 256)."""
 MAX_PROBE_POINTS = 8
 """Most texture probe points per side."""
 MAX_PATTERN_ORDER = 8
@@ -68,17 +70,24 @@ def save_surrogate(surrogate: Surrogate, path, *, data_hash: str = "", metrics: 
     return path
 
 
-def parameter_count(arch: dict) -> int:
-    """Parameter values of the network of ``arch`` (:mod:`clothlab.neural.network`: the encoder's 4 dense
-    layers, the 2 fusion layers, the 5 angular layers), computed before anything is allocated."""
+def parameter_shapes(arch: dict) -> dict[str, tuple[int, ...]]:
+    """The shape of every parameter tensor of the network of ``arch``, named as
+    :meth:`clothlab.neural.network.SurrogateNetwork.params` (the encoder's 4 dense layers, the 2 fusion
+    layers, the 5 angular layers; Chen, Wang & Wang 2024, Fig. 3), known before anything is allocated."""
     a = {k: arch.get(k, getattr(Architecture, k, 0)) for k in ARCHITECTURE_KEYS}
     e, w, s = a["enc_width"], a["width"], a["spatial"]
+    dense = {"enc_in": (a["n_material"], e), "enc_res.1": (e, e), "enc_res.2": (e, e), "enc_out": (e, a["latent"]),
+             "fuse1": (a["latent"] + a["n_spatial"], w), "fuse2": (w, s), "ang1": (s + a["n_angular"], w),
+             "ang_res.1": (w, w), "ang_res.2": (w, w), "ang4": (w, w), "ang5": (w, a["n_out"])}
+    shapes = {}
+    for name, (n_in, n_out) in dense.items():
+        shapes[f"{name}.W"], shapes[f"{name}.b"] = (n_in, n_out), (n_out,)
+    return shapes
 
-    def dense(n_in, n_out):
-        return n_in * n_out + n_out
 
-    return (dense(a["n_material"], e) + 2 * dense(e, e) + dense(e, a["latent"]) + dense(a["latent"] + a["n_spatial"], w)
-            + dense(w, s) + dense(s + a["n_angular"], w) + 3 * dense(w, w) + dense(w, a["n_out"]))
+def parameter_count(arch: dict) -> int:
+    """Parameter values of the network of ``arch`` (:func:`parameter_shapes`)."""
+    return sum(math.prod(shape) for shape in parameter_shapes(arch).values())
 
 
 def pattern_length(order: int) -> int:
@@ -344,15 +353,14 @@ def load_surrogate(path) -> tuple[Surrogate, dict]:
     path = Path(path)
     npz = path.with_suffix(".npz")
     sidecar = read_sidecar(path)
-    arch_values = sidecar["architecture"]
-    arch = Architecture(**arch_values)
-    network = SurrogateNetwork(arch, dtype=np.dtype(sidecar.get("dtype", "float32")).type)
-    members = {f"param/{k}": v.shape for k, v in network.params().items()}
-    n_materials = materials_count(sidecar.get("encoding") or {})
-    members["materials"] = (n_materials, arch.n_material)
-    # the largest archive these members make (8-byte values, headers, zip entries): larger files are not read
+    arch = Architecture(**sidecar["architecture"])
+    members = {f"param/{k}": shape for k, shape in parameter_shapes(sidecar["architecture"]).items()}
+    members["materials"] = (materials_count(sidecar.get("encoding") or {}), arch.n_material)
+    # the largest archive these members make (8-byte values, headers, zip entries): larger files are not read,
+    # and the network is allocated only once the archive holds them
     limit = sum(NPY_HEADER_BYTES + 512 + 8 * math.prod(shape) for shape in members.values()) + (1 << 16)
     arrays = read_npz(npz, members, what="surrogate weights", magnitude=MAX_WEIGHT, limit=limit)
+    network = SurrogateNetwork(arch, dtype=np.dtype(sidecar.get("dtype", "float32")).type)
     network.set_params({k.removeprefix("param/"): v for k, v in arrays.items() if k.startswith("param/")})
     materials = arrays["materials"].astype(np.float64)
     _check_outputs(network, materials, npz)
