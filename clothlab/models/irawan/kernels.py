@@ -838,18 +838,18 @@ def filament_moments(wi, wo, nodes, weights, on_arc):
     wox, woy_, woz_ = wo[:, 0].copy(), wo[:, 1].copy(), wo[:, 2].copy()
     for n in range(n_dir):  # branch-free (selects) on contiguous columns, so it vectorises
         wiy, wiz, woy, woz = wiy_[n], wiz_[n], woy_[n], woz_[n]
+        # h = s / |s| with s = wi + wo (sec. 6.2); |(t x h)_x| = sqrt(h_y^2 + h_z^2) (eq. 6), so
+        # |wi + wo| |(t x h)_x| = r = sqrt(s_y^2 + s_z^2), and u, cos u, sin u follow from s_y, s_z alone
         sy, sz = wiy + woy, wiz + woz
-        sx = wix[n] + wox[n]
-        length = math.sqrt(sx * sx + sy * sy + sz * sz)
-        hy, hz = sy / length, sz / length  # sec. 6.2: h (NaN for a degenerate pair, dropped below)
-        cross = tangent_cross_h_x(hy, hz)  # eq. 6
-        good = (wiz > 0.0) & (woz > 0.0) & (length > 0.0) & (cross > 0.0)  # else back-facing or degenerate: 0
-        u = arctan(hy / hz)  # eq. 4: u = atan(h_y / h_z), h_z > 0
-        cu = hz / cross  # cos u
-        su = hy / cross  # sin u
+        r = math.sqrt(sy * sy + sz * sz)
+        inv_r = 1.0 / r
+        good = (wiz > 0.0) & (woz > 0.0) & (r > 0.0)  # else back-facing or degenerate: 0
+        u = arctan(sy / sz)  # eq. 4: u = atan(h_y / h_z), h_z > 0
+        cu = sz * inv_r  # cos u
+        su = sy * inv_r  # sin u
         ok[n] = good
         u_out[n] = u if good else 0.0
-        inv[n] = 1.0 / (length * cross) if good else 0.0
+        inv[n] = inv_r if good else 0.0
         cu_out[n] = cu if good else 1.0
         su_out[n] = su if good else 0.0
         ci0[n] = spine_normal_cosine(wiy, wiz, su, cu) if good else 0.0
