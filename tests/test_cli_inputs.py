@@ -277,6 +277,9 @@ def _zero_measured(lines):
     ("string objective", {"edit": lambda f: f["objective"].update(start="0.3")}, "fit.json", "objective.start"),
     ("Infinity deep", {"text_edit": lambda t: t.replace('"wall_time_s": ', '"wall_time_s": Infinity, "x": ', 1)},
      "fit.json", "wall_time_s"),
+    ("string CV entry", {"edit": lambda f: f["cross_validation"].update(in_sample="x")}, "fit.json",
+     "cross_validation.in_sample"),  # before: an AttributeError traceback while rendering
+    ("list CV", {"edit": lambda f: f.update(cross_validation=[1])}, "fit.json", "cross_validation"),
     ("-Infinity in a list", {"edit": lambda f: f.update(extra=[1, {"a": [0, "MARK"]}]),
                              "text_edit": lambda t: t.replace('"MARK"', "-Infinity")}, "fit.json", "extra.1.a.1"),
 ])

@@ -268,6 +268,15 @@ def _check_fit_json(fit: dict, path: Path) -> None:
     if "warnings" in fit and not isinstance(fit["warnings"], list):
         raise InputError("expected a list of strings", path=path, field="warnings")
     _check_model_and_objective(fit, path)
+    for key in ("cross_validation", "uncertainty", "timings", "evaluation_speed"):  # optional sections the page
+        section = fit.get(key)                                                        # reads entry by entry
+        if section is not None and not isinstance(section, dict):
+            raise InputError(f"expected an object, found {type(section).__name__}", path=path, field=key)
+    cv = fit.get("cross_validation") or {}
+    for key in ("held_out", "in_sample", "train_folds"):
+        if cv.get(key) is not None and not isinstance(cv[key], dict):
+            raise InputError(f"expected an object of error percentiles, found {type(cv[key]).__name__}", path=path,
+                             field=f"cross_validation.{key}")
 
 
 def load_fit_dir(fit_dir) -> FitRecord:
