@@ -141,3 +141,20 @@ def test_the_winner_refit_is_never_worse_than_its_row(tmp_path):
     s = select(cfg, settings, fits_dir=tmp_path)
     assert s.refit["not_worse"] and s.refit["refit_objective"] <= s.ranked[0].row["objective"]
     assert "refit" in s.summary() and s.summary()["refit"]["candidate_objective"] == s.ranked[0].row["objective"]
+
+
+@pytest.mark.slow
+def test_nested_selection_on_dask_workers_is_the_in_process_one(tmp_path, nested):
+    """`fit --select --nested K --workers 2`: the (outer fold, candidate) fits as Dask tasks give the same
+    outer figures, winners and held-out predictions bit for bit."""
+    pytest.importorskip("distributed")
+    from clothlab.parallel import make_runner
+
+    cfg, m, out = nested
+    runner = make_runner(workers=2)
+    try:
+        again = _nested(cfg, m, runner=runner)
+    finally:
+        runner.close()
+    strip = {"wall_time_s"}
+    assert {k: v for k, v in again.items() if k not in strip} == {k: v for k, v in out.items() if k not in strip}
