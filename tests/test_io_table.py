@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -540,3 +541,22 @@ def test_azimuth_conversions_stay_in_one_turn(zero, sense):
         assert np.all((out >= 0.0) & (out < 360.0))
         back = azimuth_from_clothlab(azimuth_to_clothlab(phi, zero=zero, sense=sense), zero=zero, sense=sense)
         assert np.allclose(np.cos(np.radians(back)), np.cos(np.radians(phi)), atol=1e-12)
+
+
+def test_a_number_longer_than_the_strict_limit_is_refused_by_the_fast_path_too(tmp_path):
+    """A row of plain digits whose field exceeds strict.MAX_NUMBER_CHARS (64) is refused at its line and column,
+    as the strict per-field parse refuses it (the fast float() path once read an 82-character field)."""
+    from clothlab.errors import InputError
+    from clothlab.io.table import read_table
+    from clothlab.strict import MAX_NUMBER_CHARS
+
+    long_value = "0." + "1" * (MAX_NUMBER_CHARS - 1)  # 65 characters, plain decimal
+    shipped_table = Path(__file__).resolve().parents[1] / "measurements" / "cotton-twill" / "clean.csv"
+    shipped = shipped_table.read_text(encoding="utf-8").splitlines()
+    header = [line for line in shipped if line.startswith("#")] + ["theta_i,phi_i,theta_o,phi_o,R,G,B"]
+    path = tmp_path / "t.csv"
+    path.write_text("\n".join(header + ["10,0,20,0,0.1,0.1,0.1", f"10,0,30,0,0.1,{long_value},0.1"]) + "\n",
+                    encoding="utf-8")
+    with pytest.raises(InputError) as info:
+        read_table(path)
+    assert info.value.line == len(header) + 2 and "G" in str(info.value)

@@ -53,6 +53,7 @@ from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_from_clothlab, azimuth_to_clothlab
 from clothlab.io.measurement import Measurement
 from clothlab.strict import (
+    MAX_NUMBER_CHARS,
     MAX_TABLE_BYTES,
     decode_text,
     load_yaml_text,
@@ -153,7 +154,8 @@ def parse_rows(rows: list[tuple[int, str]], columns, *, path, split=_split_csv, 
             raise InputError(f"row has {len(row)} fields, expected {len(columns)} ({separator.join(columns)})",
                              path=path, line=lineno, field=columns[len(row)] if len(row) < len(columns) else None)
         fields.append(row)
-    if all(plain_numeric_text(text) for _, text in rows):
+    if all(plain_numeric_text(text) for _, text in rows) and all(
+            len(text) <= MAX_NUMBER_CHARS for row in fields for text in row):
         try:  # fast path for rows of plain decimal numbers; the strict per-field parse names a culprit
             table = np.array([[float(text) for text in row] for row in fields], dtype=np.float64).reshape(
                 len(rows), len(columns))
