@@ -51,6 +51,9 @@ def test_stability_runs_inside_select_and_lands_in_the_summary(tmp_path):
     assert sum(stab["counts"]["weave"].values()) == 3
     # the simulated table is wool-gabardine: the truth's weave wins the subsamples
     assert stab["counts"]["weave"].get("preset:wool-gabardine", 0) >= 2
+    top = s.summary()["top_residuals"]
+    assert [t["candidate"] for t in top] == [r.row["candidate"] for r in s.ranked]
+    assert all("p80 tail" in t["summary"] and t["tail_threshold"] > 0 for t in top)
     from clothlab.report import html
 
     page = "".join(html._stability_section(stab))

@@ -454,6 +454,7 @@ class Selection:
     free_by_kind: dict = field(default_factory=dict)  # kind -> {fit.free name: what it became} (map_free)
     refit: dict | None = None  # the winner's refit against its candidate row (refit_check)
     stability: dict | None = None  # fit.json selection.stability (clothlab.fit.stability)
+    top_residuals: list = field(default_factory=list)  # residual diagnostics of the top candidates
 
     def summary(self) -> dict:
         return selection_summary(self)
@@ -472,7 +473,8 @@ def selection_summary(selection: Selection) -> dict:
             "free_by_kind": selection.free_by_kind, "refit": selection.refit,
             "files": ["selection.csv", "selection.md"], "wall_time_s": selection.wall_time,
             **({"nested": selection.nested} if selection.nested else {}),
-            **({"stability": selection.stability} if selection.stability else {})}
+            **({"stability": selection.stability} if selection.stability else {}),
+            **({"top_residuals": selection.top_residuals} if selection.top_residuals else {})}
 
 
 def select(config, settings: SelectSettings | None = None, *, measurement=None, run_task=None,
@@ -538,6 +540,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
             run_task=run_task, rank=rank, runner=runner, full_winner=best.row)
         for line in nested_lines(nested):
             log.info("select: %s", line.strip())
+    top = top_residuals(config, ranked, measurement)
     stab = None
     if settings.stability >= 1:  # the selection on seeded subsamples of the rows (clothlab.fit.stability)
         from clothlab.fit.stability import stability, stability_lines
@@ -556,7 +559,36 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
     if not refit["not_worse"]:
         winner.warnings.append(refit["note"])
     return Selection(ranked, winner, settings, time.perf_counter() - started, nested=nested,
-                     free_by_kind=free_by_kind, refit=refit, stability=stab)
+                     free_by_kind=free_by_kind, refit=refit, stability=stab, top_residuals=top)
+
+
+TOP = 5
+
+
+def top_residuals(config, ranked, measurement, top: int = TOP) -> list[dict]:
+    """The residual diagnostics (:mod:`clothlab.fit.residuals`) of the ``top`` fitted candidates at their
+    candidate optima on all rows: where each one's p80 tail lies and its biases, as
+    ``[{"candidate", "summary", "enriched", "tail_threshold"}]`` (one model evaluation each)."""
+    from clothlab.errors import ClothlabError
+    from clothlab.fit.problem import build_problem
+    from clothlab.fit.residuals import diagnostics, summary_sentence
+
+    out = []
+    for r in [r for r in ranked if r.row.get("objective") is not None][:top]:
+        try:
+            cfg = candidate_config(config, r.candidate, max_evals=1, cv_folds=0, start=r.params,
+                                   orientation=r.params.get(ORIENTATION, 0.0))
+            problem = build_problem(cfg, measurement)
+            prediction = problem.solve(problem.model.resolve({**problem.start, **r.params})).prediction
+        except ClothlabError as exc:
+            out.append({"candidate": r.row["candidate"], "summary": f"not evaluated: {exc}"})
+            continue
+        m = problem.measurement
+        d = diagnostics(m.theta_i, m.phi_i, m.theta_o, m.phi_o, m.values, prediction)
+        out.append({"candidate": r.row["candidate"], "summary": summary_sentence(d), "enriched": d["enriched"],
+                    "tail_threshold": d["tail_threshold"],
+                    "bias": {name: [b["median_r"] for b in f["bins"]] for name, f in d["features"].items()}})
+    return out
 
 
 def refit_check(row: dict, winner) -> dict:
@@ -632,6 +664,10 @@ def table_markdown(selection: Selection) -> str:
     lines += free_mapping_lines(selection.free_by_kind)
     if selection.refit:
         lines += ["", f"Refit of the winner with the full budget: {selection.refit['note']}."]
+    if selection.top_residuals:
+        lines += ["", f"Residual diagnostics of the top {len(selection.top_residuals)} candidates "
+                      "(clothlab.fit.residuals, at their candidate optima):"]
+        lines += [f"- {t['candidate']}: {t['summary']}" for t in selection.top_residuals]
     if selection.nested:
         from clothlab.fit.nested import nested_lines
 

@@ -350,7 +350,16 @@ def _selection_section(fit: dict) -> list[str]:
         parts += [f"{esc(k)} {esc(v)}" for k, v in budget.items()]
         out.append(f'<p class="note">Candidates tried - {"; ".join(parts)} (per candidate).</p>')
     return (out + [_table([esc(h) for h in DISPLAY_HEAD], cells)] + _nested_section(selection.get("nested"))
-            + _stability_section(selection.get("stability")))
+            + _stability_section(selection.get("stability")) + _top_residual_section(selection.get("top_residuals")))
+
+
+def _top_residual_section(top) -> list[str]:
+    """Where the p80 tail of each of the top candidates lies (fit.json ``selection.top_residuals``)."""
+    if not isinstance(top, list) or not top:
+        return []
+    items = "".join(f"<li><b>{esc(t.get('candidate', ''))}</b>: {esc(t.get('summary', ''))}</li>" for t in top
+                    if isinstance(t, dict))
+    return ["<h3>Residual diagnostics of the top candidates</h3>", f"<ul>{items}</ul>"]
 
 
 def _stability_section(stab) -> list[str]:
