@@ -343,15 +343,25 @@ def load_json_text(text: str, *, path=None, error=InputError):
     if not _json_depth_ok(text):
         raise error(f"invalid JSON: nested more than {MAX_DEPTH} levels deep", path=path)
 
-    def constant(name):
-        raise ValueError(f"{name} is not a finite number")
+    class Constant(str):  # NaN / Infinity / -Infinity, kept in place to name its dotted field
+        pass
 
     try:
-        return json.loads(text, parse_constant=constant)
+        data = json.loads(text, parse_constant=Constant)
     except json.JSONDecodeError as exc:
         raise error(f"invalid JSON: {exc.msg} (column {exc.colno})", path=path, line=exc.lineno) from None
     except (ValueError, RecursionError) as exc:
         raise error(f"invalid JSON: {exc}", path=path) from None
+    stack = [((), data)]
+    while stack:  # depth first, in document order
+        where, value = stack.pop()
+        if isinstance(value, Constant):
+            raise error(f"invalid JSON: {value} is not a finite number", path=path,
+                        field=".".join(map(str, where)) or None)
+        if isinstance(value, dict | list):
+            items = value.items() if isinstance(value, dict) else enumerate(value)
+            stack.extend(reversed([(where + (k,), v) for k, v in items]))
+    return data
 
 
 def load_json_file(path, *, error=InputError, what: str = "JSON file", limit: int = MAX_YAML_BYTES):

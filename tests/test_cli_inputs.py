@@ -545,3 +545,15 @@ def test_fit_btf_crop_is_read_strictly(crop):
     with pytest.raises(ConfigError) as info:
         parse_crop(crop)
     assert info.value.field == "--crop"
+
+
+def test_infinity_in_fit_json_is_named_by_every_reader(tmp_path, capsys, names_only_stack):
+    """fit-btf (and eval, through clothlab.fit.store) read fit.json with the strict JSON reader, which now
+    names the dotted field of a NaN / Infinity (before: 'invalid JSON: Infinity is not a finite number')."""
+    src = tmp_path / "fits" / "cotton-denim"
+    shutil.copytree(REPO / "fits" / "cotton-denim", src)
+    text = (src / "fit.json").read_text()
+    (src / "fit.json").write_text(text.replace('"wall_time_s": ', '"wall_time_s": -Infinity, "was": ', 1))
+    assert main(["fit-btf", str(names_only_stack), str(src), "-o", str(tmp_path / "out")]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert f"{src / 'fit.json'}, field 'wall_time_s'" in line and "-Infinity" in line, line

@@ -173,44 +173,10 @@ def _check_predictions(predictions: dict, channels, path: Path) -> None:
                              field=f"measured_{c}")
 
 
-class _NonFinite:
-    """A ``NaN`` / ``Infinity`` constant of a JSON document, kept in place to name its field."""
-
-    def __init__(self, name: str):
-        self.name = name
-
-
-def _non_finite_field(value, prefix: str = "") -> tuple[str, str] | None:
-    """(dotted field, constant) of the first :class:`_NonFinite` in ``value``, depth first."""
-    if isinstance(value, _NonFinite):
-        return prefix or "(top level)", value.name
-    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
-    for key, item in items:
-        found = _non_finite_field(item, f"{prefix}.{key}" if prefix else str(key))
-        if found is not None:
-            return found
-    return None
-
-
 def read_fit_json(path) -> dict:
     """fit.json as :func:`read_json` reads it; a ``NaN`` or ``Infinity`` (which clothlab never writes) is
-    refused naming its dotted field, e.g. ``objective.final``."""
-    import json
-
-    path = Path(path)
-    try:
-        return read_json(path)
-    except InputError as exc:
-        if "not a finite number" not in exc.detail:
-            raise
-        # depth and size were checked by the first read: parse again keeping the constants to find them
-        data = json.loads(read_text(path, limit=MAX_TABLE_BYTES, what="file"), parse_constant=_NonFinite)
-        found = _non_finite_field(data)
-        if found is None:
-            raise
-        where, name = found
-        raise InputError(f"{name} is not a finite number; clothlab writes finite numbers only (a value that "
-                         "could not be computed is null)", path=path, field=where) from None
+    refused naming its dotted field, e.g. ``objective.final`` (:func:`clothlab.strict.load_json_text`)."""
+    return read_json(path)
 
 
 def _check_model_and_objective(fit: dict, path: Path) -> None:
