@@ -140,7 +140,11 @@ def _specular_albedo_cached(key, samples):
     wi, wo = _albedo_directions(samples)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
-        values = yarn_specular(wi, wo, params, kind, quadrature, key[3])
+        # the batched path of a fit's evaluations (yarn_integrals; equal to yarn_specular's per-direction
+        # quadrature to rounding): a first run compiles no kernel for the normalisation alone
+        integral = yarn_integrals(yarn_terms(wi, wo, kind, quadrature),
+                                  np.array([yarn_geometry_key(params, kind)]), quadrature, key[3])[0]
+        values = phase_function(wi, wo, params["alpha"], params["beta"]) * integral
     # E[f] under cosine-weighted sampling of both directions times pi^2, divided by pi.
     return float(np.pi * values.mean())
 
