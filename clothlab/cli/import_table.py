@@ -41,7 +41,7 @@ def _conventions(name):
 
 def add_parser(sub):
     p = sub.add_parser(
-        "import", help="convert a text/CSV table (or a MERL/UTIA/ASTM/pab-opto file) to a clothlab table",
+        "import", help="convert a text/CSV table (or a MERL/UTIA/ASTM/pab-opto/RGL .bsdf file) to a clothlab table",
         description="Read a reflectance table with the column mapping and conventions given here, convert it "
                     "once into clothlab's convention (degrees, phi counter-clockwise from the weft, BRDF in "
                     "1/sr) and write it as a clothlab table (atomically; an existing file only with --force). "
@@ -76,7 +76,7 @@ def add_parser(sub):
                         "that phi = 0 lies along the weft (default 0; recorded in the provenance)")
     p.add_argument("--channels", metavar="NAMES", help="names of the value channels in order, e.g. grey or R,G,B")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="an option of the --format reader (e.g. theta_step=5 for merl); repeatable")
+                   help="an option of the --format reader (e.g. theta_step=5 for merl or bsdf); repeatable")
     add_force(p, "output table")
     p.dash_values = frozenset({"--columns"})  # '-' skips a column: --columns -,theta_o,... is a value
     return p

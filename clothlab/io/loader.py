@@ -15,8 +15,9 @@ Detection (first 200 lines of a file):
 ``format: text`` and give its column mapping and conventions as options.
 
 ``format=`` (other than ``"auto"``) skips detection; ``**options`` go to the reader
-(:func:`clothlab.io.astm.read_astm`'s conventions, :func:`clothlab.io.pabopto.read_pabopto`'s ``up``; the
-clothlab table takes none).
+(:func:`clothlab.io.astm.read_astm`'s conventions, :func:`clothlab.io.pabopto.read_pabopto`'s ``up``, the
+sampling of :func:`clothlab.io.merl.read_merl` and :func:`clothlab.io.rglbsdf.read_bsdf`; the clothlab table
+takes none).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from clothlab.io.merl import check_options as check_merl_options
 from clothlab.io.merl import read_merl
 from clothlab.io.pabopto import SAMPLE_UP, read_pabopto
 from clothlab.io.rglbsdf import MAGIC as TENSOR_MAGIC
+from clothlab.io.rglbsdf import check_options as check_bsdf_options
 from clothlab.io.rglbsdf import read_bsdf
 from clothlab.io.table import CONVENTION_CHOICES, check_row_count, find_sidecar, read_table
 from clothlab.io.utia import NEGATIVE, UTIA_BYTES, read_utia
@@ -54,7 +56,8 @@ OPTION_CHOICES = {**{name: tuple(values) for name, values in CONVENTION_CHOICES.
                   "delimiter": tuple(DELIMITERS), "header": HEADER_CHOICES, "negative": NEGATIVE}
 """The allowed values of each reader option (the conventions of a table, the pab-opto sample ``up``, the
 text importer's delimiter and header, UTIA's handling of negative values)."""
-OPTION_CHECKS = {"text": check_generic_options, "merl": check_merl_options, "utia": check_utia_options}
+OPTION_CHECKS = {"text": check_generic_options, "merl": check_merl_options, "utia": check_utia_options,
+                 "bsdf": check_bsdf_options}
 """Per reader, a check of its option values that needs no file (raises with ``field`` = the option)."""
 _DETECT_LINES = 200
 _CLOTHLAB = re.compile(r"^#\s*clothlab-table\s*:")
