@@ -10,13 +10,14 @@ Container layout (little-endian), as the format's public readers document it:
 - the C-ordered data of each field at its offset.
 
 :func:`read_tensor_file` reads and validates the container (every field inside the file, no overlap, no
-NaN in a float field, no negative value in a density or reflectance field).  A measured BSDF holds fields
-such as ``theta_i``, ``phi_i``, ``ndf``, ``sigma``, ``vndf``, ``luminance``, ``rgb`` / ``spectra`` and
-``description``: reflectance samples on a grid in a domain warped by the material's visible-normal
-distribution.  Turning a sample into a direction pair needs the inverse of that adaptive warp (a
-piecewise-bilinear 2-D distribution interpolated over theta_i, phi_i), which clothlab does not implement,
-so :func:`read_bsdf` (``measurement.format: bsdf``) validates the file and then refuses with a message
-saying so.  See docs/formats.md for what is missing.
+NaN in a float field, no negative value in a density or reflectance field).  A measured BSDF holds
+``theta_i`` / ``phi_i`` (the incident nodes, radians), ``ndf`` and ``sigma`` (2-D), ``vndf`` and ``luminance``
+(per incident node a 2-D density), ``rgb`` (or ``spectra`` with ``wavelengths``), ``jacobian`` and
+``description``: reflectance samples on a unit-square grid warped by the material's visible-normal
+distribution.  :func:`eval_rgl` evaluates it as the format's reference evaluation does (the inverse of the
+VNDF warp at the half vector's coordinates, bilinear interpolation, D / (4 sigma)); :func:`read_bsdf`
+(``measurement.format: bsdf``, ``clothlab import --format bsdf``) converts a file with it to a measurement at
+the file's incident nodes and a regular exitant grid.  See docs/formats.md, "RGL-EPFL .bsdf".
 """
 
 from __future__ import annotations
