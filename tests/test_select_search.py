@@ -137,3 +137,23 @@ def test_the_box_check_recognises_a_warp_weft_swapped_twin():
     twin = _swapped_twin(problem, outside, objective(outside).objective)
     assert twin == {"warp.nx": 3.0, "weft.nx": 40.0, "orientation": 10.0}
     assert _swapped_twin(problem, outside, objective(outside).objective + 1.0) is None  # not the same value
+
+
+@pytest.mark.parametrize("args, field", [(["--losses", "squared,nope"], "nope"),
+                                         (["--loss-scales", "0.1,-2"], "--loss-scales"),
+                                         (["--loss-scales", "0.1,abc"], "--loss-scales"),
+                                         (["--losses", "huber,huber"], "listed twice")])
+def test_cli_refuses_bad_loss_and_stability_options(capsys, args, field):
+    from clothlab.cli.main import main
+
+    code = main(["fit", "--select", str(EXAMPLE), *args, "-o", "/tmp/clothlab-select-x"])
+    err = capsys.readouterr().err
+    assert code == 2 and field in err and "clothlab: error:" in err
+
+
+def test_cli_refuses_a_negative_stability_count():
+    from clothlab.cli.main import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["fit", "--select", str(EXAMPLE), "--stability", "-1", "-o", "/tmp/clothlab-select-x"])
+    assert exc.value.code == 2
