@@ -36,6 +36,7 @@ tr.atbound td { background: #fdecea; } .warn { color: #b00020; font-weight: bold
 .note { color: #555; font-size: 0.9em; } figure { margin: 1em 0; } figure img { max-width: 100%; }
 figcaption { font-size: 0.9em; color: #444; } pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto;
 font-size: 0.85em; } ul.warnings li { color: #8a4b00; }
+table.kv { margin: 0; font-size: 1em; } table.kv th { font-weight: normal; }
 """
 
 #: Captions of the figures a fit report may hold (file names come from the caller).
@@ -133,6 +134,32 @@ def _key_values(mapping) -> str:
     return "; ".join(f"{esc(k)} = {esc(v)}" for k, v in mapping.items())
 
 
+def fmt_unit(unit) -> str:
+    """A parameter's unit for a table cell: '-' for a dimensionless one (declared '1'), '' for none."""
+    if unit is None or unit == "":
+        return ""
+    return "-" if str(unit) == "1" else esc(unit)
+
+
+def _value_html(value) -> str:
+    """A provenance value: a nested key / value table for a mapping, a comma list for a list of scalars."""
+    if isinstance(value, dict):
+        return _key_value_table(value) if value else "\u2014"
+    if isinstance(value, list | tuple) and not any(isinstance(v, dict | list | tuple) for v in value):
+        return ", ".join(fmt_number(v) for v in value) or "\u2014"
+    if isinstance(value, list | tuple):
+        return "<br>".join(_value_html(v) for v in value) or "\u2014"
+    return fmt_number(value) if isinstance(value, int | float) and not isinstance(value, bool) else esc(value)
+
+
+def _key_value_table(mapping) -> str:
+    """A mapping (e.g. a measurement's provenance) as a two-column table, nested mappings as nested tables."""
+    if not isinstance(mapping, dict) or not mapping:
+        return "\u2014"
+    rows = "".join(f"<tr><th>{esc(k)}</th><td>{_value_html(v)}</td></tr>" for k, v in mapping.items())
+    return f'<table class="kv">{rows}</table>'
+
+
 def _page(title: str, body: list[str]) -> str:
     return "\n".join([
         "<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
@@ -169,7 +196,7 @@ def _header_section(fit: dict, sampling=None) -> list[str]:
         ("measurement", esc(measurement.get("path"))),
         ("samples", fmt_number(measurement.get("n"))),
         ("channels", esc(", ".join(map(str, channels)) if channels else None)),
-        ("provenance", _key_values(provenance)),
+        ("provenance", _key_value_table(provenance)),
         ("metric", esc(fit.get("metric"))),
         ("fit created", esc(fit.get("created"))),
     ]
@@ -236,7 +263,7 @@ def _parameter_section(fit: dict) -> list[str]:
         status = [f'<span class="warn">\u26a0 at {esc(at_bound)} bound</span>'] if at_bound else []
         if name in undetermined:
             status.append(f'<span class="warn">\u26a0 not determined: {esc(undetermined[name])}</span>')
-        row = [f"<code>{esc(name)}</code>", ("num", fmt_number(entry.get("value"))), esc(entry.get("unit") or ""),
+        row = [f"<code>{esc(name)}</code>", ("num", fmt_number(entry.get("value"))), fmt_unit(entry.get("unit")),
                "free" if entry.get("free", True) else "fixed", ("num", fmt_number(entry.get("lower"))),
                ("num", fmt_number(entry.get("upper"))), ("num", fmt_number(entry.get("start")))]
         if with_truth:
@@ -298,15 +325,27 @@ def _statistics_section(fit: dict) -> list[str]:
             _table(None, [(f"<b>{esc(k)}</b>", ("num", str(v))) for k, v in rows])]
 
 
+INFORMATIONAL = ("fitted with filament_arc:", "parameters refined with the exact surface model")
+"""Phrases of fit.json ``warnings`` entries that state a convention or what was done, not a problem: the page
+lists them under "Notes" (e.g. the filament-arc convention of a ``.wv`` export)."""
+
+
+def is_informational(text: str) -> bool:
+    """True for a fit message that informs (:data:`INFORMATIONAL`) rather than warns."""
+    return any(phrase in text for phrase in INFORMATIONAL)
+
+
 def _warning_section(fit: dict, notes) -> list[str]:
-    warnings = [str(w) for w in fit.get("warnings") or []]
+    messages = [str(w) for w in fit.get("warnings") or []]
+    warnings = [w for w in messages if not is_informational(w)]
+    notes = [w for w in messages if is_informational(w)] + list(notes)
     out = []
     if warnings:
         out += ["<h2>Warnings from the fit</h2>", '<ul class="warnings">']
         out += [f"<li>{esc(w)}</li>" for w in warnings]
         out.append("</ul>")
     if notes:
-        out += ["<h2>Report notes</h2>", "<ul>"] + [f"<li>{esc(n)}</li>" for n in notes] + ["</ul>"]
+        out += ["<h2>Notes</h2>", '<ul class="notes">'] + [f"<li>{esc(n)}</li>" for n in notes] + ["</ul>"]
     return out
 
 
@@ -487,7 +526,7 @@ def _posterior_section(posterior) -> list[str]:
     keys = ("p2.5", "p16", "median", "p84", "p97.5")  # posterior.json names (clothlab.fit.posterior)
     rows = []
     for name, e in params.items():
-        rows.append([f"<code>{esc(name)}</code>", esc(e.get("unit", ""))]
+        rows.append([f"<code>{esc(name)}</code>", fmt_unit(e.get("unit"))]
                     + [("num", fmt_number(e.get(k))) for k in keys]
                     + [("num", fmt_number(e.get("optimum"))), ("num", fmt_number(e.get("truth"))),
                        ("num", fmt_number(e.get("tau"))), ("num", fmt_number(e.get("ess"))),
