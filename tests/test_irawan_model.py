@@ -261,3 +261,23 @@ def test_memo_reuses_the_integral_when_only_the_phase_changes(monkeypatch):
     assert sorted(calls) == ["warp", "weft"]
     model.components(wi, wo, {**p, "warp.umax": p["warp.umax"] + 5.0}, normalised=False, warn=False)
     assert sorted(calls) == ["warp", "warp", "weft"]
+
+
+def test_umax_at_its_limit_is_finite_and_below_it_refused():
+    """umax -> 0 (staple): the components reach their limit (1e-6 and 1e-9 deg agree to float precision, no
+    warning); below the declared lowest value (1e-9 deg; 1e-200 made the yarn integrals 0 / 0) the value is
+    refused naming the parameter, never evaluated to inf / NaN."""
+    from clothlab.weave.parameters import UMAX_LOWEST_DEG
+
+    model = IrawanModel(get_preset("cotton-denim"))
+    wi = spherical_to_vector(np.array([30.0]), np.array([0.0]))
+    wo = spherical_to_vector(np.array([30.0]), np.array([180.0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        near = model.components(wi, wo, {"warp.umax": 1e-6})["specular_warp"]
+        lowest = model.components(wi, wo, {"warp.umax": UMAX_LOWEST_DEG})["specular_warp"]
+    assert np.all(np.isfinite(lowest)) and np.all(lowest > 0.0)
+    np.testing.assert_allclose(lowest, near, rtol=1e-9)
+    for bad in (1e-200, 0.5 * UMAX_LOWEST_DEG, 0.0):
+        with pytest.raises(ParameterError, match="warp.umax"):
+            model.components(wi, wo, {"warp.umax": bad})

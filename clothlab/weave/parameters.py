@@ -22,12 +22,18 @@ FIBRE_SPECS = [
 ]
 
 
+UMAX_LOWEST_DEG = 1e-9
+"""Smallest umax accepted (deg).  The model is at its umax -> 0 limit long before it: the components agree to
+float64 precision from 1e-6 deg down to 1e-100 deg, but below about 1e-150 deg the yarn integrals underflow
+(0 / 0, an infinite specular albedo), so a smaller value is refused rather than evaluated."""
+
+
 def _yarn_specs(kind: str) -> list[ParamSpec]:
     return [
         ParamSpec(f"{kind}.psi", "deg", (-90.0, 90.0), (-60.0, 60.0), 0.0, "linear",
                   "fibre twist angle, sec. 5.2", open_lower=True, open_upper=True),
-        ParamSpec(f"{kind}.umax", "deg", (0.0, 90.0), (1.0, 85.0), 30.0, "linear",
-                  "maximum inclination angle, sec. 5.2", open_lower=True, open_upper=True),
+        ParamSpec(f"{kind}.umax", "deg", (UMAX_LOWEST_DEG, 90.0), (1.0, 85.0), 30.0, "linear",
+                  "maximum inclination angle, sec. 5.2", open_upper=True),
         ParamSpec(f"{kind}.kappa", "1", (-1.0, 1e3), (-0.95, 4.0), 0.0, "linear",
                   "spine curvature, sec. 5.4", open_lower=True),
         ParamSpec(f"{kind}.w", "cell", (0.0, 1e3), (0.1, 20.0), 1.0, "log",
