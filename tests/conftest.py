@@ -81,6 +81,19 @@ def pytest_runtest_call(item):
         yield
 
 
+def pytest_sessionfinish(session):
+    """On a pytest-xdist worker: hand this worker's counts to the controller, which prints the summary."""
+    workeroutput = getattr(session.config, "workeroutput", None)
+    if workeroutput is not None:
+        workeroutput["hypothesis_cases"] = dict(_CASES)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    """On the pytest-xdist controller: add a finished worker's counts (``-n auto``, pyproject addopts)."""
+    _CASES.update(getattr(node, "workeroutput", {}).get("hypothesis_cases", {}))
+
+
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
     if not _CASES:
         return
