@@ -271,6 +271,11 @@ def _zero_measured(lines):
     ("zero n", {"edit": lambda f: f["measurement"].update(n=0)}, "fit.json", "measurement.n"),
     ("wrong n", {"edit": lambda f: f["measurement"].update(n=7)}, "fit.json", "measurement.n"),
     ("zero measured", {"predictions": _zero_measured}, "predictions.csv", "measured_R"),
+    ("theta_i 200", {"predictions": lambda lines: [lines[0], "200" + lines[1][lines[1].index(","):], *lines[2:]]},
+     "predictions.csv", "theta_i"),  # before: rendered, exit 0
+    ("model 1e308", {"predictions": lambda lines: [lines[0], ",".join(lines[1].split(",")[:5] + ["1e308"] +
+                                                                    lines[1].split(",")[6:]), *lines[2:]]},
+     "predictions.csv", "model_R"),
     ("NaN objective", {"text_edit": lambda t: t.replace('"final": 0.2899918708559089', '"final": NaN', 1)},
      "fit.json", "objective.final"),
     ("null objective", {"edit": lambda f: f["objective"].update(final=None)}, "fit.json", "objective.final"),

@@ -196,8 +196,12 @@ def _valid_record(record) -> None:
         assert isinstance(objective["final"], int | float) and math.isfinite(objective["final"])
     n = len(record.predictions["theta_i"])
     assert n >= 2 and fit["measurement"].get("n") in (None, n)
+    t = record.predictions
+    assert all(((0 <= t[k]) & (t[k] <= 90)).all() for k in ("theta_i", "theta_o"))
+    assert all((np.abs(t[k]) <= 360).all() for k in ("phi_i", "phi_o"))
     for c in record.channels:
         measured, model = record.predictions[f"measured_{c}"], record.predictions[f"model_{c}"]
+        assert (measured >= 0).all() and (model >= 0).all() and max(measured.max(), model.max()) <= 1e30
         assert np.isfinite(measured).all() and np.isfinite(model).all()
         assert (measured > 0).any() and model.any()
     text = json.dumps(fit, allow_nan=False)  # no NaN / Infinity anywhere

@@ -28,6 +28,7 @@ import numpy as np
 from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
 from clothlab.io.table import ANGLE_COLUMNS as DIRECTION_COLUMNS
+from clothlab.io.table import MAX_VALUE, MIN_VALUE
 from clothlab.strict import (
     MAX_NUMBER_CHARS,
     MAX_TABLE_BYTES,
@@ -163,6 +164,20 @@ def _check_predictions(predictions: dict, channels, path: Path) -> None:
     n = len(next(iter(predictions.values())))
     if n < 2:
         raise InputError(f"{n} data row; a fit's predictions hold at least 2", path=path)
+    for name, low, high in (("theta_i", 0.0, 90.0), ("theta_o", 0.0, 90.0), ("phi_i", -360.0, 360.0),
+                            ("phi_o", -360.0, 360.0)):
+        bad = np.flatnonzero((predictions[name] < low) | (predictions[name] > high))
+        if bad.size:
+            raise InputError(f"{name} = {predictions[name][bad[0]]:g} deg in data row {bad[0] + 1} lies outside "
+                             f"[{low:g}, {high:g}] deg (clothlab's convention)", path=path, field=name)
+    for name, values in predictions.items():  # BRDF values (1/sr) and their parts: >= 0, normal magnitudes
+        if not name.startswith(("measured_", "model_", "sigma_", "diffuse_", "specular_")):
+            continue
+        size = np.abs(values)
+        bad = np.flatnonzero((values < 0) | (size > MAX_VALUE) | ((size > 0) & (size < MIN_VALUE)))
+        if bad.size:
+            raise InputError(f"{values[bad[0]]:g} in data row {bad[0] + 1} is not a BRDF value: expected 0 or a "
+                             f"normal positive number up to {MAX_VALUE:g}", path=path, field=name)
     for c in channels:
         if not np.any(predictions[f"model_{c}"]):
             raise InputError(f"every value of model_{c} is 0: not the predictions of a fit", path=path,
