@@ -24,9 +24,9 @@ def _mirror_symmetric(a):
 
 
 def synthetic_fields(*, phi=PHI_FULL, seed=3, jacobian=1, n=8, spectral=False, isotropic=False):
-    """The fields of a random measured file, periodic in azimuth as a measured one is; ``isotropic``: one phi_i
-    node, ndf / sigma independent of phi, tables mirror-symmetric in the relative azimuth and independent of it
-    at normal incidence (a physically isotropic material)."""
+    """The fields of a random measured file, periodic in azimuth and uniform in it at the pole (u_x = 0) as a
+    measured one is; ``isotropic``: one phi_i node, ndf / sigma independent of phi, tables mirror-symmetric in
+    the relative azimuth and independent of it at normal incidence (a physically isotropic material)."""
     rng = np.random.default_rng(seed)
     if isotropic:
         phi = (0.0,)
@@ -44,6 +44,7 @@ def synthetic_fields(*, phi=PHI_FULL, seed=3, jacobian=1, n=8, spectral=False, i
             a[:, 0] = a[:, 0].mean(axis=-2, keepdims=True)
     for a in (ndf, sigma, vndf, luminance, values):  # periodic in azimuth: u_y = 0 and 1 are one direction
         a[..., -1, :] = a[..., 0, :]
+        a[..., 0] = a[..., 0].mean(axis=-1, keepdims=True)  # at the pole u_x = 0 the azimuth means nothing
     if np.isclose(phi[-1] - phi[0], 2 * math.pi):  # and phi_i = -pi, pi one incident azimuth
         for a in (vndf, luminance, values):
             a[-1] = a[0]

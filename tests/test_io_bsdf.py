@@ -149,6 +149,8 @@ def test_uniform_file_converts_to_value_times_d_over_4_sigma_cos(tmp_path, jacob
     nodes = np.degrees(np.linspace(0.0, 1.45, 6).astype(np.float32).astype(float))
     assert set(np.round(m.theta_i, 6)) == set(np.round(nodes, 6))
     assert set(m.theta_o) == {7.5, 22.5, 37.5, 52.5, 67.5, 82.5} and set(m.phi_o) == set(range(0, 360, 30))
+    # five phi_i nodes from -180 to 180 deg: four azimuths (-180 and 180 are one), one at normal incidence
+    assert len(np.unique(np.round(m.phi_i[m.theta_i > 0], 3))) == 4 and set(m.phi_i[m.theta_i == 0]) == {0.0}
     assert m.provenance["source_format"] == "bsdf" and m.provenance["isotropic"] is False
 
 
@@ -198,7 +200,8 @@ def test_isotropic_and_spectral_files_and_the_cli_table(tmp_path, capsys):
     assert back.provenance["bsdf_grid"]["samples"] == [8, 8]
 
 
-@pytest.mark.parametrize("option, value", [("theta_step", "0"), ("phi_step", "200"), ("theta_max", "nan")])
+@pytest.mark.parametrize("option, value", [("theta_step", "0"), ("phi_step", "200"), ("theta_max", "nan"),
+                                           ("exitant", "nodes")])
 def test_bad_sampling_option_exits_2_naming_it(tmp_path, capsys, option, value):
     path = write_synthetic(tmp_path / "s.bsdf")
     assert main(["import", str(path), "--format", "bsdf", "-o", str(tmp_path / "o.csv"), "--option",
@@ -252,3 +255,32 @@ def test_fuzzed_complete_file_is_converted_or_refused_naming_the_file(tmp_path, 
         return
     assert np.isfinite(m.values).all() and (m.values >= 0.0).all() and (m.values <= 1e30).all()
     assert m.n > 0 and (m.theta_o <= 85.0).all() and (m.theta_i <= 85.0).all()
+
+
+def test_sample_directions_carry_the_files_own_samples(tmp_path):
+    """exitant=samples: at each incident node every converted value (times cos theta_o, with D / (4 sigma)
+    constant) is one of the file's stored samples of that node: the warp maps the sample grid to these
+    directions and back (on the regular grid the values interpolate between samples instead)."""
+    f = synthetic_fields(n=6)
+    f["ndf"][:], f["sigma"][:] = 4.0, 1.0
+    path = write_tensor_file(f, tmp_path / "s.bsdf")
+    m = load_measurement(path, "bsdf", exitant="samples", theta_max=89.9)
+    assert m.provenance["bsdf_sampling"]["exitant"] == "the file's sample directions"
+    theta = np.degrees(f["theta_i"].astype(float))
+    phi = np.degrees(f["phi_i"].astype(float)) % 360.0
+    checked = 0
+    for j in (1, 2, 3):
+        for k in (1, 2, 3):  # nodes off the phi = +-180 seam
+            rows = np.isclose(m.theta_i, theta[j]) & np.isclose(m.phi_i, phi[k])
+            values = m.values[rows] * np.cos(np.radians(m.theta_o[rows]))[:, None]
+            stored = f["rgb"][k, j].reshape(3, -1).T.astype(float)  # (n * n, 3)
+            nearest = np.abs(values[:, None, :] - stored[None, :, :]).max(axis=2).min(axis=1)
+            assert np.all(nearest < 1e-6), nearest.max()
+            assert rows.sum() >= 10  # of 36: one for the 6 samples at h = n, others reflect below the surface
+            checked += rows.sum()
+    assert checked > 120
+    grid = load_measurement(path, "bsdf", theta_max=89.9)  # the grid's values interpolate: not all stored
+    rows = np.isclose(grid.theta_i, theta[2]) & np.isclose(grid.phi_i, phi[2])
+    values = grid.values[rows] * np.cos(np.radians(grid.theta_o[rows]))[:, None]
+    stored = f["rgb"][2, 2].reshape(3, -1).T.astype(float)
+    assert np.median(np.abs(values[:, None, :] - stored[None]).max(axis=2).min(axis=1)) > 1e-3

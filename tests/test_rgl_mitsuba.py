@@ -3,7 +3,7 @@ clothlab's table (BRDF, 1/sr) times cos(theta_o) equals ``measured``'s eval at t
 
 Synthetic files only (tests/rgl_synthetic.py).  Skips without mitsuba.  The figures:
 ``python -m pytest -q tests/test_rgl_mitsuba.py -p no:cacheprovider -s -n 0``.  Tolerance: relative 1e-4 (Mitsuba
-evaluates in float32; the measured maximum is ~1e-5).  Isotropic files are tested with a physically
+evaluates in float32; the measured maximum is ~5e-5).  Isotropic files are tested with a physically
 isotropic file (ndf / sigma independent of phi, tables symmetric in the relative azimuth): Mitsuba 3.9.1 also
 folds an isotropic file's directions by an azimuth symmetry whose kind is not fixed from one load to the next,
 which only such a file leaves without effect.  A half- or quarter-period file is compared at its incident
@@ -46,21 +46,27 @@ def _mitsuba_eval(path, wi, wo):
 
 @pytest.mark.parametrize("options", [
     {"phi": PHI_FULL}, {"phi": PHI_HALF}, {"phi": PHI_QUARTER}, {"phi": PHI_FULL, "jacobian": 0},
-    {"isotropic": True}, {"phi": PHI_FULL, "seed": 11, "n": 5}],
-    ids=["full", "half-period", "quarter-period", "no-jacobian", "isotropic", "coarse"])
+    {"isotropic": True}, {"phi": PHI_FULL, "seed": 11, "n": 5}, {"phi": PHI_FULL, "exitant": "samples"}],
+    ids=["full", "half-period", "quarter-period", "no-jacobian", "isotropic", "coarse", "sample-directions"])
 def test_converted_table_equals_mitsuba_measured_at_the_same_directions(tmp_path, scalar_rgb, options, request):
+    options = dict(options)
+    sampling = {"exitant": options.pop("exitant")} if "exitant" in options else {"theta_step": 15.0, "phi_step": 20.0}
     path = write_synthetic(tmp_path / "s.bsdf", **options)
-    m = load_measurement(path, "bsdf", theta_step=15.0, phi_step=20.0)
+    m = load_measurement(path, "bsdf", **sampling)
     folds = {1: (), 2: (0.0, 180.0), 4: (0.0, 90.0, 180.0, 270.0)}[m.provenance["bsdf_grid"]["reduction"]]
     m = m.subset(~np.isin(np.round(m.phi_i, 6), folds))  # (normal incidence has phi_i = 0: a fold too)
-    assert m.n >= 400
+    assert m.n >= 300
     ours = m.values * np.cos(np.radians(m.theta_o))[:, None]  # back to the format's f_r cos(theta_o)
     theirs = _mitsuba_eval(path, m.wi, m.wo)
     assert np.all(theirs > 0.0)
     rel = np.abs(ours - theirs) / theirs
-    print(f"{request.node.callspec.id}: {m.n} direction pairs x 3, max relative difference {rel.max():.2e}, median "
-          f"{np.median(rel):.2e}")
-    assert rel.max() < RTOL, f"max relative difference {rel.max():.3g} at row {int(np.argmax(rel.max(1)))}"
+    row = np.abs(ours - theirs) / theirs.max(axis=1, keepdims=True)  # relative to the row's largest channel
+    print(f"{request.node.callspec.id}: {m.n} direction pairs x 3, max relative difference {rel.max():.2e} "
+          f"(median {np.median(rel):.2e}), to the row's largest channel {row.max():.2e}")
+    assert row.max() < RTOL, f"max difference {row.max():.3g} at row {int(np.argmax(row.max(1)))}"
+    # sample directions include half vectors within ~1 deg of the normal, where float32 directions move the
+    # azimuth coordinate enough to change a channel 100x below the row's largest by ~1e-3 of itself
+    assert rel.max() < (1e-2 if "exitant" in sampling else RTOL), f"max relative difference {rel.max():.3g}"
 
 
 def test_conversion_differs_from_mitsuba_when_a_table_is_altered(tmp_path, scalar_rgb):

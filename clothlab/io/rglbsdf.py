@@ -457,16 +457,7 @@ def rgl_directions(table: RglBsdf, theta_step: float = DEFAULT_THETA_STEP, phi_s
     if theta_step / 2.0 > theta_max:
         raise ConfigError(f"theta_max {theta_max} is below the first exitant polar angle theta_step / 2 = "
                           f"{theta_step / 2.0}", field="theta_max")
-    incident = []
-    for t in np.degrees(table.theta_i):
-        if t > theta_max + 1e-9:
-            continue
-        phis = [0.0] if table.isotropic or t == 0.0 else sorted({round(float(p) % 360.0, 9)
-                                                                  for p in np.degrees(table.phi_i)})
-        incident += [(float(t), p) for p in phis]
-    if not incident:
-        raise ConfigError(f"no incident node of the file lies at or below theta_max {theta_max} deg (the first "
-                          f"is {np.degrees(table.theta_i[0]):.6g} deg)", field="theta_max")
+    incident = _incident_nodes(table, theta_max)
     thetas = np.arange(theta_step / 2.0, theta_max + 1e-9, theta_step)
     phis = np.arange(0.0, 360.0 - 1e-9, phi_step)
     rows = len(incident) * len(thetas) * len(phis)
@@ -479,28 +470,112 @@ def rgl_directions(table: RglBsdf, theta_step: float = DEFAULT_THETA_STEP, phi_s
     return inc[k, 0], inc[k, 1], to.ravel(), po.ravel()
 
 
+def _sample_slice(density, conditional, marginal, ux, uy):
+    """The point to which one warp slice maps unit-square samples (ux, uy): the marginal CDF in y inverted,
+    then the conditional CDF in x at that row (the forward map that :func:`invert_warp` undoes); within a
+    cell the CDF is quadratic, f = 2 d / (c0 + sqrt(c0^2 + 2 d (c1 - c0)))."""
+    ny, nx = density.shape
+    row = np.clip(np.searchsorted(marginal, uy, side="left") - 1, 0, ny - 2)
+    r0, r1 = conditional[row, -1], conditional[row + 1, -1]
+    d = np.maximum(uy - marginal[row], 0.0)
+    root = np.sqrt(np.maximum(r0 * r0 + 2.0 * d * (r1 - r0), 0.0))
+    fy = np.clip(np.where(r0 + root > 0.0, 2.0 * d / np.where(r0 + root > 0.0, r0 + root, 1.0), 0.0), 0.0, 1.0)
+    target = ux * ((1.0 - fy) * r0 + fy * r1)
+    rows = (1.0 - fy)[:, None] * conditional[row] + fy[:, None] * conditional[row + 1]
+    col = np.clip((rows < target[:, None]).sum(axis=1) - 1, 0, nx - 2)
+    dx = np.maximum(target - rows[np.arange(len(col)), col], 0.0)
+    c0 = (1.0 - fy) * density[row, col] + fy * density[row + 1, col]
+    c1 = (1.0 - fy) * density[row, col + 1] + fy * density[row + 1, col + 1]
+    root = np.sqrt(np.maximum(c0 * c0 + 2.0 * dx * (c1 - c0), 0.0))
+    fx = np.clip(np.where(c0 + root > 0.0, 2.0 * dx / np.where(c0 + root > 0.0, c0 + root, 1.0), 0.0), 0.0, 1.0)
+    return (col + fx) / (nx - 1), (row + fy) / (ny - 1)
+
+
+def _incident_nodes(table: RglBsdf, theta_max: float) -> list[tuple[float, float]]:
+    """(theta_i, phi_i) degrees of the file's incident nodes with theta_i <= theta_max (one azimuth at normal
+    incidence; phi_i = 0 only for an isotropic file)."""
+    azimuths: list[float] = []
+    for p in np.degrees(table.phi_i) % 360.0:  # -180 and 180 deg (float32 -pi, pi) are one azimuth: kept once
+        if all(abs((float(p) - q + 180.0) % 360.0 - 180.0) > 1e-3 for q in azimuths):
+            azimuths.append(float(p))
+    incident = []
+    for t in np.degrees(table.theta_i):
+        if t > theta_max + 1e-9:
+            continue
+        phis = [0.0] if table.isotropic or t == 0.0 else sorted(azimuths)
+        incident += [(float(t), p) for p in phis]
+    if not incident:
+        raise ConfigError(f"no incident node of the file lies at or below theta_max {theta_max} deg (the first "
+                          f"is {np.degrees(table.theta_i[0]):.6g} deg)", field="theta_max")
+    return incident
+
+
+def rgl_sample_directions(table: RglBsdf, theta_max: float = DEFAULT_THETA_MAX):
+    """Direction pairs (degrees, clothlab convention) where the file holds its reflectance samples: at each
+    incident node (:func:`_incident_nodes`), every node of the sample grid mapped through the VNDF warp to a
+    half vector h and reflected, wo = 2 (wi . h) h - wi; pairs with theta_o > theta_max (or wo below the
+    surface) are left out, repeated pairs (e.g. all azimuths of h = n) kept once."""
+    ny, nx = table.values.shape[3:]
+    gx, gy = np.meshgrid(np.linspace(0.0, 1.0, nx), np.linspace(0.0, 1.0, ny))
+    gx, gy = gx.ravel(), gy.ravel()
+    rows = []
+    for t, p in _incident_nodes(table, theta_max):
+        ti, pi_ = math.radians(t), math.radians(p if p <= 180.0 else p - 360.0)
+        (ia, wa), (ib, wb) = (_node_weights(table.phi_i, np.array([pi_])), _node_weights(table.theta_i,
+                                                                                         np.array([ti])))
+        params = ((ia, wa), (ib, wb))
+        tables = [_blend(a, params)[0] for a in (table.vndf.density, table.vndf.conditional, table.vndf.marginal)]
+        umx, umy = _sample_slice(*tables, gx, gy)
+        theta_m, phi_m = umx * umx * (math.pi / 2.0), (2.0 * umy - 1.0) * math.pi
+        if table.isotropic:
+            phi_m = phi_m + pi_
+        h = np.stack([np.sin(theta_m) * np.cos(phi_m), np.sin(theta_m) * np.sin(phi_m), np.cos(theta_m)], axis=1)
+        wi = spherical_to_vector(t, p)
+        wo = 2.0 * (h @ wi)[:, None] * h - wi
+        theta_o = np.degrees(np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2]))
+        phi_o = np.where(theta_o > 0.0, np.degrees(np.arctan2(wo[:, 1], wo[:, 0])) % 360.0, 0.0)
+        keep = (wo[:, 2] > 0.0) & (theta_o <= theta_max)
+        rows.append(np.stack([np.full(keep.sum(), t), np.full(keep.sum(), p), theta_o[keep], phi_o[keep]], axis=1))
+    pairs = np.concatenate(rows)
+    _, first = np.unique(np.round(pairs, 9), axis=0, return_index=True)
+    pairs = pairs[np.sort(first)]
+    if len(pairs) > MAX_ROWS:
+        raise ConfigError(f"{len(pairs)} sample direction pairs exceed {MAX_ROWS}", field="exitant")
+    return pairs[:, 0], pairs[:, 1], pairs[:, 2], pairs[:, 3]
+
+
+EXITANT_CHOICES = ("grid", "samples")
+"""``exitant`` option of :func:`read_bsdf`: the regular grid (:func:`rgl_directions`) or the file's own sample
+directions (:func:`rgl_sample_directions`)."""
+
+
 def check_options(*, theta_step: float = DEFAULT_THETA_STEP, phi_step: float = DEFAULT_PHI_STEP,
-                  theta_max: float = DEFAULT_THETA_MAX) -> None:
+                  theta_max: float = DEFAULT_THETA_MAX, exitant: str = "grid") -> None:
     """ConfigError (``field`` = the option) unless :func:`read_bsdf`'s sampling options are valid."""
+    if exitant not in EXITANT_CHOICES:
+        raise ConfigError(f"exitant must be one of {' | '.join(EXITANT_CHOICES)}, got {exitant!r}", field="exitant")
     probe = RglBsdf(np.zeros(1), np.zeros(1), np.ones((2, 2)), np.ones((2, 2)), None, np.zeros(0), (), True,
                     True, 1, "")
     rgl_directions(probe, theta_step, phi_step, theta_max)
 
 
 def read_bsdf(path, *, theta_step: float = DEFAULT_THETA_STEP, phi_step: float = DEFAULT_PHI_STEP,
-              theta_max: float = DEFAULT_THETA_MAX) -> Measurement:
+              theta_max: float = DEFAULT_THETA_MAX, exitant: str = "grid") -> Measurement:
     """Convert an RGL-EPFL ``.bsdf`` file (``measurement.format: bsdf``) to a measurement: the BRDF (1/sr) by
     the format's own evaluation (:func:`lookup_rgl`) at :func:`rgl_directions`.
 
-    The file's x axis is taken as the weft (phi = 0); its incident direction as clothlab's theta_i, phi_i.
+    ``exitant="samples"``: at the file's own sample directions (:func:`rgl_sample_directions`) instead of the
+    regular grid.  The file's x axis is taken as the weft (phi = 0); its incident direction as clothlab's
+    theta_i, phi_i.
     """
     try:
-        check_options(theta_step=theta_step, phi_step=phi_step, theta_max=theta_max)
+        check_options(theta_step=theta_step, phi_step=phi_step, theta_max=theta_max, exitant=exitant)
     except ConfigError as exc:
         raise InputError(exc.detail, path=path, field=exc.field) from None
     table = read_rgl_bsdf(path)
     try:
-        theta_i, phi_i, theta_o, phi_o = rgl_directions(table, theta_step, phi_step, theta_max)
+        theta_i, phi_i, theta_o, phi_o = (rgl_sample_directions(table, theta_max) if exitant == "samples" else
+                                          rgl_directions(table, theta_step, phi_step, theta_max))
     except ConfigError as exc:
         raise InputError(exc.detail, path=path, field=exc.field) from None
     values = lookup_rgl(table, spherical_to_vector(theta_i, phi_i), spherical_to_vector(theta_o, phi_o))
@@ -517,8 +592,10 @@ def read_bsdf(path, *, theta_step: float = DEFAULT_THETA_STEP, phi_step: float =
     info = {"source_format": "bsdf", "isotropic": table.isotropic,
             "sample_name": Path(path).name.split(".")[0],
             "bsdf_description": table.description,
-            "bsdf_sampling": {"theta_step": float(theta_step), "phi_step": float(phi_step),
-                              "theta_max": float(theta_max), "incident": "the file's theta_i / phi_i nodes"},
+            "bsdf_sampling": ({"exitant": "the file's sample directions", "theta_max": float(theta_max)}
+                              if exitant == "samples" else
+                              {"exitant": "grid", "theta_step": float(theta_step), "phi_step": float(phi_step),
+                               "theta_max": float(theta_max)}) | {"incident": "the file's theta_i / phi_i nodes"},
             "bsdf_grid": {"phi_i": len(table.phi_i), "theta_i": len(table.theta_i),
                           "samples": list(table.values.shape[3:]), "reduction": table.reduction,
                           "jacobian": table.jacobian},
