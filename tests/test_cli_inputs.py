@@ -562,3 +562,45 @@ def test_infinity_in_fit_json_is_named_by_every_reader(tmp_path, capsys, names_o
     assert main(["fit-btf", str(names_only_stack), str(src), "-o", str(tmp_path / "out")]) == 2
     line = one_error_line(capsys.readouterr().err)
     assert f"{src / 'fit.json'}, field 'wall_time_s'" in line and "-Infinity" in line, line
+
+
+def _edit_csv(path: Path, column: str, value: str, row: int = 3) -> None:
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[row].split(",")
+    cells[header.index(column)] = value
+    lines[row] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("file, column, value", [
+    ("slices.csv", "signed_theta_i", "1e308"), ("slices.csv", "model_R", "1e-320"), ("slices.csv", "phi_o", "-1e308"),
+    ("trace.csv", "value", "1e308"), ("trace.csv", "best", "1e-320"), ("trace.csv", "time_s", "-1"),
+    ("posterior_samples.csv", "alpha", "nan"),
+])
+def test_report_refuses_bad_optional_tables_naming_the_column(tmp_path, capsys, file, column, value):
+    """Before: a ValueError traceback from matplotlib ('Axis limits cannot be NaN or Inf', 'x and y must have
+    the same length') or overflow warnings and exit 0."""
+    d = tmp_path / "fits" / "polyester-lining"
+    shutil.copytree(REPO / "fits" / "polyester-lining", d)
+    _edit_csv(d / file, column, value)
+    assert main(["report", str(d), "-o", str(tmp_path / "reports")]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert str(d / file) in line and (f"field '{column}'" in line or f"{file}:" in line), line
+
+
+@pytest.mark.parametrize("key, value, field", [
+    ("predictive_slices", '"x"', "predictive_slices"), ("parameters", "[]", "parameters"),
+    ("correlation", '{"names": ["a"], "matrix": 5}', "correlation.matrix"),
+    ("predictive_slices", '{"bands": {"p5": [[1, NaN]]}}', "predictive_slices.bands.p5.0.1"),
+    ("predictive_slices", '{"bands": {"p5": [["a"]]}}', "predictive_slices.bands.p5"),
+])
+def test_report_refuses_a_malformed_posterior_json_naming_the_field(tmp_path, capsys, key, value, field):
+    d = tmp_path / "fits" / "polyester-lining"
+    shutil.copytree(REPO / "fits" / "polyester-lining", d)
+    post = json.loads((d / "posterior.json").read_text())
+    post[key] = "@@"
+    (d / "posterior.json").write_text(json.dumps(post, indent=1).replace('"@@"', value))
+    assert main(["report", str(d), "-o", str(tmp_path / "reports")]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert f"posterior.json, field '{field}'" in line, line

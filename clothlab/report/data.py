@@ -157,6 +157,80 @@ def _finite(value, path: Path, field: str) -> float:
     return float(value)
 
 
+ANGLE_RANGES = {"theta_i": (0.0, 90.0), "theta_o": (0.0, 90.0), "phi_i": (-360.0, 360.0),
+                "phi_o": (-360.0, 360.0), "signed_theta_i": (-90.0, 90.0)}
+"""Directions of predictions.csv and slices.csv (deg, clothlab's convention)."""
+BRDF_PREFIXES = ("measured_", "model_", "sigma_", "diffuse_", "specular_")
+
+
+def _check_columns(table: dict, path: Path) -> None:
+    """Directions within :data:`ANGLE_RANGES`; BRDF columns (1/sr, :data:`BRDF_PREFIXES`) 0 or normal
+    positive numbers up to 1e30 (what a measurement table may hold, :mod:`clothlab.io.table`)."""
+    for name, (low, high) in ANGLE_RANGES.items():
+        if name in table:
+            bad = np.flatnonzero((table[name] < low) | (table[name] > high))
+            if bad.size:
+                raise InputError(f"{name} = {table[name][bad[0]]:g} deg in data row {bad[0] + 1} lies outside "
+                                 f"[{low:g}, {high:g}] deg (clothlab's convention)", path=path, field=name)
+    for name, values in table.items():
+        if not name.startswith(BRDF_PREFIXES):
+            continue
+        size = np.abs(values)
+        bad = np.flatnonzero((values < 0) | (size > MAX_VALUE) | ((size > 0) & (size < MIN_VALUE)))
+        if bad.size:
+            raise InputError(f"{values[bad[0]]:g} in data row {bad[0] + 1} is not a BRDF value: expected 0 or a "
+                             f"normal positive number up to {MAX_VALUE:g}", path=path, field=name)
+
+
+def _check_trace(trace: dict, path: Path) -> None:
+    """Objective values of trace.csv: inf or NaN where the optimiser met them, else 0 or a normal magnitude up
+    to 1e30 (the trace plot is logarithmic); evaluation numbers and times finite and >= 0."""
+    for name in ("evaluation", "time_s"):
+        bad = np.flatnonzero(~np.isfinite(trace[name]) | (trace[name] < 0))
+        if bad.size:
+            raise InputError(f"{trace[name][bad[0]]:g} in data row {bad[0] + 1}: expected a finite number >= 0",
+                             path=path, field=name)
+    for name in ("value", "best"):
+        size = np.abs(trace[name])
+        bad = np.flatnonzero(np.isfinite(size) & ((size > MAX_VALUE) | ((size > 0) & (size < MIN_VALUE))))
+        if bad.size:
+            raise InputError(f"{trace[name][bad[0]]:g} in data row {bad[0] + 1} is not an objective value: expected "
+                             f"0, inf, nan or a normal number up to {MAX_VALUE:g} in magnitude", path=path, field=name)
+
+
+def _check_posterior(post: dict, path: Path) -> None:
+    """The shapes the report reads from posterior.json (objects, lists, numbers), each refused naming its field."""
+    def kind(value, types, field, what):
+        if value is not None and not isinstance(value, types):
+            raise InputError(f"expected {what}, found {type(value).__name__}", path=path, field=field)
+
+    for key in ("parameters", "convergence", "correlation", "predictive_slices"):
+        kind(post.get(key), dict, key, "an object")
+    kind(post.get("not_determined"), list, "not_determined", "a list of parameter names")
+    for name, entry in (post.get("parameters") or {}).items():
+        kind(entry, dict, f"parameters.{name}", "an object")
+    kind((post.get("convergence") or {}).get("acceptance_fraction"), dict, "convergence.acceptance_fraction",
+         "an object")
+    corr = post.get("correlation") or {}
+    kind(corr.get("names"), list, "correlation.names", "a list")
+    kind(corr.get("matrix"), list, "correlation.matrix", "a list of rows")
+    for i, row in enumerate(corr.get("matrix") or []):
+        kind(row, list, f"correlation.matrix.{i}", "a row (list)")
+    bands = (post.get("predictive_slices") or {}).get("bands")
+    kind(bands, dict, "predictive_slices.bands", "an object of percentile bands")
+    for key, band in (bands or {}).items():
+        if not key.startswith("p"):  # e.g. draws
+            continue
+        kind(band, list, f"predictive_slices.bands.{key}", "a list of rows of numbers")
+        try:
+            values = np.asarray(band, dtype=np.float64)
+        except (TypeError, ValueError):
+            values = np.array([np.nan])
+        if values.ndim not in (1, 2) or not np.isfinite(values).all() or any(isinstance(r, bool) for r in band):
+            raise InputError("expected rows of finite numbers (one per slice point)", path=path,
+                             field=f"predictive_slices.bands.{key}")
+
+
 def _check_predictions(predictions: dict, channels, path: Path) -> None:
     """The measured and model columns the report shows: every value finite (read strictly already), model
     values not all zero, some measured value positive (the relative error of sec. 8 needs one), at least two
@@ -164,20 +238,7 @@ def _check_predictions(predictions: dict, channels, path: Path) -> None:
     n = len(next(iter(predictions.values())))
     if n < 2:
         raise InputError(f"{n} data row; a fit's predictions hold at least 2", path=path)
-    for name, low, high in (("theta_i", 0.0, 90.0), ("theta_o", 0.0, 90.0), ("phi_i", -360.0, 360.0),
-                            ("phi_o", -360.0, 360.0)):
-        bad = np.flatnonzero((predictions[name] < low) | (predictions[name] > high))
-        if bad.size:
-            raise InputError(f"{name} = {predictions[name][bad[0]]:g} deg in data row {bad[0] + 1} lies outside "
-                             f"[{low:g}, {high:g}] deg (clothlab's convention)", path=path, field=name)
-    for name, values in predictions.items():  # BRDF values (1/sr) and their parts: >= 0, normal magnitudes
-        if not name.startswith(("measured_", "model_", "sigma_", "diffuse_", "specular_")):
-            continue
-        size = np.abs(values)
-        bad = np.flatnonzero((values < 0) | (size > MAX_VALUE) | ((size > 0) & (size < MIN_VALUE)))
-        if bad.size:
-            raise InputError(f"{values[bad[0]]:g} in data row {bad[0] + 1} is not a BRDF value: expected 0 or a "
-                             f"normal positive number up to {MAX_VALUE:g}", path=path, field=name)
+    _check_columns(predictions, path)
     for c in channels:
         if not np.any(predictions[f"model_{c}"]):
             raise InputError(f"every value of model_{c} is 0: not the predictions of a fit", path=path,
@@ -297,17 +358,20 @@ def load_fit_dir(fit_dir) -> FitRecord:
     slices_path, trace_path, posterior_path = (fit_dir / n for n in ("slices.csv", "trace.csv", "posterior.json"))
     if slices_path.exists():
         record.slices = read_csv_table(slices_path, required=SLICE_COLUMNS)
+        _check_columns(record.slices, slices_path)
     else:
         record.notes.append("slices.csv is absent: no incidence-plane slice plot.")
     if trace_path.exists():
         record.trace = read_csv_table(trace_path, required=TRACE_COLUMNS, text_columns=("stage",), finite=False)
+        _check_trace(record.trace, trace_path)
     else:
         record.notes.append("trace.csv is absent: no optimiser trace plot.")
     if posterior_path.exists():
         record.posterior = read_json(posterior_path)
+        _check_posterior(record.posterior, posterior_path)
         samples_path = fit_dir / "posterior_samples.csv"
         if samples_path.exists():
-            record.posterior_samples = read_csv_table(samples_path, finite=False)
+            record.posterior_samples = read_csv_table(samples_path)  # samples of the chain: finite numbers
     return record
 
 
