@@ -55,7 +55,7 @@ class Section(NamedTuple):
 
 
 _IM = "clothlab.models.irawan"
-_FIT = ("clothlab.fit", _IM, "clothlab.io", "clothlab.config")
+_FIT = ("clothlab.fit", _IM)  # (not io / config: reading the table and the yaml is a negligible part of a fit)
 SECTIONS = (
     Section("cli", "clothlab.studies.cli_startup", "clothlab --help time, heavy modules pulled in by import",
             ("clothlab.cli", "clothlab.progress", "clothlab.__main__")),
