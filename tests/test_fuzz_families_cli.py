@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_fuzz_inputs import BAD_TOKENS, TOKENS, check_named, mutate_lines, report
+from test_fuzz_inputs import BAD_TOKENS, TOKENS, check_named, mutate_lines, replace_field, report
 
 from clothlab.errors import ClothlabError
 
@@ -206,6 +206,14 @@ def _valid_record(record) -> None:
         assert (measured > 0).any() and model.any()
     text = json.dumps(fit, allow_nan=False)  # no NaN / Infinity anywhere
     assert text
+    if record.slices is not None:
+        sl = record.slices
+        assert ((0 <= sl["theta_o"]) & (sl["theta_o"] <= 90)).all() and (np.abs(sl["signed_theta_i"]) <= 90).all()
+        assert all(((sl[k] >= 0) & (sl[k] <= 1e30)).all() for k in sl if k.startswith("model_"))
+    if record.trace is not None:
+        for k in ("value", "best"):
+            finite = record.trace[k][np.isfinite(record.trace[k])]
+            assert (np.abs(finite) <= 1e30).all() and not ((finite != 0) & (np.abs(finite) < 2.2e-308)).any()
 
 
 def test_fuzz_report_fit_directories(tmp_path, small_fit):
@@ -216,14 +224,16 @@ def test_fuzz_report_fit_directories(tmp_path, small_fit):
     fit_text = (small_fit / "fit.json").read_text()
     fit = json.loads(fit_text)
     leaves = list(_leaves(fit))
-    pred_lines = (small_fit / "predictions.csv").read_text().splitlines()
+    tables = {name: (small_fit / name).read_text().splitlines()
+              for name in ("predictions.csv", "slices.csv", "trace.csv")}
     counts = collections.Counter()
 
     @SETTINGS
-    @given(target=st.sampled_from(["fit.json", "fit.json", "predictions.csv"]), leaf=st.sampled_from(leaves),
-           value=st.one_of(st.sampled_from(FIT_VALUES), TOKENS.map(json.dumps)), delete=st.booleans(),
-           op=st.integers(0, 3), index=st.integers(0, 10**6), token=TOKENS)
-    def run(target, leaf, value, delete, op, index, token):
+    @given(target=st.sampled_from(["fit.json", "fit.json", "predictions.csv", "slices.csv", "trace.csv"]),
+           leaf=st.sampled_from(leaves), value=st.one_of(st.sampled_from(FIT_VALUES), TOKENS.map(json.dumps)),
+           delete=st.booleans(), op=st.integers(0, 4), index=st.integers(0, 10**6), col=st.integers(0, 40),
+           token=st.one_of(TOKENS, st.sampled_from(["1e308", "-1e308", "1e-320", "-5", "200", "inf", "nan"])))
+    def run(target, leaf, value, delete, op, index, col, token):
         d = tmp_path / "case"
         shutil.rmtree(d, ignore_errors=True)
         shutil.copytree(small_fit, d)
@@ -240,11 +250,16 @@ def test_fuzz_report_fit_directories(tmp_path, small_fit):
                 text = json.dumps(data).replace('"@@VALUE@@"', value)
             (d / "fit.json").write_text(text)
         else:
-            (d / "predictions.csv").write_text("\n".join(mutate_lines(pred_lines, op, index, token)) + "\n")
+            lines = tables[target]
+            if op == 4:  # one cell of a data row
+                lines = replace_field(lines, 1 + index % (len(lines) - 1), col, token)
+            else:
+                lines = mutate_lines(lines, op, index, token)
+            (d / target).write_text("\n".join(lines) + "\n")
         try:
             record = load_fit_dir(d)
         except ClothlabError as exc:
-            check_named(exc, d / "fit.json", d / "predictions.csv")
+            check_named(exc, *(d / name for name in ("fit.json", "predictions.csv", "slices.csv", "trace.csv")))
             counts["refused (named)"] += 1
             return
         _valid_record(record)

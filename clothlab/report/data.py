@@ -79,7 +79,7 @@ def read_csv_table(path, *, required=(), text_columns=(), finite: bool = True) -
         raise InputError(f"cannot read the file ({exc})", path=path) from None
     rows = [(number, row) for number, row in enumerate(rows, start=1) if any(cell.strip() for cell in row)]
     if not rows:
-        raise InputError("the file is empty; expected a header row and data rows", path=path)
+        raise InputError("the file is empty; expected a header row and data rows", path=path, line=1)
     header_line, header = rows[0]
     header = [cell.strip() for cell in header]
     if len(set(header)) != len(header):
@@ -88,7 +88,7 @@ def read_csv_table(path, *, required=(), text_columns=(), finite: bool = True) -
     if missing:
         raise InputError(f"missing column(s) {missing}; the header has {header}", path=path, line=header_line)
     if len(rows) == 1:
-        raise InputError("the file has a header but no data rows", path=path)
+        raise InputError("the file has a header but no data rows", path=path, line=header_line + 1)
     for number, row in rows[1:]:
         if len(row) != len(header):
             raise InputError(f"row has {len(row)} fields, the header has {len(header)}", path=path, line=number)
