@@ -13,7 +13,7 @@ A *chunk* is one (material, centre cell): ``sizes x len(SIZE_RANGES) x pairs`` r
 seed ``(seed, material, cell)`` alone, so chunks are independent tasks (any order, any machine) and a run
 resumes by generating only the chunks whose file is missing.  Every row has its own direction pair: with
 the same label budget this generalises to held-out pairs far better than a few pairs meeting every
-footprint (measured: relative RMSE 0.04-0.16 against 0.19-0.34 at >= 0.12 tile, docs/neural.md), but a
+footprint (measured: relative RMSE 0.04-0.16 against 0.19-0.34 at >= 0.12 tile, docs/notes/neural-log.md), but a
 labeller that tabulates per direction pair (summed-area tables) then builds one table per row.
 Row columns: :data:`COLUMNS` then the label source's components.
 """

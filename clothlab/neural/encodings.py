@@ -67,7 +67,7 @@ def yarn_features(weave, centre: np.ndarray, extent: dict, bins: int = BLOB_BINS
     Not in the paper: its decoder sees only the position one-blob.  The IM texture's value at a point is a
     function of these local coordinates and the directions (the yarn normal and tangent follow from them),
     shared by every segment of a type, so the network can pool what it learns over the segments of a tile
-    (docs/neural.md: the ablation at footprints below 0.12 tile)."""
+    (docs/notes/neural-log.md: the ablation at footprints below 0.12 tile)."""
     from clothlab.weave.lookup import locate_segments
 
     centre = np.asarray(centre, dtype=np.float64)

@@ -5,7 +5,8 @@ yarn_features` and :func:`~clothlab.neural.encodings.direction_features` (comput
 float32: the decoder's dtype), written straight into two float32 arrays, without the ~20 temporary (N, k)
 float64 arrays of the numpy path.  The yarn lookup (Irawan & Marschner 2012, sec. 7.2;
 :func:`clothlab.weave.lookup.locate_segments`) reads a per-cell table of segment indices made once per weave
-(:func:`yarn_tables`).  Measured on this machine: 0.42 -> ~0.1 CPU-us per query (docs/neural.md).
+(:func:`yarn_tables`).  Measured on this machine: 0.42-0.5 -> 0.22-0.27 CPU-us per query (docs/neural.md,
+"What changed in session 12").
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ decoder and encoder by the network's own backward pass (:meth:`SurrogateNetwork.
 trained over a range of the free parameters (``clothlab train-surrogate --vary``); a per-fabric network has
 seen one material and its encoder does not constrain them.
 
-A residual network (``--residual``) outputs g = T(R(params)) + net(m(params)) (docs/neural.md "Residual over
+A residual network (``--residual``) outputs g = T(R(params)) + net(m(params)) (docs/notes/neural-log.md "Residual over
 the reflectance model"): the gradient then also has the term dT(R)/dx, by central finite differences of the
 exact model R (cheap next to the network's backward pass) in x, the parameter's normalised internal
 coordinate.  Decoder inputs that depend on the material (T(R) with ``--residual-input``, the texture probe
@@ -71,10 +71,10 @@ class MaterialObjective:
     0 and 1), times the network's gradient with respect to them:
 
     - ``reference``: a callable x -> R (N, C) of the exact model at the parameters of x, for a residual network
-      (g = T(R) + net, docs/neural.md "Residual over the reflectance model") and for one that reads T(R) as a
+      (g = T(R) + net, docs/notes/neural-log.md "Residual over the reflectance model") and for one that reads T(R) as a
       decoder input (``--residual-input``);
     - ``probe``: a callable x -> the texture probe's values (N, n^2 C) at the parameters of x, for a network
-      that reads the probe as a decoder input (``--probe-points``; docs/neural.md "Texture probe")."""
+      that reads the probe as a decoder input (``--probe-points``; docs/notes/neural-log.md "Texture probe")."""
 
     def __init__(self, surrogate, wi, wo, values, base_vector: np.ndarray, free_index: dict, *, size: float = 4.5,
                  reference=None, probe=None, step: float = 1e-4):

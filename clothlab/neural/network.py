@@ -9,7 +9,7 @@ The encoder runs once per material (the M rows of ``material``); each query row 
 ``index``.  At inference the latent part of the first fusion layer (z W_z + b) is a per-material constant
 (:meth:`SurrogateNetwork.fusion_bias`), so a query costs only the decoder
 (:class:`clothlab.neural.inference.DecoderPlan`).  The paper does not state the decoder widths; ``width`` /
-``spatial`` are chosen by measurement (docs/neural.md).
+``spatial`` are chosen by measurement (docs/notes/neural-log.md).
 """
 
 from __future__ import annotations

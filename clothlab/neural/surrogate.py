@@ -17,7 +17,7 @@ or, for another material, from the ``reference`` values handed to :meth:`Surroga
 Texture probe (``encoding["probe_points"]`` = n > 0; not in the paper): T of the noise-free texture at the
 n x n midpoints of the footprint (:class:`clothlab.neural.labels.TextureProbe`) is appended to the direction
 features.  It tells the decoder where the yarn highlights lie in the footprint, which the position one-blob
-of 8 bins cannot resolve below ~0.12 tile (docs/neural.md, "Texture probe").  The values come from
+of 8 bins cannot resolve below ~0.12 tile (docs/notes/neural-log.md, "Texture probe").  The values come from
 ``probes`` (one per trained material, attached by the caller) or from ``probe`` handed to :meth:`query`.
 """
 
@@ -143,7 +143,7 @@ class Surrogate:
         latent of any other material (a held-out row, an encoder input vector) is clipped to it: after long
         training the encoder can send a material between trained ones far outside their latents (a norm of 50
         against at most 3 for the trained ones, measured), where the decoder was never trained; clipped, it
-        stays among them (docs/neural.md, "Latent box").  A one-material network's encoder says nothing about
+        stays among them (docs/notes/neural-log.md, "Latent box").  A one-material network's encoder says nothing about
         other materials and is left as it is."""
         if self._box is None:
             rows = self.trained_rows()
