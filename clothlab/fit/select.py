@@ -13,23 +13,33 @@ Candidates (:func:`candidates`) are the product of
   starts (:func:`orientation_scan`; the objective is multimodal in the orientation, and a reduced budget
   does not find the basin by itself).  Isotropic kinds get one start and do not free it.
 
-The free parameters of a candidate are fabric.yaml's ``fit.free`` that the candidate's kind declares (when
-none is, its specular part's defaults by config validation's rule, :func:`clothlab.config.validate.default_free`:
-for kind neural the parameters its network was trained over), its diffuse part's defaults (``sigma``) and
+* losses (issue 28): ``--losses`` (default: fabric.yaml's ``fit.loss`` only), huber and cauchy at every
+  ``--loss-scales`` value, so the CV ranking chooses the scale.
+
+The free parameters of a candidate are fabric.yaml's ``fit.free`` mapped to the candidate's kind
+(:func:`map_free`: a declared name kept, another replaced by its role's counterpart, :data:`IM_COUNTERPARTS`,
+:data:`CONCEPTS`; a name of no model's vocabulary is a ConfigError before any fit); when that leaves none, its
+specular part's defaults by config validation's rule (:func:`clothlab.config.validate.default_free`: for kind
+neural the parameters its network was trained over); then its diffuse part's defaults (``sigma``) and
 ``orientation``; the starts are ``model.params`` restricted the same way, else the weave's values.
+
+Optional, on top (docs/select.md): nested cross-validation (``SelectSettings.nested``, :mod:`clothlab.fit.nested`)
+for the selected model's honest held-out error, selection stability on subsamples (``stability``,
+:mod:`clothlab.fit.stability`), and always the residual diagnostics of the top candidates
+(:func:`top_residuals`) and the not-determined flags in each row's note (:mod:`clothlab.fit.determined`).
 
 Each candidate is one independent task (:func:`fit_candidate`: a :class:`CandidateTask` in, a
 :class:`CandidateResult` out, nothing shared), so a task scheduler can distribute the list.  A candidate is
 fitted with a reduced budget (``select.max_evals``, default 600 evaluations, one start, polish
-``max_evals // 4``) and cross-validated (``select.cv_folds``, default 5, through
-:func:`clothlab.fit.runner.run_fit`, i.e. :mod:`clothlab.fit.crossval`; its fold scheme is ``auto``).
+``max_evals // 4``) and cross-validated (``select.cv_folds``, default 5, :mod:`clothlab.fit.crossval`, fold
+scheme ``auto``), each fold repeating the candidate's own search with the same budget (:func:`_candidate_cv`).
 
 Ranking (:func:`rank`): by the cross-validated (held-out) mean relative error, candidates whose
 cross-validation failed after those with one; the table also lists the information criteria
 
     AIC = n ln(F) + 2 k,        BIC = n ln(F) + k ln(n)
 
-with F the objective at the optimum (the mean squared metric residual, :mod:`clothlab.fit.problem`), n the
+with F the mean squared metric residual at the optimum (whatever the candidate's loss), n the
 number of fitted values (rows x channels) and k the free parameters plus the linear coefficients
 (components x channels).  Likelihood assumed: the metric residuals are independent Gaussian with one unknown
 variance, profiled out (-2 ln L = n ln F + const), so only differences between candidates on the same data
