@@ -38,3 +38,23 @@ def test_compiled_features_equal_the_numpy_encodings(name, yarn):
     for a, b in zip(fast, slow, strict=True):
         assert a.dtype == b.dtype == surrogate.network.dtype and a.shape == b.shape
         np.testing.assert_allclose(a, b, rtol=2e-7, atol=1e-12)
+
+
+def test_kernels_compile_uncached_where_no_cache_directory_is_writable(monkeypatch):
+    import numba
+
+    from clothlab.neural import fast_features
+
+    real, seen = numba.njit, []
+
+    def refusing(**options):
+        seen.append(options.get("cache"))
+        if options.get("cache"):
+            raise RuntimeError("cannot cache function: no locator available for file")
+        return real(**options)
+    monkeypatch.setattr(numba, "njit", refusing)
+
+    @fast_features.njit(cache=True)
+    def twice(x):
+        return 2.0 * x
+    assert twice(1.5) == 3.0 and seen == [True, False]

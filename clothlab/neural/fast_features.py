@@ -13,12 +13,26 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
-from numba import njit
 
 from clothlab.neural.encodings import SIZE_MAX, SIZE_S0
 
 INV_E = math.exp(-1.0)
+
+
+def njit(**options):
+    """``numba.njit`` that compiles uncached where no cache directory is writable (numba raises RuntimeError
+    "no locator available" then), as :func:`clothlab.models.jit.njit` does for the model kernels (this
+    package sits below ``models`` in the import layers)."""
+    def wrap(fn):
+        try:
+            return numba.njit(**options)(fn)
+        except RuntimeError as exc:
+            if "no locator available" not in str(exc):
+                raise
+            return numba.njit(**{**options, "cache": False})(fn)
+    return wrap
 
 
 @njit(cache=True, inline="always")
