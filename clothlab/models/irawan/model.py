@@ -12,12 +12,12 @@ beta        1     (0, 100000]  4        forward scattering of the phase function
 delta       1     [0, 1)       0.3      filament smoothing: the faded fraction of the arc, eq. 9
 hwidth      1     (0, 1]       0.5      highlight band width / segment size, eq. 12 (texture model only)
 warp.psi    deg   (-90, 90)    0        fibre twist angle, sec. 5.2 (0: filament yarn)
-warp.umax   deg   [1e-9, 90)   30       maximum inclination angle, sec. 5.2
+warp.umax   deg   [1e-09, 90)  30       maximum inclination angle, sec. 5.2
 warp.kappa  1     (-1, 1000]   0        spine curvature, sec. 5.4
 warp.w      cell  (0, 1000]    1        segment rectangle width, sec. 5.3
 warp.l      cell  (0, 1000]    1        segment rectangle length, sec. 5.3
 weft.psi    deg   (-90, 90)    0        as warp.psi, for the weft segments
-weft.umax   deg   [1e-9, 90)   30       as warp.umax, for the weft segments
+weft.umax   deg   [1e-09, 90)  30       as warp.umax, for the weft segments
 weft.kappa  1     (-1, 1000]   0        as warp.kappa, for the weft segments
 weft.w      cell  (0, 1000]    1        as warp.w, for the weft segments
 weft.l      cell  (0, 1000]    1        as warp.l, for the weft segments
