@@ -604,3 +604,12 @@ def test_report_refuses_a_malformed_posterior_json_naming_the_field(tmp_path, ca
     assert main(["report", str(d), "-o", str(tmp_path / "reports")]) == 2
     line = one_error_line(capsys.readouterr().err)
     assert f"posterior.json, field '{field}'" in line, line
+
+
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_train_surrogate_never_replaces_a_file_with_its_run(tmp_path, capsys, force):
+    target = tmp_path / "notes.txt"
+    target.write_text("keep me")
+    assert main(["train-surrogate", "preset:cotton-denim", "-o", str(target), *force, *TINY_SURROGATE]) == 2
+    assert "not a directory" in one_error_line(capsys.readouterr().err)
+    assert target.read_text() == "keep me"

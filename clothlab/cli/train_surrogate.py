@@ -244,8 +244,10 @@ def _run_directory(held, out: Path, *, resume: bool, force: bool) -> Path:
     """The directory this run writes: ``out`` itself (locked) for ``--resume``, else the temporary directory
     of :func:`clothlab.atomic.atomic_directory` that replaces ``out`` when the ``held`` stack closes cleanly."""
     from clothlab.atomic import atomic_directory, result_lock
-    from clothlab.errors import ConfigError, ResultExistsError
+    from clothlab.errors import ConfigError, OutputError, ResultExistsError
 
+    if (out.exists() or out.is_symlink()) and not out.is_dir():  # never swapped away, even with --force
+        raise OutputError("exists and is not a directory; give a directory for the run", path=out)
     used = out.is_dir() and any(out.iterdir())
     if resume:
         if not (out / "materials.json").is_file():
