@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import socket
 import struct
@@ -276,7 +277,7 @@ def _zero_measured(lines):
     ("model 1e308", {"predictions": lambda lines: [lines[0], ",".join(lines[1].split(",")[:5] + ["1e308"] +
                                                                     lines[1].split(",")[6:]), *lines[2:]]},
      "predictions.csv", "model_R"),
-    ("NaN objective", {"text_edit": lambda t: t.replace('"final": 0.2899918708559089', '"final": NaN', 1)},
+    ("NaN objective", {"text_edit": lambda t: re.sub(r'"final": [-+0-9.eE]+', '"final": NaN', t, count=1)},
      "fit.json", "objective.final"),
     ("null objective", {"edit": lambda f: f["objective"].update(final=None)}, "fit.json", "objective.final"),
     ("string objective", {"edit": lambda f: f["objective"].update(start="0.3")}, "fit.json", "objective.start"),

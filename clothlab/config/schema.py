@@ -240,7 +240,7 @@ class Config:
         from clothlab.models.registry import model_class
 
         options = dict(self.model.options)
-        for name in getattr(model_class(self.model.kind), "path_options", ()):
+        for name in model_class(self.model.kind).options_class().path_options:
             if options.get(name):
                 options[name] = self._relative(Path(options[name]))
         return options

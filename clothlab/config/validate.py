@@ -243,8 +243,8 @@ class _Validator:
         the type of the default where it has one; options the model names in ``path_options`` (files) are
         resolved against the yaml's directory and must exist.  Returns the options so resolved."""
         resolved = copy.deepcopy(options)
-        takes = getattr(model_class(kind), "specular_class", model_class(kind))  # a composite: its specular part
-        path_options = getattr(takes, "path_options", ())
+        takes = model_class(kind).options_class()  # a composite: its specular part
+        path_options = takes.path_options
         declared = {q.name: q.default for q in inspect.signature(takes.__init__).parameters.values()
                     if q.kind == q.KEYWORD_ONLY}
         for name, value in options.items():
@@ -262,24 +262,20 @@ class _Validator:
                 as_number(value, at)
             elif isinstance(default, str):
                 as_str(value, at)
-            check = getattr(takes, "check_option", None)  # a model's own value check, if it has one
-            if check is not None:
-                try:
-                    check(name, value)
-                except ConfigError as exc:
-                    raise at.error(exc.detail) from None
+            try:
+                takes.check_option(name, value)  # a model's own value check (Model: none)
+            except ConfigError as exc:
+                raise at.error(exc.detail) from None
             if name in path_options and value is not None:
                 path = self.resolve(as_str(value, at), at)
                 if not self.is_there(path, need_file=True):
                     raise at.error(f"file not found: {path} (from {value!r}, relative to {self.base_dir})")
                 resolved[name] = str(path)
-        together = getattr(takes, "check_options", None)  # options that must agree with each other
-        if together is not None:
-            try:
-                together(options)
-            except ConfigError as exc:
-                name = (exc.field or "").removeprefix("model.options.")
-                raise self.at(p + (name,) if name in options else p).error(exc.detail) from None
+        try:  # options that must agree with each other (Model: no check)
+            takes.check_options(options)
+        except ConfigError as exc:
+            name = (exc.field or "").removeprefix("model.options.")
+            raise self.at(p + (name,) if name in options else p).error(exc.detail) from None
         return resolved
 
     def model(self, value: Any) -> ModelConfig:
@@ -541,8 +537,7 @@ def default_free(cls, options: dict | None = None) -> tuple:
     """The parameters a fit of model class ``cls`` frees when fabric.yaml names none: ``cls.declared_free(
     options)`` where the class has it (kind neural: those its network was trained over, read from
     ``options["weights"]``), else ``cls.default_free``.  Shared by config validation and ``clothlab select``."""
-    declared = getattr(cls, "declared_free", None)
-    return tuple(declared(options) if declared is not None else cls.default_free)
+    return tuple(cls.declared_free(options))
 
 
 def _check_parameter(table, name: str, value: float, at: Location) -> float:

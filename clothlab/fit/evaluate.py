@@ -154,7 +154,7 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
             with_texture = [kind for kind in MODEL_KINDS if model_class(kind).has_texture]
             raise InputError(f"u, v columns need a model with a texture model ({', '.join(with_texture)}); model "
                              f"kind {model.kind!r} has none", path=directions, field="u")
-        if FOOTPRINT in angles and getattr(model, "footprint_queries", False):  # kind neural: the network's own
+        if FOOTPRINT in angles and model.footprint_queries:  # kind neural: the network's own
             comps = model.texture().components(angles["u"], angles["v"], wi, wo, params, footprint=angles[FOOTPRINT])
         elif FOOTPRINT in angles:
             from clothlab.models.footprint import footprint_components

@@ -102,7 +102,7 @@ class FitProblem:
     def _averaged_orientations(self, nodes: int) -> np.ndarray | None:
         """The orientations (deg) an isotropic measurement averages the model over (module docstring), or
         None (an anisotropic measurement, or a model that does not depend on the orientation)."""
-        period = float(getattr(self.model, "orientation_period", 0.0))
+        period = float(self.model.orientation_period)
         if not self.measurement.isotropic or period <= 0:
             return None
         if ORIENTATION in self.free:
@@ -298,9 +298,7 @@ def evaluation_speed(problem: FitProblem, params: dict, repeats: int = 5) -> dic
     best of ``repeats`` (memoised yarn integrals cleared, so this is the cost of a new parameter point)."""
     best = float("inf")
     for _ in range(repeats):
-        memo = getattr(problem.model, "_memo", None)
-        if memo is not None:
-            memo.clear()
+        problem.model.forget_results()
         t = time.perf_counter()
         problem.design(params)
         best = min(best, time.perf_counter() - t)

@@ -160,7 +160,7 @@ def run_fit(config, *, measurement=None, progress=None, posterior=None, fits_dir
               problem.y.size, start_objective)
     optimum = release_periodic_bounds(problem, multistart_minimize(problem, x0, opt, progress))
     refinement = None
-    if getattr(problem.model, "refine", False) and problem.free:  # kind neural: the exact model from there
+    if problem.model.refine and problem.free:  # kind neural: the exact model from there
         optimum, refinement = refine_exact(problem, optimum, opt, progress)
         optimum = release_periodic_bounds(problem, optimum)
     params = problem.from_unit(optimum.x)

@@ -252,7 +252,7 @@ FAMILIES = {"irawan": "irawan", "neural": "irawan", "surface": "surface", "kang"
 
 def _family(kind: str) -> str:
     cls = model_class(kind)
-    return FAMILIES.get(getattr(cls, "specular_class", cls).kind, cls.kind)
+    return FAMILIES.get(cls.options_class().kind, cls.kind)
 
 
 def map_free(kind: str, free, options: dict | None = None) -> tuple[list, dict]:
@@ -319,7 +319,7 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
     budget ``max_evals`` (one start, polish max_evals // 4) unless ``optimizer`` is given; CV ``cv_folds``; no
     posterior unless given."""
     cls = model_class(candidate.kind)
-    specular = getattr(cls, "specular_class", cls)  # a composite passes the options to its specular part
+    specular = cls.options_class()  # a composite passes the options to its specular part
     options = dict(config.model.options) if cls.kind == config.model.kind or \
         specular is model_class(config.model.kind) else {}
     table = cls.declared_parameters(config.model.options if cls.kind == config.model.kind else {})
@@ -327,7 +327,7 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
                        else {})
     if not free:  # config validation's rule (kind neural: the parameters its network was trained over)
         free = list(default_free(specular, options))
-    diffuse = getattr(cls, "diffuse_class", None)  # a composite's diffuse term brings its own (sigma)
+    diffuse = cls.diffuse_class  # a composite's diffuse term brings its own (sigma); None for a single model
     free += [n for n in (diffuse.default_free if diffuse else ()) if n not in free and n in table]
     built = _model_parameters(config, candidate.kind, candidate.weave, tuple(sorted(options.items())))
     if built is not None:  # e.g. Kang declares the parameters of the yarn kinds the weave has

@@ -152,7 +152,7 @@ def load_fitted(fit_dir):
             raise KeyError("coefficients and measurement.channels must not be empty")
         # the model's constructor options as fitted (e.g. kang: alternating, tile_nodes)
         options = dict(fit["model"].get("options") or (fit.get("config") or {}).get("model", {}).get("options") or {})
-        for name in getattr(model_class(kind), "path_options", ()):  # copies in the fit directory
+        for name in model_class(kind).options_class().path_options:  # copies in the fit directory
             if options.get(name) and not Path(options[name]).is_absolute():
                 options[name] = str(fit_dir / options[name])
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

@@ -65,7 +65,7 @@ class ClothMaterial:
             return "reflectance"
         if self.lod == "texture":
             return "texture"
-        return "footprint-texture" if getattr(self.reflectance, "texture_filters", False) else "im-lod"
+        return "footprint-texture" if self.reflectance.texture_filters else "im-lod"
 
     # ------------------------------------------------------------------------------------------ evaluation
 
@@ -88,7 +88,7 @@ class ClothMaterial:
         """f_r (N, C) of the texture model at texture points (u, v) (tiles)."""
         if not self.need or len(wi) == 0:
             return np.zeros((len(wi), len(self.channels)))
-        if getattr(self.reflectance, "texture_filters", False):
+        if self.reflectance.texture_filters:
             from clothlab.render.shade import MAX_FOOTPRINT
 
             fp = None if footprint is None else np.minimum(np.asarray(footprint, dtype=np.float64), MAX_FOOTPRINT)

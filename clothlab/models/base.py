@@ -31,6 +31,7 @@ member                   meaning
 ``geometry_warnings``    notes on parameter sets outside the model's valid geometry (empty by default)
 ``with_quadrature``      a copy integrating with another rule / node count (itself if it integrates nothing)
 ``forget_directions``    drop the memo of the last directions evaluated (benchmarks time cold; no-op by default)
+``forget_results``       drop memoised results at those directions, keeping them (a new parameter point's cost)
 ``has_texture``          True when :meth:`texture` gives a texture model (capability)
 ``texture``              the texture model: components at texture points (u, v) whose tile average is
                          :meth:`components`; ConfigError for models without one
@@ -39,6 +40,19 @@ member                   meaning
                          (:data:`ISOTROPIC` = 0: any rotation); the bounds of ``orientation`` span one period
 ``quarter_turn_swaps``   True when a quarter turn maps the warp components onto the weft ones (capability)
 ``fit_period``           the period of ``orientation`` at given parameters, up to relabelling warp <-> weft
+``path_options``         the ``model.options`` that name files (resolved against the yaml's directory)
+``check_option``         a model's own check of one option's value (class method; ConfigError; no-op default)
+``check_options``        a check of options that must agree with each other (class method; no-op default)
+``options_class``        the class whose keyword arguments ``model.options`` are (a composite: its specular
+                         part; class method)
+``declared_free``        the parameters a fit frees when fabric.yaml names none, for given options (class
+                         method; ``default_free`` by default)
+``specular_class``       a composite's specular and diffuse model classes (None for a single model)
+``diffuse_class``
+``footprint_queries``    True when the model answers footprint averages itself (``clothlab eval``'s footprint
+                         column; kind neural: its network), rather than by averaging its texture (capability)
+``refine``               True when a fit polishes its optimum with the exact model it approximates (neural)
+``quadrature``           the rule the model integrates with (None for a model that integrates nothing)
 =======================  =====================================================================================
 
 Orientation (one implementation for every model, here).  Every model accepts the parameter ``orientation``
@@ -269,6 +283,17 @@ class Model(abc.ABC):
     #: True when the weft components are the warp components turned by 90 deg up to a constant factor (the
     #: same yarn model for both types, the weave entering only through cell shares): :meth:`fit_period`
     quarter_turn_swaps: ClassVar[bool] = True
+    #: the ``model.options`` that name files: resolved against fabric.yaml's directory, copied into fit dirs
+    path_options: ClassVar[tuple[str, ...]] = ()
+    #: a composite's specular and diffuse model classes; None for a single model
+    specular_class: ClassVar[type | None] = None
+    diffuse_class: ClassVar[type | None] = None
+    #: True when the model answers footprint averages itself (kind neural), not by averaging its texture
+    footprint_queries: ClassVar[bool] = False
+    #: True when a fit polishes its optimum with the exact model this one approximates (kind neural)
+    refine: bool = False
+    #: the quadrature rule the model integrates with; None for a model that integrates nothing
+    quadrature = None
     params: ParamTable
 
     def __init_subclass__(cls, **kwargs):
@@ -306,6 +331,28 @@ class Model(abc.ABC):
                     self.params = with_orientation(self.__dict__["params"], type(self).orientation_period)
             __init__.oriented = True
             cls.__init__ = __init__
+
+    @classmethod
+    def options_class(cls) -> type:
+        """The class whose keyword-only constructor arguments ``model.options`` are: a composite passes its
+        options to its specular part, any other model takes them itself."""
+        return cls.specular_class if cls.specular_class is not None else cls
+
+    @classmethod
+    def check_option(cls, name: str, value) -> None:
+        """A model's own check of one ``model.options`` value (ConfigError naming the problem); none here."""
+        return None
+
+    @classmethod
+    def check_options(cls, options: dict) -> None:
+        """A check of ``model.options`` that must agree with each other (ConfigError); none here."""
+        return None
+
+    @classmethod
+    def declared_free(cls, options: dict | None = None) -> tuple:
+        """The parameters a fit frees when fabric.yaml names none, for these ``model.options``:
+        :attr:`default_free` unless the model reads them from its options (kind neural: its network)."""
+        return tuple(cls.default_free)
 
     def fit_period(self, params: dict | None = None) -> float:
         """The period (deg) of ``orientation`` as a fit sees it at ``params``: :attr:`orientation_period`,
@@ -396,6 +443,11 @@ class Model(abc.ABC):
         """This model integrating with another quadrature (None keeps the current rule / node count); a
         model that integrates nothing returns itself."""
         return self
+
+    def forget_results(self) -> None:
+        """Drop what the model remembers of results at the current directions (memoised integrals), keeping
+        the direction set: the next evaluation costs what a new parameter point costs.  Nothing here."""
+        return None
 
     def forget_directions(self) -> None:
         """Drop what the model keeps of the last directions it evaluated (models that memoise the

@@ -67,20 +67,17 @@ def build_model(kind: str, weave, quadrature=None, **options):
     clothlab.errors.ConfigError: field 'model.options.tile_nodes': model kind 'irawan' takes no option ...
     """
     cls = model_class(kind)
-    takes_options = getattr(cls, "specular_class", cls)  # a composite passes its options to its specular part
+    takes_options = cls.options_class()  # a composite passes its options to its specular part
     accepted = [p.name for p in inspect.signature(takes_options.__init__).parameters.values()
                 if p.kind == p.KEYWORD_ONLY]
-    check = getattr(takes_options, "check_option", None)  # the model's own value checks (sizes bounded)
+    check = takes_options.check_option  # the model's own value checks (sizes bounded; Model: none)
     for name, value in options.items():
         if name not in accepted:
             raise ConfigError(f"model kind {kind!r} takes no option {name!r}; options: {', '.join(accepted) or 'none'}",
                               field=f"model.options.{name}")
-        if check is not None:
-            try:
-                check(name, value)
-            except ConfigError as exc:
-                raise ConfigError(exc.detail, path=exc.path, line=exc.line, field=f"model.options.{name}") from None
-    together = getattr(takes_options, "check_options", None)  # options that must agree with each other
-    if together is not None:
-        together(options)
+        try:
+            check(name, value)
+        except ConfigError as exc:
+            raise ConfigError(exc.detail, path=exc.path, line=exc.line, field=f"model.options.{name}") from None
+    takes_options.check_options(options)  # options that must agree with each other (Model: no check)
     return cls.from_config(weave, quadrature, **options)

@@ -132,7 +132,7 @@ def simulate(model, params: dict, coefficients: dict, *, channels=("R", "G", "B"
     info = {
         "simulated": True,
         "generator": "clothlab simulate (virtual gonioreflectometer)",
-        "model": getattr(model, "kind", "unknown"),
+        "model": model.kind,
         "parameters": {k: float(v) for k, v in model.resolve(params).items()},
         "coefficients": {k: [float(x) for x in np.atleast_1d(v)] for k, v in coefficients.items()},
         "noise": asdict(noise),

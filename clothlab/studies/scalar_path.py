@@ -21,7 +21,7 @@ def scalar_design(problem, params: dict) -> np.ndarray:
     """(N, k) design of ``problem`` at one parameter dict, evaluated on its own."""
     model = problem.model
     p = model.resolve(params)
-    quadrature = getattr(model, "quadrature", None)
+    quadrature = model.quadrature
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
         if quadrature is None or not set(problem.component_names) <= {"diffuse", "specular_warp", "specular_weft"}:

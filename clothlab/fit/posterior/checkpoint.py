@@ -30,14 +30,14 @@ def _model_settings(model) -> dict:
     """What of the model (besides the parameters) changes the likelihood: the quadrature (rule, nodes) of the
     IM yarn integrals, the other models' scalar options (e.g. Kang's tile_nodes), and the weave geometry."""
     out = {"kind": type(model).__name__}
-    q = getattr(model, "quadrature", None)
+    q = model.quadrature
     if q is not None:
         out["quadrature"] = {"rule": str(q.rule), "nodes": int(q.nodes)}
     for key, value in sorted(vars(model).items()):
         if not key.startswith("_") and key != "quadrature" and (value is None or isinstance(value, bool | int |
                                                                                              float | str)):
             out[key] = value
-    weave = getattr(model, "weave", None)
+    weave = model.weave
     if weave is not None:
         digest = hashlib.sha256(np.ascontiguousarray(weave.pattern).tobytes())
         digest.update(repr([getattr(weave, f.name) for f in dataclass_fields(weave)

@@ -172,6 +172,10 @@ class IrawanModel(Model):
         self._memo: dict = {}  # (kind, geometry key) -> I_j at the directions of self._at; see _integrals
         self._directions: dict | None = None  # the parameter-free quantities of the last directions; see _at
 
+    def forget_results(self) -> None:
+        """Drop the memoised yarn integrals I_j at the current directions (:meth:`_integrals`)."""
+        self._memo.clear()
+
     def forget_directions(self) -> None:
         """Drop the memo of the last directions (:meth:`_at`)."""
         self._directions = None
