@@ -31,7 +31,8 @@ No figure pools bins.  Run (the figures of docs/neural.md)::
 
     clothlab bench --sections neural
 
-or this part alone: ``python -m clothlab.studies.neural_bins [--quick]``.
+or one network from Python: ``network_figures(name, path, quick)`` and ``table_lines`` of its result
+(only the CLI prints).
 """
 
 from __future__ import annotations
@@ -339,29 +340,3 @@ def lines(results: list[dict]) -> list[str]:
         out += table_lines(r) + [""]
     out.append("'<=': the surrogate costs less than MC-1; the ratio is against MC-1 (a lower bound).")
     return out
-
-
-def main(argv=None) -> None:
-    import argparse
-
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--networks", default=None, help="comma-separated names (default: all shipped)")
-    parser.add_argument("--per-bin", type=int, default=None)
-    parser.add_argument("--json", default=None, help="also write the figures to this JSON file")
-    a = parser.parse_args(argv)
-    sizes = {"per_bin": a.per_bin} if a.per_bin else None
-    names = a.networks.split(",") if a.networks else None
-    results = []
-    for name, path in shipped_networks():
-        if names is None or name in names:
-            results.append(network_figures(name, path, a.quick, sizes))
-            print("\n".join(table_lines(results[-1])), flush=True)
-    if a.json:
-        import json
-
-        Path(a.json).write_text(json.dumps(results, indent=1), encoding="utf-8")
-
-
-if __name__ == "__main__":
-    main()
