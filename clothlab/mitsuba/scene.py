@@ -194,17 +194,10 @@ def render_to_files(scene_path, output_stem, *, shader: str = "im-lod", spp: int
                     variant: str | None = None, force: bool = False):
     """:func:`clothlab.render.render_to_files` with Mitsuba 3 as the renderer: ``<stem>.exr`` and ``.png``;
     refuses existing outputs unless ``force`` (checked before rendering).  Returns (result, EXR, PNG)."""
-    from pathlib import Path
 
-    from clothlab.errors import ResultExistsError
-    from clothlab.render import load_scene, save_render
+    from clothlab.render import load_scene, output_stem_checked, save_render
 
-    stem = Path(output_stem)
-    if stem.suffix.lower() in (".exr", ".png"):
-        stem = stem.with_suffix("")
-    existing = [p for p in (stem.parent / f"{stem.name}.exr", stem.parent / f"{stem.name}.png") if p.exists()]
-    if existing and not force:
-        raise ResultExistsError(f"{existing[0]} already exists; use --force to replace it", path=existing[0])
+    stem = output_stem_checked(output_stem, force)
     result = render_scene(load_scene(scene_path), shader=shader, spp=spp, variant=variant)
     exr, png = save_render(result, stem, force=force)
     return result, exr, png
