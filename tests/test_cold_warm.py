@@ -5,6 +5,7 @@ direction-set kernels agree with their literal numpy forms (issue 27)."""
 from __future__ import annotations
 
 import math
+import zlib
 
 import numpy as np
 import pytest
@@ -45,7 +46,7 @@ def _sets(model, rng, k):
 @pytest.mark.parametrize("rule", [("trapezoid", 11), ("gauss", 8), ("support", 4)])
 @pytest.mark.parametrize("fabric", PRESET_NAMES)
 def test_irawan_cold_equals_warm(fabric, rule):
-    rng = np.random.default_rng(hash((fabric, rule)) % 2**32)
+    rng = np.random.default_rng(zlib.crc32(repr((fabric, rule)).encode()))  # str hash() is salted per process
     warm = IrawanModel(get_preset(fabric), Quadrature(*rule))
     sets = _sets(warm, rng, 3)
     d1, d2 = _pairs(200, rng), _pairs(150, rng)
@@ -61,7 +62,9 @@ def test_irawan_cold_equals_warm(fabric, rule):
             for kind in ("warp", "weft"):
                 literal = yarn_integral_fabric(*directions, p, kind, warm.quadrature)
                 got = cold_values[f"specular_{kind}"][j] / (p["alpha"] + _von_mises(directions, p["beta"]))
-                np.testing.assert_allclose(got, literal, rtol=1e-11, atol=1e-300)
+                # to rounding of the whole row: two summation orders, so an entry far below the row's largest
+                # (cancellation) carries its absolute round-off; numba's target CPU changes the order too
+                np.testing.assert_allclose(got, literal, rtol=1e-11, atol=1e-11 * float(np.max(np.abs(literal))))
 
 
 def _von_mises(directions, beta):
