@@ -24,6 +24,10 @@ The paper's six fabrics ship with the package (Irawan & Marschner 2012, Table I)
 
 from importlib import import_module
 
+from clothlab.renamed import install as _install_renamed
+
+_install_renamed()  # old module names of one release (clothlab.renamed)
+
 __version__ = "0.1.0"
 
 _LAZY = {

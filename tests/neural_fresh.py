@@ -15,8 +15,8 @@ def assert_agrees_with_fresh_labels(surrogate, sidecar: dict, material: int, mod
     """Fresh whole-tile-split MC-256 labels of ``model`` at ``params`` (seed 11; the training labels used
     another seed) on 150 held-out-pair queries of ``material`` per range: relative RMSE of f at 0.12-1 and
     1-5 tiles within 1.5x the largest error ``recorded`` (sidecar metric bins) has in that range."""
-    from clothlab.neural.data import DataSpec, heldout_queries
-    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+    from clothlab.surrogate.data import DataSpec, heldout_queries
+    from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels
 
     labels = TextureMonteCarloLabels(model.texture(seed=0), params, samples=256, seed=11,
                                      tile_average=ModelLabels(model, params))

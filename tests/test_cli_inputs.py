@@ -442,7 +442,7 @@ TINY_SURROGATE = ["--budget", "0.02", "--labels", "model", "--pairs", "4", "--wi
 def test_train_surrogate_replaces_its_directory_atomically(tmp_path, capsys, monkeypatch):
     """--force builds the new run next to the old one and swaps it in when complete: a run that fails half way
     leaves the previous directory as it was (before: shutil.rmtree first, then a half-written directory)."""
-    import clothlab.neural.run
+    import clothlab.surrogate.training_run
 
     out = tmp_path / "run"
     args = ["train-surrogate", "preset:cotton-denim", "-o", str(out), *TINY_SURROGATE]
@@ -453,7 +453,7 @@ def test_train_surrogate_replaces_its_directory_atomically(tmp_path, capsys, mon
     def broken(*a, **k):
         raise RuntimeError("disk on fire")
 
-    monkeypatch.setattr(clothlab.neural.run, "write_plots", broken)
+    monkeypatch.setattr(clothlab.surrogate.training_run, "write_plots", broken)
     with pytest.raises(RuntimeError, match="disk on fire"):
         main([*args, "--force", "--seed", "3"])
     after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}

@@ -17,8 +17,8 @@ from test_texture import _eval_csv as _csv
 from test_texture import _read_csv as _read
 
 from clothlab.errors import InputError
+from clothlab.footprint import FootprintTable, footprint_components, mc_estimate
 from clothlab.frames import spherical_to_vector
-from clothlab.models.footprint import FootprintTable, footprint_components, mc_estimate
 from clothlab.models.registry import MODEL_KINDS, build_model, model_class
 from clothlab.weave.presets import get_preset
 
@@ -285,7 +285,7 @@ def test_box_and_gaussian_averages_of_a_cosine_match_closed_forms():
 
 class HeightFieldTexture:
     """A tile-periodic height field h(u) = a sin(2 pi u) (tiles) with micro normals n_p ~ (-h'(u), 0, 1) and
-    a Lambertian point BSDF f_p = 1/pi about n_p: the eq. 4-5 path of :mod:`clothlab.models.footprint`."""
+    a Lambertian point BSDF f_p = 1/pi about n_p: the eq. 4-5 path of :mod:`clothlab.footprint`."""
 
     component_names = ("lambert",)
     weave = None

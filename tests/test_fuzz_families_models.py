@@ -147,7 +147,7 @@ def corrupt_weights(data: bytes, arrays: dict, draw) -> bytes:
 def test_fuzz_weights_npz(tmp_path):
     """Corrupt weights are refused naming the .npz (and the member), or load to a finite network."""
     from clothlab.models.neural.model import NeuralModel
-    from clothlab.neural.serialise import MAX_WEIGHT, load_surrogate
+    from clothlab.surrogate.serialise import MAX_WEIGHT, load_surrogate
     from clothlab.weave.presets import get_preset
 
     npz = copy_weights(tmp_path)
@@ -221,7 +221,7 @@ def test_fuzz_sidecar(tmp_path):
     """Mutated sidecars are refused naming the sidecar and the dotted field (read_sidecar) and, through the
     model, the file and the option; or the model built from them answers finite components."""
     from clothlab.models.neural.model import NeuralModel
-    from clothlab.neural.serialise import read_sidecar
+    from clothlab.surrogate.serialise import read_sidecar
     from clothlab.weave.presets import get_preset
 
     npz = copy_weights(tmp_path)
@@ -263,8 +263,8 @@ def test_fuzz_sidecar_multi_material(tmp_path):
     materials_weave, probe points): a named refusal, or a surrogate whose materials and latents are finite
     and shaped as its sidecar says (the model's query is checked by test_fuzz_sidecar)."""
     from clothlab.models.neural.model import read_sidecar
-    from clothlab.neural.serialise import load_surrogate, materials_count
-    from clothlab.neural.threads import one_blas_thread
+    from clothlab.surrogate.serialise import load_surrogate, materials_count
+    from clothlab.surrogate.threads import one_blas_thread
 
     npz = tmp_path / "f.npz"
     shutil.copy(FAMILY, npz)
@@ -366,7 +366,7 @@ EVAL_ROWS = ["30,0,30,180,0.25,0.5,0.1", "45,90,20,270,1.5,-2,2", "10,10,80,350,
 
 
 def valid_directions(d) -> None:
-    from clothlab.fit.evaluate import MAX_AZIMUTH, MAX_FOOTPRINT, MAX_TEXTURE_COORDINATE
+    from clothlab.fit.eval_csv import MAX_AZIMUTH, MAX_FOOTPRINT, MAX_TEXTURE_COORDINATE
 
     for name, values in d.items():
         assert np.isfinite(values).all(), name
@@ -384,7 +384,7 @@ def valid_directions(d) -> None:
 def test_fuzz_eval_directions(tmp_path):
     """A BAD_TOKENS field (or a dropped / doubled / extra line) in an eval CSV is refused naming the file,
     line and column, or reads to finite values inside the documented bounds."""
-    from clothlab.fit.evaluate import read_directions
+    from clothlab.fit.eval_csv import read_directions
 
     path = tmp_path / "dirs.csv"
     path.write_text("\n".join([EVAL_HEADER, *EVAL_ROWS]) + "\n")
@@ -470,7 +470,7 @@ def test_fuzz_vary_specs():
 
 def test_truncated_empty_and_non_zip_weights_are_named_input_errors(tmp_path):
     """Before: BadZipFile / EOFError tracebacks from np.load."""
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     data = npz.read_bytes()
@@ -486,7 +486,7 @@ def test_a_zip_bomb_member_is_refused_before_it_is_inflated(tmp_path):
     less than 8 MiB allocated (before: np.load inflated it, ArrayMemoryError for larger bombs)."""
     import tracemalloc
 
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     members = {f"{k}.npy": _npy(v) for k, v in shipped_arrays().items()}
@@ -508,7 +508,7 @@ def test_a_zip_bomb_member_is_refused_before_it_is_inflated(tmp_path):
 def test_non_finite_or_huge_weights_name_the_weights_file_and_member(tmp_path, value):
     """Before: infinite biases were accepted (35 % error) and NaN / 1e38 weights were blamed on the
     measurement; now the .npz and the member are named."""
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     arrays = shipped_arrays()
@@ -524,7 +524,7 @@ def test_non_finite_or_huge_weights_name_the_weights_file_and_member(tmp_path, v
 def test_weights_that_overflow_float32_in_the_network_are_refused(tmp_path):
     """Every value within the magnitude bound, yet the layers overflow float32: refused at load, naming the
     weights (the outputs are checked at the network's own materials)."""
-    from clothlab.neural.serialise import MAX_WEIGHT, load_surrogate
+    from clothlab.surrogate.serialise import MAX_WEIGHT, load_surrogate
 
     npz = copy_weights(tmp_path)
     arrays = shipped_arrays()
@@ -540,7 +540,7 @@ def test_weights_that_overflow_float32_in_the_network_are_refused(tmp_path):
 def test_weights_larger_than_the_architecture_allows_are_not_read(tmp_path):
     """The archive's size is bounded by the members the sidecar implies: a padded file is refused from its
     size, before it is read."""
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     with npz.open("ab") as handle:
@@ -551,7 +551,7 @@ def test_weights_larger_than_the_architecture_allows_are_not_read(tmp_path):
 
 
 def test_pickled_or_complex_members_are_refused(tmp_path):
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     for bad in (np.array([{"a": 1}], dtype=object), np.zeros(3, dtype=np.complex128)):
@@ -564,8 +564,8 @@ def test_pickled_or_complex_members_are_refused(tmp_path):
 
 
 def test_the_shipped_weights_still_load_and_the_parameter_count_matches_the_network():
-    from clothlab.neural.network import Architecture, SurrogateNetwork
-    from clothlab.neural.serialise import load_surrogate, parameter_count, parameter_shapes
+    from clothlab.surrogate.network import Architecture, SurrogateNetwork
+    from clothlab.surrogate.serialise import load_surrogate, parameter_count, parameter_shapes
 
     for npz in sorted((REPO / "clothlab/models/neural/data").rglob("*.npz")):
         surrogate, sidecar = load_surrogate(npz)
@@ -579,7 +579,7 @@ def test_the_shipped_weights_still_load_and_the_parameter_count_matches_the_netw
 def test_the_largest_documented_architecture_is_within_the_parameter_bound():
     """train-surrogate takes --width / --spatial up to 4,096 and --yarn-bins up to 256: such a network's
     sidecar passes the schema's bounds (its weights are not built here)."""
-    from clothlab.neural.serialise import MAX_BINS, MAX_PARAMETERS, MAX_WIDTH, parameter_count
+    from clothlab.surrogate.serialise import MAX_BINS, MAX_PARAMETERS, MAX_WIDTH, parameter_count
 
     arch = {"n_material": 39, "n_spatial": 2 * 8 + 8 + 1 + 2 * 256, "n_angular": 8, "n_out": 4, "enc_width": 128,
             "latent": 64, "width": 4096, "spatial": 4096}
@@ -615,7 +615,7 @@ def _write_sidecar(npz: Path, edit) -> Path:
 def test_bad_sidecars_name_the_dotted_field(tmp_path, edit, field):
     """Before: KeyError / ValueError / AttributeError tracebacks, an allocation error for width 1e9,
     complex128 accepted; now an InputError naming the sidecar and the dotted field."""
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     sidecar = _write_sidecar(npz, edit)
@@ -627,7 +627,7 @@ def test_bad_sidecars_name_the_dotted_field(tmp_path, edit, field):
 def test_a_width_of_1e9_is_refused_before_allocating(tmp_path):
     import tracemalloc
 
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     npz = copy_weights(tmp_path)
     _write_sidecar(npz, lambda d: d["architecture"].update(width=4096, enc_width=4096, latent=4096, spatial=4096))
@@ -797,7 +797,7 @@ def test_loss_scale_1e_320_is_refused_at_its_line(tmp_path):
 def test_eval_csv_numbers_are_strict_and_bounded(tmp_path, column, token):
     """Before: float() read 3_0 and Arabic-Indic digits as 30, u = 1e300 was accepted and a footprint of 1e30
     wrote 0.0; now an InputError naming file, line and column."""
-    from clothlab.fit.evaluate import read_directions
+    from clothlab.fit.eval_csv import read_directions
 
     rows = ["theta_i,phi_i,theta_o,phi_o,u,v,footprint", "30,0,30,180,0.2,0.3,0.5", "20,0,30,180,0.2,0.3,0.5"]
     header = rows[0].split(",")
@@ -827,7 +827,7 @@ def test_eval_csv_with_only_a_header_is_refused(tmp_path, capsys, header):
 def test_eval_csv_errors_give_the_physical_line(tmp_path):
     """A quoted field spanning two lines shifts the record count; the error names the file's own line (before:
     the record number)."""
-    from clothlab.fit.evaluate import read_directions
+    from clothlab.fit.eval_csv import read_directions
 
     path = tmp_path / "dirs.csv"
     path.write_text('theta_i,phi_i,theta_o,phi_o,note\n30,0,30,180,"two\nlines"\n30,0,95,180,x\n')
@@ -844,7 +844,7 @@ def test_the_largest_footprint_and_coordinates_give_the_tile_average(tmp_path):
     """At the documented limits (footprint MAX_FOOTPRINT tiles centred at u = MAX_TEXTURE_COORDINATE) a box
     footprint of a whole number of tiles is the tile average: the summed-area tables still resolve it
     (equal to a one-tile footprint at the origin to 1e-9)."""
-    from clothlab.fit.evaluate import MAX_FOOTPRINT, MAX_TEXTURE_COORDINATE, evaluate_directions_file
+    from clothlab.fit.eval_csv import MAX_FOOTPRINT, MAX_TEXTURE_COORDINATE, evaluate_directions_file
 
     (tmp_path / "fabric.yaml").write_text("name: n\nmeasurement: {path: m.csv}\n"
                                           "model: {kind: irawan, weave: preset:cotton-denim}\n")

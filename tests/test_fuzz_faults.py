@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clothlab.errors import ClothlabError, InputError, ResultError
-from clothlab.strict import MAX_NODES, load_json_text, load_yaml_text, parse_number
+from clothlab.untrusted import MAX_NODES, load_json_text, load_yaml_text, parse_number
 
 DECIMAL = r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?"  # the documented notation, written here again
 

@@ -548,7 +548,7 @@ def test_a_number_longer_than_the_strict_limit_is_refused_by_the_fast_path_too(t
     as the strict per-field parse refuses it (the fast float() path once read an 82-character field)."""
     from clothlab.errors import InputError
     from clothlab.io.table import read_table
-    from clothlab.strict import MAX_NUMBER_CHARS
+    from clothlab.untrusted import MAX_NUMBER_CHARS
 
     long_value = "0." + "1" * (MAX_NUMBER_CHARS - 1)  # 65 characters, plain decimal
     shipped_table = Path(__file__).resolve().parents[1] / "measurements" / "cotton-twill" / "clean.csv"

@@ -765,7 +765,7 @@ def test_texture_interface_is_the_point_shader():
 
 def test_eval_at_texture_points_of_a_kang_fit(tmp_path):
     """``clothlab eval`` with u, v columns on a Kang fit: the fitted point shader, the fit's coefficients."""
-    from clothlab.fit.evaluate import evaluate_directions_file
+    from clothlab.fit.eval_csv import evaluate_directions_file
     from clothlab.fit.store import load_fitted
     from clothlab.models.components import combine
 

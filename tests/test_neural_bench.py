@@ -74,7 +74,7 @@ def test_timed_queries_meet_directions_no_model_has_seen(monkeypatch):
     """Each timed call (surrogate, its R share, MC) gets directions never handed to R before, and every
     direction memo is dropped before it: no memo can serve a timed call."""
     from clothlab.models.neural.model import load_neural
-    from clothlab.neural.data import DataSpec
+    from clothlab.surrogate.data import DataSpec
 
     surrogate, sidecar = load_neural(dict(neural_bins.shipped_networks())["silk-shantung"])
     seen, timed, forgets = set(), {"on": False, "calls": 0}, []

@@ -1,4 +1,4 @@
-"""The compiled feature pass (clothlab.neural.fast_features) gives the numpy encodings' values
+"""The compiled feature pass (clothlab.surrogate.fast_features) gives the numpy encodings' values
 (Surrogate.reference_features: one-blob position and size, yarn-local features, direction features), for every
 shipped per-fabric network's encoding and without yarn features, including centres outside the tile, sizes
 outside the encoded range, bin-boundary ties of the periodic wrap and grazing directions."""
@@ -43,7 +43,7 @@ def test_compiled_features_equal_the_numpy_encodings(name, yarn):
 def test_kernels_compile_uncached_where_no_cache_directory_is_writable(monkeypatch):
     import numba
 
-    from clothlab.neural import fast_features
+    from clothlab.surrogate import fast_features
 
     real, seen = numba.njit, []
 

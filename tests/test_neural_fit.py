@@ -1,5 +1,5 @@
 """Multi-material surrogates: the ``--vary`` grid of train-surrogate (held-out midpoints, Fig. 8 page) and
-the fast material fit through the encoder (clothlab.neural.material_fit) on simulated data."""
+the fast material fit through the encoder (clothlab.surrogate.material_fit) on simulated data."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from clothlab.cli.train_surrogate import material_grid
 from clothlab.errors import ConfigError
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
-from clothlab.neural.material_fit import unit_to_parameter
+from clothlab.surrogate.material_fit import unit_to_parameter
 
 
 def test_material_grid_is_the_product_with_geometric_midpoints_held_out():
@@ -29,7 +29,7 @@ def test_material_grid_is_the_product_with_geometric_midpoints_held_out():
 
 
 def test_unit_coordinate_inverts_the_normalisation():
-    from clothlab.neural.encodings import normalised_parameters
+    from clothlab.surrogate.encodings import normalised_parameters
 
     for name, value in (("alpha", 0.123), ("beta", 3.7)):
         t = normalised_parameters({name: value}, IRAWAN_PARAMS, [name])[0]
@@ -119,8 +119,8 @@ def test_latents_of_other_materials_are_clipped_to_the_trained_materials_box():
     the decoder somewhere it was never trained), trained rows are untouched, and the clipped latent is what
     the decoder reads (query with a vector = query_latent at the clipped z).  A one-material network has no
     box."""
-    from clothlab.neural.network import Architecture, SurrogateNetwork
-    from clothlab.neural.surrogate import LATENT_MARGIN, Surrogate
+    from clothlab.surrogate.network import Architecture, SurrogateNetwork
+    from clothlab.surrogate.surrogate import LATENT_MARGIN, Surrogate
 
     arch = Architecture(n_material=5, n_spatial=24, n_angular=8, n_out=3, enc_width=16, latent=6, width=8,
                         spatial=8)

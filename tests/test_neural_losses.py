@@ -1,12 +1,12 @@
 """The training loss of the numpy surrogate (Chen, Wang & Wang 2024, eqs. 9-11) and its highlight weights
-(clothlab.neural.losses; docs/neural.md "Small footprints")."""
+(clothlab.surrogate.losses; docs/neural.md "Small footprints")."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from clothlab.neural.losses import (
+from clothlab.surrogate.losses import (
     K_SPECULAR,
     column_weights,
     decode_outputs,
@@ -82,8 +82,8 @@ def test_training_with_highlight_weights_records_the_scale_and_lowers_the_strong
     a dim background whose log varies over 2 decades (which the log loss spends capacity on) plus a narrow
     strong highlight (which carries most of sum f^2).  The sidecar encoding records the scale, and the
     relative RMSE of f is lower with the weights."""
-    from clothlab.neural.data import COLUMNS
-    from clothlab.neural.training import TrainSpec, errors_by_size, train
+    from clothlab.surrogate.data import COLUMNS
+    from clothlab.surrogate.training import TrainSpec, errors_by_size, train
 
     rng = np.random.default_rng(2)
     n = 3000

@@ -93,7 +93,7 @@ def test_fast_fit_with_residual_weights_then_exact_refinement_recovers_an_unseen
     """Noise-free far-view data of the unseen grid midpoint (alpha 0.178, beta 0.5) simulated by the exact
     surface model: the fast fit through the encoder (with R at each trial) improves on its start (defaults
     alpha 0.5, beta 1) in residual and in both parameters; the exact refinement recovers them to 1e-5."""
-    from clothlab.neural.encodings import normalised_parameters
+    from clothlab.surrogate.encodings import normalised_parameters
 
     wi, wo = _directions(120)
     start = neural.resolve({})

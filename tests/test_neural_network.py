@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clothlab.neural.inference import DecoderPlan
-from clothlab.neural.layers import LEAK, Residual
-from clothlab.neural.losses import column_weights, decode_outputs, encode_targets, is_specular, loss_and_gradient
-from clothlab.neural.network import Architecture, SurrogateNetwork
-from clothlab.neural.optimizer import Adam, step_schedule
+from clothlab.surrogate.inference import DecoderPlan
+from clothlab.surrogate.layers import LEAK, Residual
+from clothlab.surrogate.losses import column_weights, decode_outputs, encode_targets, is_specular, loss_and_gradient
+from clothlab.surrogate.network import Architecture, SurrogateNetwork
+from clothlab.surrogate.optimizer import Adam, step_schedule
 
 ARCH = Architecture(n_material=5, n_spatial=6, n_angular=4, n_out=3, enc_width=8, latent=6, width=7, spatial=5)
 

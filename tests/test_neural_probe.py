@@ -1,4 +1,4 @@
-"""The texture probe input of the surrogate (``--probe-points``; clothlab.neural.labels.TextureProbe) and the
+"""The texture probe input of the surrogate (``--probe-points``; clothlab.surrogate.labels.TextureProbe) and the
 output cap recorded from the training labels (``encoding["output_max"]``)."""
 
 from __future__ import annotations
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from clothlab.models.registry import build_model
-from clothlab.neural.data import DataSpec, assemble, generate
-from clothlab.neural.encodings import material_vector
-from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels, TextureProbe
-from clothlab.neural.losses import encode_targets, is_specular
-from clothlab.neural.serialise import save_surrogate
-from clothlab.neural.training import TrainSpec, train
+from clothlab.surrogate.data import DataSpec, assemble, generate
+from clothlab.surrogate.encodings import material_vector
+from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels, TextureProbe
+from clothlab.surrogate.losses import encode_targets, is_specular
+from clothlab.surrogate.serialise import save_surrogate
+from clothlab.surrogate.training import TrainSpec, train
 from clothlab.weave.presets import get_preset
 from clothlab.weave.wvformat import format_wv
 
@@ -89,7 +89,7 @@ def test_a_probing_network_trains_round_trips_and_needs_its_probe(tmp_path, mode
     saved and loaded with its texture attached (load_neural) it answers as in memory; without probes it
     refuses; kind neural at another material computes the probe itself."""
     from clothlab.models.neural.model import load_neural
-    from clothlab.neural.serialise import load_surrogate
+    from clothlab.surrogate.serialise import load_surrogate
 
     path, sur, curve, data = _probing_network(tmp_path, model)
     p = model.default_parameters()
@@ -128,7 +128,7 @@ def test_the_fast_fit_of_a_probing_network_descends_its_objective(tmp_path, mode
     the network's input gradient.  On a float64 copy of the network the gradient agrees with central
     differences of F itself (the encoder path alone is ~0.5 % of it here), and a fit from there does not end
     above its start."""
-    from clothlab.neural.network import SurrogateNetwork
+    from clothlab.surrogate.network import SurrogateNetwork
 
     path, _, _, _ = _probing_network(tmp_path, model, steps=60, **inputs)
     neural = build_model("neural", model.weave, weights=str(path))

@@ -50,15 +50,16 @@ def test_several_patterns_label_each_material_on_its_own_weave_and_round_trip(tm
     A 2 x 2 grid of footprint centres (Table 2: 8 x 8) keeps it to seconds."""
     import functools
 
-    import clothlab.neural.data
+    import clothlab.surrogate.data
     from clothlab.cli.main import main
     from clothlab.models.neural.model import load_neural
     from clothlab.models.registry import build_model
-    from clothlab.neural.encodings import material_vector
-    from clothlab.neural.training import errors_by_size
+    from clothlab.surrogate.encodings import material_vector
+    from clothlab.surrogate.training import errors_by_size
     from clothlab.weave.patterns import get_pattern
 
-    monkeypatch.setattr(clothlab.neural.data, "DataSpec", functools.partial(clothlab.neural.data.DataSpec, centres=2))
+    data = clothlab.surrogate.data
+    monkeypatch.setattr(data, "DataSpec", functools.partial(data.DataSpec, centres=2))
     out = tmp_path / "run"
     args = ["train-surrogate", "pattern:plain,pattern:satin-5x5", "--heldout-pattern", "pattern:twill-3x3",
             "-o", str(out), "--draw", "3", "--heldout-share", "0.34", *TINY]
@@ -205,7 +206,7 @@ def test_kind_neural_uses_a_stored_latent_only_on_that_materials_own_weave(table
 
 
 def test_fast_fit_through_the_probing_table2_network_recovers_an_unseen_material(table2):
-    """The fast material fit (clothlab.neural.material_fit) through the shipped Table-2 network, which reads a
+    """The fast material fit (clothlab.surrogate.material_fit) through the shipped Table-2 network, which reads a
     texture probe: far-view data of the exact surface model at its first unseen material (noise-free, four
     linear coefficients), warp and weft alpha free from 0.5.  The fast fit lands near the truth (session 11's
     network: 0.026 / 0.000 off, 0.09 % relative RMS; the coefficients within 19 %: the warp and weft

@@ -10,7 +10,7 @@ import pytest
 
 from clothlab.errors import InputError
 from clothlab.models.registry import build_model
-from clothlab.neural.data import (
+from clothlab.surrogate.data import (
     MIN_SIZE,
     MIN_Z,
     DataSpec,
@@ -20,16 +20,16 @@ from clothlab.neural.data import (
     heldout_cells,
     heldout_queries,
 )
-from clothlab.neural.encodings import (
+from clothlab.surrogate.encodings import (
     material_vector,
     normalised_parameters,
     one_blob,
     pattern_descriptor,
     size_coordinate,
 )
-from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
-from clothlab.neural.serialise import load_surrogate, save_surrogate
-from clothlab.neural.training import TrainSpec, train
+from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels
+from clothlab.surrogate.serialise import load_surrogate, save_surrogate
+from clothlab.surrogate.training import TrainSpec, train
 from clothlab.weave.patterns import get_pattern
 from clothlab.weave.presets import get_preset
 
@@ -379,9 +379,9 @@ def test_residual_surrogate_is_the_reflectance_model_plus_its_outputs_and_round_
 def test_residual_loss_gradient_matches_central_differences_with_the_reference_input(model):
     """Eq. 11 of g = T(R) + net against T(label), with T(R) also an input: the training path's d loss / d
     parameters (targets T(label) - T(R), backward unchanged) against float64 central differences."""
-    from clothlab.neural.losses import column_weights, encode_targets, is_specular, loss_and_gradient
-    from clothlab.neural.network import SurrogateNetwork
-    from clothlab.neural.training import _batch, make_surrogate, transformed_references
+    from clothlab.surrogate.losses import column_weights, encode_targets, is_specular, loss_and_gradient
+    from clothlab.surrogate.network import SurrogateNetwork
+    from clothlab.surrogate.training import _batch, make_surrogate, transformed_references
 
     data, _ = _tiny_mc_data(model)
     rows = data[:12]
@@ -425,7 +425,7 @@ def test_residual_loss_gradient_matches_central_differences_with_the_reference_i
 def test_bootstrap_interval_of_the_relative_rmse_brackets_it_and_shows_a_heavy_tail():
     """relative_rmse_interval: seeded, contains the point estimate, narrows ~1 / sqrt(n) for homogeneous
     errors, and is wide when one query carries most of the error (the small-footprint bins' case)."""
-    from clothlab.neural.training import relative_rmse_interval
+    from clothlab.surrogate.training import relative_rmse_interval
 
     rng = np.random.default_rng(0)
 
@@ -455,10 +455,10 @@ def test_labelling_on_workers_is_charged_to_the_budget_as_wall_time_x_workers(tm
     time, no CPU) on 4 workers costs the training 4x its wait."""
     import time
 
-    from clothlab.neural.encodings import material_vector
-    from clothlab.neural.run import run_training
-    from clothlab.neural.training import TrainSpec
     from clothlab.parallel import InProcessRunner
+    from clothlab.surrogate.encodings import material_vector
+    from clothlab.surrogate.training import TrainSpec
+    from clothlab.surrogate.training_run import run_training
 
     class WaitingLabels(ModelLabels):
         def __call__(self, *args):

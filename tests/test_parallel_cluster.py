@@ -245,8 +245,8 @@ def test_surrogate_training_chunks_on_dask_are_the_in_process_files(tmp_path, cl
     """The surrogate's labelling chunks as Dask tasks (issue 13 item 4): byte-identical .npy files, whatever
     the number of workers or the order the chunks finish in."""
     from clothlab.models.irawan.model import IrawanModel
-    from clothlab.neural.data import DataSpec, generate
-    from clothlab.neural.labels import ModelLabels
+    from clothlab.surrogate.data import DataSpec, generate
+    from clothlab.surrogate.labels import ModelLabels
     from clothlab.weave.presets import get_preset
 
     runner, _ = cluster

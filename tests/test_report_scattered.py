@@ -137,7 +137,7 @@ def test_scattered_model_map_is_the_model_at_the_panel_direction(scattered):
     from clothlab.frames import spherical_to_vector
     from clothlab.models.components import combine
     from clothlab.report.data import load_fit_dir
-    from clothlab.report.modelview import load_fitted_model
+    from clothlab.report.model_on_grid import load_fitted_model
     from clothlab.report.scatter_plots import exitant_disc_grid, model_maps
 
     record = load_fit_dir(scattered[0])

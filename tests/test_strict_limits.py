@@ -1,4 +1,4 @@
-"""The documented limits of clothlab.strict at their boundary: a number of at most 64 characters is read, one
+"""The documented limits of clothlab.untrusted at their boundary: a number of at most 64 characters is read, one
 of 65 is refused (README, "strict numbers"), by the field parser and by the YAML loader alike (issue 25: the
 limit moved by one survived the suite, which only tried far longer fields); likewise YAML integers of 30 digits,
 file size limits, and the non-finite spellings."""
@@ -10,7 +10,7 @@ import re
 import pytest
 
 from clothlab.errors import InputError
-from clothlab.strict import load_yaml_text, parse_number, read_bounded_bytes
+from clothlab.untrusted import load_yaml_text, parse_number, read_bounded_bytes
 
 SIXTY_FOUR = "0." + "25" * 31  # 64 characters
 assert len(SIXTY_FOUR) == 64

@@ -546,7 +546,7 @@ def test_shared_directions_equal_per_point_directions():
 def test_whole_tile_footprint_is_the_tile_average():
     """Through the footprint aggregation (eqs. 3-5, when present): a box footprint of whole tiles, by
     summed-area tables and by stratified MC, equals components() - the texture needs no micro-normal weights."""
-    footprint = pytest.importorskip("clothlab.models.footprint")
+    footprint = pytest.importorskip("clothlab.footprint")
     model = SurfaceModel(get_pattern("twill-3x3"), tile_nodes=[128, 64])
     params = {"warp.psi": 30.0, "warp.alpha": 0.4, "weft.alpha": 0.7, "warp.beta": 1.2, "weft.beta": 0.6}
     rng = np.random.default_rng(11)

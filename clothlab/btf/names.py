@@ -49,7 +49,7 @@ import numpy as np
 
 from clothlab.errors import InputError
 from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_to_clothlab
-from clothlab.strict import MAX_YAML_BYTES, compose_yaml, construct_yaml, parse_number, read_text
+from clothlab.untrusted import MAX_YAML_BYTES, compose_yaml, construct_yaml, parse_number, read_text
 
 #: Image file suffixes a stack may hold (lower case).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")

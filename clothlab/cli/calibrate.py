@@ -41,7 +41,7 @@ def run(args) -> int:
         corrected = correct_measurement(calibration.correction, load_measurement(args.apply))
         print(write_table(corrected, args.output, overwrite=args.force))
     if args.report is not None:
-        from clothlab.report.studies import write_study_report
+        from clothlab.report.study_pages import write_study_report
 
         page = write_study_report(calibration.to_dict(), args.report, title="clothlab calibrate: colour correction")
         print(f"report: {page}")

@@ -35,7 +35,7 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from clothlab.fit.evaluate import evaluate_directions_file
+    from clothlab.fit.eval_csv import evaluate_directions_file
 
     text = evaluate_directions_file(args.source, args.directions, components=args.components, rule=args.rule,
                                     nodes=args.nodes, footprint_method=args.footprint_method,

@@ -27,7 +27,7 @@ def _degrees(text: str) -> float:
     import argparse
 
     from clothlab.errors import ConfigError
-    from clothlab.strict import parse_number
+    from clothlab.untrusted import parse_number
 
     try:
         return parse_number(text, error=ConfigError)
@@ -84,7 +84,7 @@ def add_parser(sub):
 
 def _reader_options(items):
     from clothlab.errors import ConfigError
-    from clothlab.strict import load_yaml_text
+    from clothlab.untrusted import load_yaml_text
 
     options = {}
     for item in items:

@@ -74,7 +74,7 @@ def number_type(low: float | None = None, high: float | None = None):
         import argparse
 
         from clothlab.errors import ConfigError
-        from clothlab.strict import parse_number
+        from clothlab.untrusted import parse_number
 
         try:
             value = parse_number(text, error=ConfigError)

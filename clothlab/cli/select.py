@@ -86,7 +86,7 @@ def _settings(cfg, args):
 
         losses = [as_choice(k.strip(), Location(None, "--losses"), LOSSES) for k in args.losses.split(",")]
     if getattr(args, "loss_scales", None) is not None:
-        from clothlab.strict import parse_number
+        from clothlab.untrusted import parse_number
 
         scales = []
         for item in args.loss_scales.split(","):

@@ -63,7 +63,7 @@ def channel_values(text: str, field: str, n: int):
     import numpy as np
 
     from clothlab.errors import ConfigError
-    from clothlab.strict import parse_number
+    from clothlab.untrusted import parse_number
 
     values = np.array([parse_number(x, error=ConfigError, field=field) for x in text.split(",")])
     if values.size == 1:
@@ -163,7 +163,7 @@ def _run_btf(args) -> int:
                           "texture model's intensity noise (paper sec. 7.2.1, seeded by --seed), not the table "
                           "simulation's measurement noise", field=not_applicable[0].split("/")[-1])
 
-    from clothlab.strict import parse_number
+    from clothlab.untrusted import parse_number
 
     offset = tuple(parse_number(x, error=ConfigError, field="--btf-offset") for x in args.btf_offset.split(","))
     if len(offset) != 2:

@@ -29,7 +29,7 @@ def add_parser(sub):
     p.add_argument("--labels", choices=LABELS, default="mc",
                    help="label source: mc (default: stratified MC of the texture model over the part of the "
                         "footprint that is not whole tiles, the rest exact), sat (summed-area tables of "
-                        "clothlab.models.footprint: one table per direction pair, and each query here has its "
+                        "clothlab.footprint: one table per direction pair, and each query here has its "
                         "own, so slow), model (the reflectance model, footprint-independent)")
     p.add_argument("--samples", type=count_type(1, 1_000_000), default=64,
                    help="MC samples per query for mc labels (default 64)")
@@ -97,7 +97,7 @@ def _model(source: str, target: str):
 
 def _labels(choice: str, model, params: dict, samples: int, seed: int):
     from clothlab.errors import ConfigError
-    from clothlab.neural.labels import FootprintLabels, ModelLabels, TextureMonteCarloLabels
+    from clothlab.surrogate.labels import FootprintLabels, ModelLabels, TextureMonteCarloLabels
 
     if choice == "model":
         return ModelLabels(model, params)
@@ -107,9 +107,9 @@ def _labels(choice: str, model, params: dict, samples: int, seed: int):
     texture = model.texture(seed=seed)
     if choice == "sat":
         try:
-            from clothlab.models.footprint import footprint_components
+            from clothlab.footprint import footprint_components
         except ImportError:
-            raise ConfigError("the footprint estimator (clothlab.models.footprint) is not available; "
+            raise ConfigError("the footprint estimator (clothlab.footprint) is not available; "
                               "use --labels mc", field="--labels") from None
         return FootprintLabels(footprint_components, texture, params, method="sat")
     return TextureMonteCarloLabels(texture, params, samples=max(2, samples), seed=seed,
@@ -125,7 +125,7 @@ MAX_VARY_MATERIALS = 4096
 def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
     """Parameter sets of ``--vary NAME=LO:HI:N`` (all combinations, then the held-out midpoints) and the
     indices of the held-out ones; ``[base], []`` without ``--vary``.  LO and HI are plain decimal numbers
-    (:func:`clothlab.strict.parse_number`) inside NAME's fit bounds with LO < HI, N an integer from 2 to
+    (:func:`clothlab.untrusted.parse_number`) inside NAME's fit bounds with LO < HI, N an integer from 2 to
     :data:`MAX_VARY_STEPS`, NAME a parameter given once; the grid holds at most :data:`MAX_VARY_MATERIALS`
     materials.  ConfigError at ``--vary`` otherwise."""
     import itertools
@@ -135,7 +135,7 @@ def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
     import numpy as np
 
     from clothlab.errors import ConfigError
-    from clothlab.strict import parse_number
+    from clothlab.untrusted import parse_number
 
     axes, mids = [], []
     for text in vary:
@@ -265,10 +265,10 @@ def _run(args, held, lines: list[str]) -> int:
 
     from clothlab.atomic import atomic_write_bytes
     from clothlab.errors import ConfigError
-    from clothlab.neural.data import DataSpec
-    from clothlab.neural.encodings import PATTERN_ORDER, material_vector, yarn_extent
-    from clothlab.neural.run import run_training
-    from clothlab.neural.training import TrainSpec
+    from clothlab.surrogate.data import DataSpec
+    from clothlab.surrogate.encodings import PATTERN_ORDER, material_vector, yarn_extent
+    from clothlab.surrogate.training import TrainSpec
+    from clothlab.surrogate.training_run import run_training
     from clothlab.weave.wvformat import format_wv
 
     if args.output is None:
@@ -302,7 +302,7 @@ def _run(args, held, lines: list[str]) -> int:
     import numpy as np
 
     from clothlab.models.base import ORIENTATION
-    from clothlab.neural.labels import ModelLabels, TextureProbe
+    from clothlab.surrogate.labels import ModelLabels, TextureProbe
 
     # per weave its materials (trained weaves first, then the held-out pattern's), one list over all
     sets, heldout, held_pattern, owner = [], [], [], []
@@ -371,11 +371,11 @@ def _run(args, held, lines: list[str]) -> int:
                               budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
                               heldout_materials=heldout, runner=runner, references=references,
                               heldout_pattern=held_pattern, probes=probes)
-    from clothlab.neural.run import write_report_page
+    from clothlab.surrogate.training_run import write_report_page
 
     latent = None
     if args.vary and not several:  # Fig. 8: between the first and the last grid material
-        from clothlab.neural.interpolation import latent_interpolation, plot_latent_interpolation
+        from clothlab.surrogate.interpolation import latent_interpolation, plot_latent_interpolation
 
         last = len(sets) - len(heldout) - 1
         latent = latent_interpolation(result.surrogate, model, 0, last, sets[0], sets[last], names)

@@ -29,7 +29,7 @@ from clothlab.colour.chart import (
 )
 from clothlab.errors import InputError
 from clothlab.progress import get_logger
-from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
+from clothlab.untrusted import MAX_TABLE_BYTES, parse_number, read_text
 
 
 def read_chart(path) -> tuple[np.ndarray, list[str]]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from clothlab.errors import ConfigError
-from clothlab.strict import MAX_YAML_BYTES, compose_yaml, construct_yaml, read_text
+from clothlab.untrusted import MAX_YAML_BYTES, compose_yaml, construct_yaml, read_text
 
 _MERGE_TAG = "tag:yaml.org,2002:merge"
 
@@ -146,7 +146,7 @@ class LineMap:
 def parse_yaml_with_lines(text: str, source: str | None = None):
     """``(data, LineMap)`` of the YAML document ``text``; ``data`` is None for an empty document.
 
-    The document is read by the strict, bounded loader of :mod:`clothlab.strict` (plain decimal numbers,
+    The document is read by the strict, bounded loader of :mod:`clothlab.untrusted` (plain decimal numbers,
     no timestamps, depth and alias-expansion limits).  A syntax error, a duplicate key, an alias cycle or
     a bound exceeded raises :class:`~clothlab.errors.ConfigError` with ``source`` and the line.
     """
@@ -169,7 +169,7 @@ def _exists(path) -> bool:
 
 def load_yaml_with_lines(path):
     """``(data, LineMap)`` of the YAML file ``path`` (a regular UTF-8 file of at most
-    :data:`clothlab.strict.MAX_YAML_BYTES`); messages name the file as ``str(path)``."""
+    :data:`clothlab.untrusted.MAX_YAML_BYTES`); messages name the file as ``str(path)``."""
     source = str(path)
     if "\x00" not in source and not Path(path).is_file() and not Path(path).is_dir() and not _exists(path):
         raise ConfigError(f"configuration file not found: {Path(path).absolute()}", path=source)

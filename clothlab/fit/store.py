@@ -38,7 +38,7 @@ from clothlab.errors import InputError, ResultError
 from clothlab.fit.fitreport import Reportable
 from clothlab.frames import spherical_to_vector
 from clothlab.models.registry import build_model, model_class
-from clothlab.strict import load_json_file
+from clothlab.untrusted import load_json_file
 from clothlab.weave.wvformat import format_wv, parse_wv
 
 MAX_SLICE_DIRECTIONS = 24

@@ -14,11 +14,11 @@ import numpy as np
 
 from clothlab.errors import InputError
 from clothlab.io.table import MAX_VALUE, MIN_VALUE
-from clothlab.strict import MAX_TABLE_BYTES, read_bounded_bytes
+from clothlab.untrusted import MAX_TABLE_BYTES, read_bounded_bytes
 
 
 def read_binary(path, *, what: str) -> bytes:
-    """The bytes of a regular binary file of at most :data:`clothlab.strict.MAX_TABLE_BYTES` bytes."""
+    """The bytes of a regular binary file of at most :data:`clothlab.untrusted.MAX_TABLE_BYTES` bytes."""
     return read_bounded_bytes(path, limit=MAX_TABLE_BYTES, what=what)
 
 

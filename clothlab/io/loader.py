@@ -42,7 +42,7 @@ from clothlab.io.rglbsdf import read_bsdf
 from clothlab.io.table import CONVENTION_CHOICES, check_row_count, find_sidecar, read_table
 from clothlab.io.utia import NEGATIVE, UTIA_BYTES, read_utia
 from clothlab.io.utia import check_options as check_utia_options
-from clothlab.strict import MAX_LINE_CHARS, MAX_TABLE_BYTES, check_regular_file
+from clothlab.untrusted import MAX_LINE_CHARS, MAX_TABLE_BYTES, check_regular_file
 
 READERS = {"clothlab": read_table, "astm": read_astm, "pabopto": read_pabopto, "text": read_generic,
            "merl": read_merl, "utia": read_utia, "bsdf": read_bsdf}

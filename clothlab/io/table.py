@@ -52,7 +52,7 @@ from clothlab.atomic import atomic_write_text
 from clothlab.errors import ConfigError, InputError, ResultExistsError
 from clothlab.frames import AZIMUTH_SENSE, AZIMUTH_ZERO, azimuth_from_clothlab, azimuth_to_clothlab
 from clothlab.io.measurement import Measurement
-from clothlab.strict import (
+from clothlab.untrusted import (
     MAX_NUMBER_CHARS,
     MAX_TABLE_BYTES,
     decode_text,
@@ -60,7 +60,7 @@ from clothlab.strict import (
     plain_numeric_text,
     read_bounded_bytes,
 )
-from clothlab.strict import parse_number as strict_number
+from clothlab.untrusted import parse_number as strict_number
 
 TABLE_VERSION = 1
 ANGLE_COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")
@@ -121,8 +121,8 @@ class RawRows:
 def read_text_lines(path) -> list[str]:
     """The lines of a UTF-8 text file ('\\n' or '\\r\\n' endings), or InputError naming the bad line.
 
-    The file must be a regular file of at most :data:`clothlab.strict.MAX_TABLE_BYTES`; a leading UTF-8
-    byte-order mark is dropped (:func:`clothlab.strict.decode_text`).
+    The file must be a regular file of at most :data:`clothlab.untrusted.MAX_TABLE_BYTES`; a leading UTF-8
+    byte-order mark is dropped (:func:`clothlab.untrusted.decode_text`).
     """
     data = read_bounded_bytes(path, limit=MAX_TABLE_BYTES, what="measurement file")
     text = decode_text(data, path=Path(path), what="measurement file")
@@ -133,7 +133,7 @@ def read_text_lines(path) -> list[str]:
 
 
 def parse_number(text: str, *, path, line: int, column: str) -> float:
-    """A finite float in plain decimal notation from one field (:func:`clothlab.strict.parse_number`), or
+    """A finite float in plain decimal notation from one field (:func:`clothlab.untrusted.parse_number`), or
     InputError naming file, line and column."""
     return strict_number(text, path=path, line=line, field=column)
 

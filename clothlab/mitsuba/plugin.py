@@ -98,7 +98,7 @@ def _vector(props, name, n, default):
     text = props.get(name, None) if name in props else None
     if text is None:
         return np.asarray(default, dtype=np.float64)
-    from clothlab.strict import parse_number
+    from clothlab.untrusted import parse_number
 
     parts = str(text).replace(",", " ").split()
     if len(parts) != n:

@@ -85,7 +85,7 @@ A texture model (what :meth:`Model.texture` returns) has ``weave``, ``component_
 and ``components(u, v, wi, wo, params, *, need=None, noise=True, normalised=True, warn=True, footprint=None,
 view_distance=None)`` returning arrays of the points' shape; models with ``texture_filters`` use
 ``footprint`` (tiles) and ``view_distance``, the others ignore them.  Optional members, read by the
-footprint aggregation (:mod:`clothlab.models.footprint`, docs/footprint.md): ``shared_directions = True``
+footprint aggregation (:mod:`clothlab.footprint`, docs/footprint.md): ``shared_directions = True``
 when ``components`` takes (1, 3) directions shared by every point (faster), and ``micro_normals(u, v,
 params)`` for a texture whose values are point BSDFs about micro normals (eqs. 4-5 weights then apply).
 

@@ -21,7 +21,7 @@ MODEL_KINDS = {
 }
 #: Composite kinds (clothlab.models.composite): name -> (specular kind, diffuse kind).
 COMPOSITE_KINDS = {f"{s}+{d}": (s, d) for s in ("irawan", "kang") for d in ("lambert", "oren-nayar")}
-MODEL_KINDS.update({name: ("clothlab.models.composite", "composite_class") for name in COMPOSITE_KINDS})
+MODEL_KINDS.update({name: ("clothlab.models.composite.model", "composite_class") for name in COMPOSITE_KINDS})
 DEFAULT_KIND = "irawan"
 #: kinds whose reflectance does not depend on the weave (fabric.yaml may leave ``model.weave`` out)
 WEAVE_FREE_KINDS = ("lambert", "oren-nayar")

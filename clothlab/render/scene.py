@@ -420,7 +420,7 @@ def _fabric(r: _Reader, d: dict, base_dir) -> Fabric:
 
 def load_scene(path) -> Scene:
     """Read a scene YAML file (see the module docstring); ConfigError / InputError name file and field."""
-    from clothlab.strict import load_yaml_file
+    from clothlab.untrusted import load_yaml_file
 
     path = Path(path)
     data = load_yaml_file(path, error=ConfigError, what="scene file")

@@ -164,10 +164,10 @@ def _figure_jobs(record: FitRecord, percentiles, layout: SamplingLayout | None =
 def _scattered_jobs(record: FitRecord, notes: list[str]) -> list[tuple[str, object]]:
     """Model maps at a few representative incident directions, slices where samples lie near their planes,
     residuals against the angles and the parity plot; the fitted model is rebuilt for the maps and slices
-    (:mod:`clothlab.report.modelview`)."""
+    (:mod:`clothlab.report.model_on_grid`)."""
     from clothlab.report import scatter_plots as sp
     from clothlab.report.data import shown_channel
-    from clothlab.report.modelview import load_fitted_model
+    from clothlab.report.model_on_grid import load_fitted_model
     from clothlab.report.sampling import representative_incidents
 
     panels = representative_incidents(record.predictions)

@@ -29,7 +29,7 @@ from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
 from clothlab.io.table import ANGLE_COLUMNS as DIRECTION_COLUMNS
 from clothlab.io.table import MAX_VALUE, MIN_VALUE
-from clothlab.strict import (
+from clothlab.untrusted import (
     MAX_NUMBER_CHARS,
     MAX_TABLE_BYTES,
     load_json_file,
@@ -66,7 +66,7 @@ class FitRecord:
 def read_csv_table(path, *, required=(), text_columns=(), finite: bool = True) -> dict[str, np.ndarray]:
     """Read a CSV with a header row into {column: (N,) float64 array} (``text_columns`` stay str).
 
-    Numbers are plain decimal notation (:func:`clothlab.strict.parse_number`); with ``finite=False`` empty
+    Numbers are plain decimal notation (:func:`clothlab.untrusted.parse_number`); with ``finite=False`` empty
     cells and 'nan' / 'inf' are also read (as NaN / inf: an optimiser trace may hold them).  Raises
     :class:`InputError` naming the file, line and column for a missing file, a missing required column, a
     ragged row, an empty or non-numeric value.
@@ -251,7 +251,7 @@ def _check_predictions(predictions: dict, channels, path: Path) -> None:
 
 def read_fit_json(path) -> dict:
     """fit.json as :func:`read_json` reads it; a ``NaN`` or ``Infinity`` (which clothlab never writes) is
-    refused naming its dotted field, e.g. ``objective.final`` (:func:`clothlab.strict.load_json_text`)."""
+    refused naming its dotted field, e.g. ``objective.final`` (:func:`clothlab.untrusted.load_json_text`)."""
     return read_json(path)
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from clothlab.errors import ConfigError, InputError
 from clothlab.frames import vector_to_spherical
-from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
+from clothlab.untrusted import MAX_TABLE_BYTES, parse_number, read_text
 
 DISTRIBUTIONS = ("uniform", "cosine")
 COLUMNS = ("theta_i", "phi_i", "theta_o", "phi_o")

@@ -4,7 +4,7 @@ This module is the list of sections (:data:`SECTIONS`, one module each under :mo
 run loop (:func:`run_bench`).  A section module defines ``run(context) -> dict`` and ``lines(result) ->
 list[str]`` (:mod:`clothlab.studies.section`); the loop hands each section's lines to ``emit`` as it finishes,
 collects the figures with the machine description, writes them as JSON and, with an output directory, as an
-HTML page with the plots (:func:`clothlab.report.studies.write_study_report`).  Nothing here prints.
+HTML page with the plots (:func:`clothlab.report.study_pages.write_study_report`).  Nothing here prints.
 
 Data (``data_dir``, ``clothlab bench --data DIR``): a directory holding ``measurements/<fabric>/`` and
 ``fits/<fabric>/`` - the repository root for the full run.  Without one (an installed wheel run in an empty
@@ -81,9 +81,9 @@ SECTIONS = (
     Section("render", "clothlab.studies.render_lod", "receding plane: LoD render cost and error by distance",
             ("clothlab.render", _IM, "clothlab.models.kang")),
     Section("footprint", "clothlab.studies.footprint", "footprint averages: SAT vs MC queries/s and error by size",
-            ("clothlab.models.footprint", _IM)),
+            ("clothlab.footprint", _IM)),
     Section("neural", "clothlab.studies.neural", "neural surrogate decoder queries/s at three widths",
-            ("clothlab.neural", "clothlab.models.neural")),
+            ("clothlab.surrogate", "clothlab.models.neural")),
     Section("mitsuba", "clothlab.studies.mitsuba_render", "Mitsuba 3 plugin vs clothlab render: time, parity, chi2",
             ("clothlab.mitsuba",)),
     Section("scaleout", "clothlab.studies.scaleout",
@@ -251,7 +251,7 @@ def run_bench(*, sections: tuple[str, ...] | None, quick: bool, data_dir: Path |
         emit(f"figures written to {json_path} (commit {(figures['provenance']['commit'] or '?')[:10]}, "
              f"{figures['provenance']['date']})")
     if output is not None:
-        from clothlab.report.studies import write_study_report
+        from clothlab.report.study_pages import write_study_report
 
         page = write_study_report(figures, output, title="clothlab bench: speed and accuracy",
                                   figures=sorted(output.glob("*.png")))

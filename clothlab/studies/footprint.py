@@ -59,7 +59,7 @@ def footprint_benchmark(quick: bool, *, pairs: int | None = None, footprints: in
     """Figures per kind: settings, one row per estimator (queries_per_second, relative_rmse by size bin),
     the SAT build time per pair and the query time, and the tables' discretisation check (``check``
     queries per bin).  ``quick``: 4 pairs x 250 footprints, 20 checked per bin, IM only."""
-    from clothlab.models.footprint import FootprintTable, mc_estimate
+    from clothlab.footprint import FootprintTable, mc_estimate
     from clothlab.models.registry import MODEL_KINDS, build_model, model_class
     from clothlab.weave.presets import get_preset
 

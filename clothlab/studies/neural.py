@@ -15,7 +15,7 @@ reference uses R) sets a shipped per-fabric network against Monte-Carlo footprin
 time (the "MSE vs time" table): held-out direction
 pairs of its training data spec (one pair per query), footprints >= 0.12 tile; the reference is the
 whole-tile-split MC estimate with :data:`REFERENCE_SAMPLES` samples
-(:class:`clothlab.neural.labels.TextureMonteCarloLabels`); the MC estimates are plain stratified box
+(:class:`clothlab.surrogate.labels.TextureMonteCarloLabels`); the MC estimates are plain stratified box
 averages of k = 1, 2, 4, ..., 256 texture samples (what a renderer does); MSE of f = the sum of the
 components, seconds per query measured in this process.
 """
@@ -37,8 +37,8 @@ def _worker(args) -> tuple[float, float]:
     """(wall s, CPU s) of ``repeats`` passes over ``n`` queries at one width (best of the passes)."""
     import time
 
-    from clothlab.neural.network import Architecture, SurrogateNetwork
-    from clothlab.neural.surrogate import Surrogate
+    from clothlab.surrogate.network import Architecture, SurrogateNetwork
+    from clothlab.surrogate.surrogate import Surrogate
 
     width, spatial, n, repeats = args
     arch = Architecture(n_material=39, n_spatial=24, n_angular=8, n_out=3, width=width, spatial=spatial)
@@ -75,7 +75,7 @@ def _pool(processes: int):
 def neural_speed(quick: bool, queries: int | None = None, repeats: int | None = None) -> dict:
     """Queries/s and queries per CPU-second per width, one worker and one worker per core (``queries`` per
     worker and timing ``repeats`` override the run size)."""
-    from clothlab.neural.network import Architecture
+    from clothlab.surrogate.network import Architecture
 
     cores = max(1, os.cpu_count() or 1)
     n = queries or (65536 if quick else 262144)
@@ -105,9 +105,9 @@ def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | No
     footprint group; a residual network's time includes its reflectance-model evaluation."""
     from clothlab.models.neural.model import SHIPPED, load_neural
     from clothlab.models.registry import build_model
-    from clothlab.neural.data import DataSpec, heldout_queries
-    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
     from clothlab.studies.timing import best_time
+    from clothlab.surrogate.data import DataSpec, heldout_queries
+    from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels
     from clothlab.weave.presets import get_preset
 
     path = SHIPPED / f"{fabric}.npz" if weights is None else Path(weights)
@@ -151,8 +151,8 @@ def fresh_heldout_labels(sidecar: dict, per_bin: int = 150, samples: int = REFER
     model R (N, C) at them; a list of (lo, hi, queries, labels, R).  Independent of the network, so one call
     serves every variant trained on the same data."""
     from clothlab.models.neural.model import reference_model
-    from clothlab.neural.data import DataSpec, heldout_queries
-    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
+    from clothlab.surrogate.data import DataSpec, heldout_queries
+    from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels
 
     enc = sidecar["encoding"]
     model = reference_model(sidecar)
@@ -171,7 +171,7 @@ def heldout_errors(weights, fresh) -> dict:
     sum of the components) by bin, that of the reflectance model, and the far view (>= 4 tiles): relative RMS
     difference between surrogate and reflectance model."""
     from clothlab.models.neural.model import load_neural
-    from clothlab.neural.training import relative_rmse_interval
+    from clothlab.surrogate.training import relative_rmse_interval
 
     surrogate, _ = load_neural(weights)
     rows, far = [], None

@@ -6,7 +6,7 @@ For each shipped network (:func:`shipped_networks`: the per-fabric ``<preset>.np
 materials, the held-out pattern and the trained materials of the Table-2 network), per footprint bin of
 :data:`BINS`:
 
-* **queries**: fresh held-out direction pairs of the network's data spec (:func:`clothlab.neural.data.
+* **queries**: fresh held-out direction pairs of the network's data spec (:func:`clothlab.surrogate.data.
   heldout_queries`, seeds :data:`QUERY_SEED` + ..., never the training seed), uniform centres, sizes as
   Table 2 within the bin;
 * **reference**: the texture model's own box average by stratified MC of ``samples`` points (default
@@ -14,14 +14,14 @@ materials, the held-out pattern and the trained materials of the Table-2 network
   as the mean of two independent stratified halves: it does not use the reflectance model R, and the halves'
   difference gives its own noise (``reference_noise``, relative RMS of the mean);
 * **accuracy**: relative RMSE of f (the sum of the components, unit coefficients) with a 90 % bootstrap
-  interval (:func:`clothlab.neural.training.relative_rmse_interval`), beside R alone on the same reference;
+  interval (:func:`clothlab.surrogate.training.relative_rmse_interval`), beside R alone on the same reference;
 * **cost**: the surrogate's ``Surrogate.query`` end to end (features, R or the texture probe, decoder, the
   decoding), CPU time (``process_time``) per query, median of ``repeats`` calls, each call on a new set of
   ``timing`` queries whose directions no model has seen (new draws; every model's direction memo is dropped
   before each call as well: :meth:`clothlab.models.base.Model.forget_directions`); ``inputs_us`` is the R /
   probe share, timed the same way;
 * **equal time**: MSE of k-sample estimates (k in :data:`MC_SAMPLES`) of plain stratified MC of the texture
-  and of *split* MC (whole tiles from R, the rest by MC: :class:`clothlab.neural.labels.
+  and of *split* MC (whole tiles from R, the rest by MC: :class:`clothlab.surrogate.labels.
   TextureMonteCarloLabels` with ``tile_average``; what a renderer with R does), each timed as the
   surrogate; the MC MSE at the surrogate's CPU time is interpolated log-log between the bracketing k
   (:func:`equal_time_mse`), and ``ratio_*`` = that MSE / the surrogate's MSE.  When the surrogate costs less
@@ -82,7 +82,7 @@ class Material:
 
     def __init__(self, surrogate, sidecar, row: int):
         from clothlab.models.neural.model import reference_model
-        from clothlab.neural.labels import ModelLabels
+        from clothlab.surrogate.labels import ModelLabels
 
         self.row = row
         if surrogate.references:
@@ -165,9 +165,9 @@ def equal_time_mse(times, mses, t: float) -> tuple[float, bool]:
 def bin_figures(surrogate, materials, spec, lo: float, hi: float, *, per_bin: int, samples: int, timing: int,
                 repeats: int, seed: int, mc_samples=MC_SAMPLES) -> dict:
     """The figures of one bin (module docstring) for the materials (queries spread evenly over them)."""
-    from clothlab.neural.data import heldout_queries
-    from clothlab.neural.labels import TextureMonteCarloLabels
-    from clothlab.neural.training import relative_rmse_interval
+    from clothlab.surrogate.data import heldout_queries
+    from clothlab.surrogate.labels import TextureMonteCarloLabels
+    from clothlab.surrogate.training import relative_rmse_interval
 
     each = -(-per_bin // len(materials))
     each_t = -(-timing // len(materials))
@@ -241,7 +241,7 @@ def network_figures(name: str, path, quick: bool = False, sizes: dict | None = N
     """Per group and bin :func:`bin_figures` of the network at ``path`` (``sizes``: overrides of
     :data:`FULL` / :data:`QUICK`)."""
     from clothlab.models.neural.model import load_neural
-    from clothlab.neural.data import DataSpec
+    from clothlab.surrogate.data import DataSpec
 
     size = {**(QUICK if quick else FULL), **(sizes or {})}
     start = time.process_time()
@@ -285,7 +285,7 @@ def accuracy_figures(path, per_bin: int = 40, samples=1024, materials: int = 2, 
     tests' check of the shipped weights."""
     per_bin_samples = [int(samples)] * len(bins) if np.isscalar(samples) else [int(k) for k in samples]
     from clothlab.models.neural.model import load_neural
-    from clothlab.neural.data import DataSpec, heldout_queries
+    from clothlab.surrogate.data import DataSpec, heldout_queries
 
     surrogate, sidecar = load_neural(path)
     enc = sidecar["encoding"]

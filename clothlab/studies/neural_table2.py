@@ -1,7 +1,7 @@
 """Fresh-label errors of a network over several weaves (``train-surrogate SRC1,SRC2,... --draw N
 --heldout-pattern WEAVE``, docs/neural.md "The Table-2 network"): relative RMSE of f (the sum of the
 components, unit coefficients) by footprint bin for three groups of materials, each against fresh
-whole-tile-split MC labels (:class:`clothlab.neural.labels.TextureMonteCarloLabels`, another seed than the
+whole-tile-split MC labels (:class:`clothlab.surrogate.labels.TextureMonteCarloLabels`, another seed than the
 training labels, on held-out direction pairs of the data spec), beside the reflectance model alone on the
 same labels, and the far view (>= 4 tiles: relative RMS difference of the network from the reflectance model).
 
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)  # tiles (as clothlab.neural.training.SIZE_BINS)
+BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)  # tiles (as clothlab.surrogate.training.SIZE_BINS)
 GROUPS = ("heldout_pairs", "heldout_materials", "heldout_pattern")
 RANGES = ((0.03, 0.12), (0.12, 1.0), (1.0, 5.0))  # tiles: the coarse ranges of the per-weave breakdown
 
@@ -42,9 +42,9 @@ def fresh_errors(weights, per_bin: int = 150, samples: int = 1024, seed: int = 2
     "cpu_s": float} for the network at ``weights`` (.npz, residual or not; R from
     :func:`clothlab.models.neural.model.load_neural`)."""
     from clothlab.models.neural.model import load_neural, reference_model
-    from clothlab.neural.data import DataSpec, heldout_queries
-    from clothlab.neural.labels import ModelLabels, TextureMonteCarloLabels
-    from clothlab.neural.training import relative_rmse_interval
+    from clothlab.surrogate.data import DataSpec, heldout_queries
+    from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels
+    from clothlab.surrogate.training import relative_rmse_interval
 
     start = time.process_time()
     surrogate, sidecar = load_neural(weights)

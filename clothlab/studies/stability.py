@@ -526,7 +526,7 @@ def run_check_command(*, full: bool, seed: int, data_dir: Path | None, output: P
         atomic_write_text(json_path, json.dumps(result, indent=1, default=float) + "\n")
         emit(f"results written to {json_path}")
     if output is not None:
-        from clothlab.report.studies import write_study_report
+        from clothlab.report.study_pages import write_study_report
 
         output = Path(output)
         page = write_study_report(result, output, title="clothlab check: numerical stability and stiff fits",

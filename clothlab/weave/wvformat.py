@@ -77,7 +77,7 @@ from pathlib import Path
 import numpy as np
 
 from clothlab.errors import InputError, ParameterError
-from clothlab.strict import MAX_YAML_BYTES, parse_number, read_text
+from clothlab.untrusted import MAX_YAML_BYTES, parse_number, read_text
 from clothlab.weave.model import YARN_KINDS, Segment, Weave, YarnGeometry
 from clothlab.weave.parameters import IRAWAN_PARAMS
 
@@ -322,7 +322,7 @@ class _Parser:
 
 
 def _number(tok: _Token, field: str, source: str) -> float:
-    """A finite number in plain decimal notation (:func:`clothlab.strict.parse_number`), within the
+    """A finite number in plain decimal notation (:func:`clothlab.untrusted.parse_number`), within the
     plausible range of ``field`` where :data:`FIELD_RANGES` declares one."""
     if tok.kind != "word" or not _NUMBER_RE.fullmatch(tok.text):
         raise InputError(f"expected a number, found {tok.describe()}", path=source, line=tok.line, field=field)

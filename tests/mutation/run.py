@@ -3,7 +3,7 @@
 Each entry of :data:`MUTANTS` is one deliberate single-line change (an operator swapped, a constant moved by
 one, a statement dropped) to one of the core modules - the IM kernels (clothlab/models/irawan/kernels.py), the
 NNLS solver (clothlab/fit/nnls.py, nnls_kernels.py), cross-validation (clothlab/fit/crossval.py), the posterior
-checkpoint (clothlab/fit/posterior/checkpoint.py) and the strict readers (clothlab/strict.py).  For each, the
+checkpoint (clothlab/fit/posterior/checkpoint.py) and the strict readers (clothlab/untrusted.py).  For each, the
 script applies the change to a **copy** of the package in a temporary directory (the checkout is never
 touched), runs that module's tests (:data:`TESTS`) against the copy (``PYTHONPATH`` and the working directory
 point at the copy), and calls the mutant *killed* when a test fails, *survived* when all pass.  The score is
@@ -47,7 +47,7 @@ NNLS = "clothlab/fit/nnls.py"
 NNLS_KERNELS = "clothlab/fit/nnls_kernels.py"
 CROSSVAL = "clothlab/fit/crossval.py"
 CHECKPOINT = "clothlab/fit/posterior/checkpoint.py"
-STRICT = "clothlab/strict.py"
+STRICT = "clothlab/untrusted.py"
 
 TESTS = {
     "kernels": ("tests/test_irawan_kernels.py",),

@@ -1,1 +1,1 @@
-"""``kind: neural``: the trained numpy surrogate (:mod:`clothlab.neural`) behind the model interface."""
+"""``kind: neural``: the trained numpy surrogate (:mod:`clothlab.surrogate`) behind the model interface."""

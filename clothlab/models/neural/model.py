@@ -1,6 +1,6 @@
 """The neural surrogate as a model (``kind: neural``; Chen, Wang & Wang 2024, sec. 4.3).
 
-A surrogate (:mod:`clothlab.neural`, trained by ``clothlab train-surrogate``) answers footprint queries of
+A surrogate (:mod:`clothlab.surrogate`, trained by ``clothlab train-surrogate``) answers footprint queries of
 the texture model of its *target kind*, the sidecar's ``encoding.kind`` (:data:`TARGET_KINDS`: ``irawan``,
 or ``surface``, the Chen et al. model).  As a model:
 
@@ -16,7 +16,7 @@ or ``surface``, the Chen et al. model).  As a model:
 A trained material is answered from its stored latent; any other parameter set goes through the encoder
 (a fast approximation, exact only near the trained materials; meaningful for a ``--vary`` network over
 the varied parameters, which a fit frees by default).  A residual network (``--residual``;
-:mod:`clothlab.neural.surrogate`) adds its outputs to the transformed reflectance model T(R(wi, wo)) of the
+:mod:`clothlab.surrogate.surrogate`) adds its outputs to the transformed reflectance model T(R(wi, wo)) of the
 target kind at the queried parameters: :func:`load_neural` attaches R of the trained materials, and a query
 at other parameters evaluates it (:meth:`NeuralModel.exact_model`).
 
@@ -41,8 +41,8 @@ from clothlab.frames import to_weave_frame
 from clothlab.models.base import ORIENTATION, Model, ModelTexture, as_directions, split_orientation
 from clothlab.models.irawan.integrals import COMPONENTS
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
-from clothlab.neural.encodings import normalised_parameters, pattern_descriptor
-from clothlab.neural.serialise import load_surrogate
+from clothlab.surrogate.encodings import normalised_parameters, pattern_descriptor
+from clothlab.surrogate.serialise import load_surrogate
 
 SHIPPED = Path(__file__).parent / "data"
 """Shipped per-fabric weights, ``<preset>.npz`` + ``.json`` (docs/neural.md says how they were trained)."""
@@ -68,10 +68,10 @@ def reference_model(sidecar: dict, weave=None, name: str | None = None):
 
 
 def load_neural(path, weave=None):
-    """:func:`clothlab.neural.serialise.load_surrogate` with, for a residual network, the reflectance model
+    """:func:`clothlab.surrogate.serialise.load_surrogate` with, for a residual network, the reflectance model
     of each trained material attached (``references``), each on its own weave (``encoding["materials_weave"]``
     of a network over several weaves, unless ``weave`` is given); returns (surrogate, sidecar)."""
-    from clothlab.neural.labels import ModelLabels, TextureProbe
+    from clothlab.surrogate.labels import ModelLabels, TextureProbe
 
     surrogate, sidecar = load_surrogate(Path(path))
     if surrogate.residual or surrogate.residual_input or surrogate.probe_points:
@@ -214,11 +214,11 @@ class NeuralModel(Model):
         return np.concatenate([normalised_parameters(self.resolve(params), self.params, names), self._pattern])
 
     def material_objective(self, wi, wo, values, free=None, params: dict | None = None):
-        """The fast fit's objective (:class:`clothlab.neural.material_fit.MaterialObjective`) of the ``free``
+        """The fast fit's objective (:class:`clothlab.surrogate.material_fit.MaterialObjective`) of the ``free``
         parameters (default ``default_free``) through the encoder, far view, from ``params``; a network over
         the reflectance model (g = T(R) + net, or T(R) as an input; docs/neural.md) evaluates R of
         :meth:`exact_model` at each trial, a probing one the texture probe (:meth:`surrogate_probe`)."""
-        from clothlab.neural.material_fit import MaterialObjective, unit_to_parameter
+        from clothlab.surrogate.material_fit import MaterialObjective, unit_to_parameter
 
         names = list(self._encoding.get("parameters", self._material_names()))
         free = list(free or self.default_free)
@@ -250,12 +250,12 @@ class NeuralModel(Model):
     def fit_material(self, wi, wo, values, free=None, params: dict | None = None, *, refine: bool = False,
                      **options):
         """Fast approximate fit of the ``free`` parameters (default ``default_free``) through the encoder
-        (:meth:`material_objective`, :func:`clothlab.neural.material_fit.fit_material`; ``options``: its
+        (:meth:`material_objective`, :func:`clothlab.surrogate.material_fit.fit_material`; ``options``: its
         steps, lr, starts) to far-view values (N,) at directions (N, 3), starting from ``params``; returns
         (fitted parameters, the :class:`MaterialFit`).  ``refine``: then refine with the exact model the
-        network learnt (:meth:`exact_model`; :func:`~clothlab.neural.material_fit.refine_material`), whose
+        network learnt (:meth:`exact_model`; :func:`~clothlab.surrogate.material_fit.refine_material`), whose
         parameters, coefficients and RMS replace the fast fit's (kept in ``fast``)."""
-        from clothlab.neural.material_fit import fit_material, refine_material, unit_to_parameter
+        from clothlab.surrogate.material_fit import fit_material, refine_material, unit_to_parameter
 
         objective = self.material_objective(wi, wo, values, free, params)
         result = fit_material(objective, **options)
@@ -300,7 +300,7 @@ class NeuralModel(Model):
 
     def surrogate_reference(self, params: dict | None):
         """The reflectance model at ``params`` as a label source (what a residual network corrects)."""
-        from clothlab.neural.labels import ModelLabels
+        from clothlab.surrogate.labels import ModelLabels
 
         return ModelLabels(self.exact_model(), self.resolve(params))
 
@@ -309,9 +309,9 @@ class NeuralModel(Model):
         return {name: [path, path.with_suffix(".json")] for name, (path,) in super().option_files().items()}
 
     def surrogate_probe(self, params: dict | None):
-        """The texture probe at ``params`` (:class:`clothlab.neural.labels.TextureProbe` of the exact model's
+        """The texture probe at ``params`` (:class:`clothlab.surrogate.labels.TextureProbe` of the exact model's
         texture), the input of a probing network (``encoding["probe_points"]``) at a material it did not store."""
-        from clothlab.neural.labels import TextureProbe
+        from clothlab.surrogate.labels import TextureProbe
 
         if self._probe_texture is None:
             self._probe_texture = self.exact_model().texture()
@@ -323,12 +323,12 @@ class NeuralModel(Model):
 
 def read_sidecar(weights, *, as_config: bool = True) -> dict:
     """The checked ``.json`` sidecar of surrogate weights ``weights`` (.npz or .json;
-    :func:`clothlab.neural.serialise.read_sidecar`'s schema, then the target kind and the parameter names
+    :func:`clothlab.surrogate.serialise.read_sidecar`'s schema, then the target kind and the parameter names
     against that kind's declarations).  A ConfigError at ``model.options.weights`` when a file is missing;
     a bad sidecar is a ConfigError there too, naming the sidecar (``path``) and its dotted field (first in
     the message); with ``as_config`` (config validation, which names the yaml line of the option) both are
     in the message."""
-    from clothlab.neural.serialise import read_sidecar as read_checked
+    from clothlab.surrogate.serialise import read_sidecar as read_checked
 
     path = Path(weights)
     for p in (path.with_suffix(".npz"), path.with_suffix(".json")):
@@ -363,7 +363,7 @@ def check_sidecar_names(sidecar: dict, path) -> None:
     if kind not in TARGET_KINDS:
         raise InputError(f"surrogate target kind {kind!r}: kind neural takes networks of {', '.join(TARGET_KINDS)}",
                          path=path, field="encoding.kind")
-    from clothlab.neural.serialise import pattern_length
+    from clothlab.surrogate.serialise import pattern_length
 
     table = target_class(sidecar).declared_parameters()
     for i, name in enumerate(enc.get("parameters", ())):

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.models.footprint.kernels import stratified_unit, unit_offsets
-from clothlab.models.footprint.projection import weighted_values
+from clothlab.footprint.kernels import stratified_unit, unit_offsets
+from clothlab.footprint.projection import weighted_values
 
 _CHUNK_POINTS = 1 << 17  # texture points per evaluation call (memory bound)
 _MIN_SHARED_POINTS = 1024  # points per call below which grouping by direction pair does not pay

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.neural.material_fit import unit_to_parameter
+from clothlab.surrogate.material_fit import unit_to_parameter
 
 #: (wi, wo) of the curves: the mirror configuration at 30 deg, a grazing mirror pair, an off-specular pair
 PAIRS = (((0.5, 0.0, 0.866), (-0.5, 0.0, 0.866)), ((0.0, 0.8, 0.6), (0.0, -0.8, 0.6)),

@@ -8,7 +8,7 @@
 The encoder runs once per material (the M rows of ``material``); each query row names its material by
 ``index``.  At inference the latent part of the first fusion layer (z W_z + b) is a per-material constant
 (:meth:`SurrogateNetwork.fusion_bias`), so a query costs only the decoder
-(:class:`clothlab.neural.inference.DecoderPlan`).  The paper does not state the decoder widths; ``width`` /
+(:class:`clothlab.surrogate.inference.DecoderPlan`).  The paper does not state the decoder widths; ``width`` /
 ``spatial`` are chosen by measurement (docs/notes/neural-log.md).
 """
 
@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from clothlab.neural.layers import Dense, DenseAct, Residual
+from clothlab.surrogate.layers import Dense, DenseAct, Residual
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ import numpy as np
 from clothlab.atomic import atomic_write_bytes
 from clothlab.progress import Progress, get_logger
 
-LOG = get_logger("neural.data")
+LOG = get_logger("surrogate.data")
 SIZE_RANGES = ((0.0, 1.0), (1.0, 5.0))
 MIN_SIZE = 0.01  # tiles
 SMALL_RANGE = (0.01, 0.12)  # tiles: the range of DataSpec.small_sizes

@@ -9,13 +9,13 @@ Residual over the reflectance model (``encoding["residual"]``, issue 10 build it
 the reflectance model R(wi, wo) is exactly the whole-tile footprint average (the texture-average =
 reflectance identity of Irawan & Marschner 2012), so the network predicts a correction in the loss space
 of eqs. 9-11: g_c = T_c(R_c(wi, wo)) + net_c, T_c(x) = ln(k x + 1) for specular components and x for
-diffuse (:func:`clothlab.neural.losses.encode_targets`).  ``encoding["residual_input"]`` also appends
+diffuse (:func:`clothlab.surrogate.losses.encode_targets`).  ``encoding["residual_input"]`` also appends
 T(R) to the direction features.  R comes from ``references`` (one label source per trained material, e.g.
-:class:`clothlab.neural.labels.ModelLabels`; attached by the caller, this package does not build models)
+:class:`clothlab.surrogate.labels.ModelLabels`; attached by the caller, this package does not build models)
 or, for another material, from the ``reference`` values handed to :meth:`Surrogate.query`.
 
 Texture probe (``encoding["probe_points"]`` = n > 0; not in the paper): T of the noise-free texture at the
-n x n midpoints of the footprint (:class:`clothlab.neural.labels.TextureProbe`) is appended to the direction
+n x n midpoints of the footprint (:class:`clothlab.surrogate.labels.TextureProbe`) is appended to the direction
 features.  It tells the decoder where the yarn highlights lie in the footprint, which the position one-blob
 of 8 bins cannot resolve below ~0.12 tile (docs/notes/neural-log.md, "Texture probe").  The values come from
 ``probes`` (one per trained material, attached by the caller) or from ``probe`` handed to :meth:`query`.
@@ -27,11 +27,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clothlab.neural.encodings import BLOB_BINS, direction_features, spatial_features, yarn_features
-from clothlab.neural.inference import DecoderPlan
-from clothlab.neural.losses import K_SPECULAR, decode_outputs, encode_targets, is_specular
-from clothlab.neural.network import SurrogateNetwork
-from clothlab.neural.threads import one_blas_thread
+from clothlab.surrogate.encodings import BLOB_BINS, direction_features, spatial_features, yarn_features
+from clothlab.surrogate.inference import DecoderPlan
+from clothlab.surrogate.losses import K_SPECULAR, decode_outputs, encode_targets, is_specular
+from clothlab.surrogate.network import SurrogateNetwork
+from clothlab.surrogate.threads import one_blas_thread
 
 CHUNK = 2048
 OUTPUT_MARGIN = float(np.log(2.0))  # loss-space margin of the output cap above the largest training target
@@ -191,8 +191,8 @@ class Surrogate:
 
     def _base_features(self, centre, size, wi, wo) -> tuple[np.ndarray, np.ndarray]:
         """Spatial (one-blob position and size, yarn features) and direction features in the network's dtype:
-        one compiled pass (:mod:`clothlab.neural.fast_features`; the values of :meth:`reference_features`)."""
-        from clothlab.neural.fast_features import features, yarn_tables
+        one compiled pass (:mod:`clothlab.surrogate.fast_features`; the values of :meth:`reference_features`)."""
+        from clothlab.surrogate.fast_features import features, yarn_tables
 
         if self.yarn_bins and self._yarn_tables is None:
             extent = {k: tuple(v) for k, v in self.encoding["yarn_extent"].items()}
@@ -233,7 +233,7 @@ class Surrogate:
     @property
     def output_cap(self) -> np.ndarray | None:
         """(C,) upper bound of the loss-space outputs g (``encoding["output_max"]``: the largest T(label) of
-        the training rows per component, recorded by :func:`clothlab.neural.training.train`) plus ln 2, i.e.
+        the training rows per component, recorded by :func:`clothlab.surrogate.training.train`) plus ln 2, i.e.
         about twice the largest training label; None for files without it (no cap)."""
         top = self.encoding.get("output_max")
         return None if top is None else np.asarray(top, dtype=np.float64) + OUTPUT_MARGIN

@@ -1,10 +1,10 @@
 """Saving and loading a surrogate: ``NAME.npz`` (the parameter tensors and material vectors; no pickle) and
 ``NAME.json`` beside it (architecture, encodings, components, data hash, metrics).  Both written atomically.
 
-Reading is strict (docs/design.md principle 7; :mod:`clothlab.strict`): the sidecar is read first and checked
+Reading is strict (docs/design.md principle 7; :mod:`clothlab.untrusted`): the sidecar is read first and checked
 against a schema (:func:`read_sidecar`: types, ranges, widths at most :data:`MAX_WIDTH`, parameters at most
 :data:`MAX_PARAMETERS`, the architecture consistent with the encoding), then the ``.npz`` is read with the
-member shapes the architecture implies (:func:`clothlab.strict.read_npz`: size checked before reading,
+member shapes the architecture implies (:func:`clothlab.untrusted.read_npz`: size checked before reading,
 members bounded before inflating, no pickle, float32/float64 only, every value finite and at most
 :data:`MAX_WEIGHT` in magnitude), and the loaded network must give finite outputs.  Every refusal is an
 :class:`~clothlab.errors.InputError` naming the file and the field (a sidecar key as a dotted path such as
@@ -23,11 +23,11 @@ import numpy as np
 
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError
-from clothlab.neural.encodings import n_direction_features, n_yarn_features
-from clothlab.neural.network import Architecture, SurrogateNetwork
-from clothlab.neural.surrogate import Surrogate
-from clothlab.neural.threads import one_blas_thread
-from clothlab.strict import MAX_YAML_BYTES, NPY_HEADER_BYTES, load_json_file, read_npz
+from clothlab.surrogate.encodings import n_direction_features, n_yarn_features
+from clothlab.surrogate.network import Architecture, SurrogateNetwork
+from clothlab.surrogate.surrogate import Surrogate
+from clothlab.surrogate.threads import one_blas_thread
+from clothlab.untrusted import MAX_YAML_BYTES, NPY_HEADER_BYTES, load_json_file, read_npz
 
 FORMAT = "clothlab-neural-surrogate/1"
 MAX_WIDTH = 4096
@@ -43,7 +43,7 @@ MAX_BINS = 256
 MAX_PROBE_POINTS = 8
 """Most texture probe points per side."""
 MAX_PATTERN_ORDER = 8
-"""Highest Fourier order of the pattern descriptor (:func:`clothlab.neural.encodings.pattern_descriptor`)."""
+"""Highest Fourier order of the pattern descriptor (:func:`clothlab.surrogate.encodings.pattern_descriptor`)."""
 MAX_WEIGHT = 1e4
 """Largest magnitude of a stored parameter or material value (trained networks stay below 10)."""
 MIN_K_SPECULAR, MAX_K_SPECULAR = 1e-3, 1e6
@@ -72,7 +72,7 @@ def save_surrogate(surrogate: Surrogate, path, *, data_hash: str = "", metrics: 
 
 def parameter_shapes(arch: dict) -> dict[str, tuple[int, ...]]:
     """The shape of every parameter tensor of the network of ``arch``, named as
-    :meth:`clothlab.neural.network.SurrogateNetwork.params` (the encoder's 4 dense layers, the 2 fusion
+    :meth:`clothlab.surrogate.network.SurrogateNetwork.params` (the encoder's 4 dense layers, the 2 fusion
     layers, the 5 angular layers; Chen, Wang & Wang 2024, Fig. 3), known before anything is allocated."""
     a = {k: arch.get(k, getattr(Architecture, k, 0)) for k in ARCHITECTURE_KEYS}
     e, w, s = a["enc_width"], a["width"], a["spatial"]
@@ -91,7 +91,8 @@ def parameter_count(arch: dict) -> int:
 
 
 def pattern_length(order: int) -> int:
-    """Values of the pattern descriptor of Fourier ``order`` (:func:`clothlab.neural.encodings.pattern_descriptor`)."""
+    """Values of the pattern descriptor of Fourier ``order``
+    (:func:`clothlab.surrogate.encodings.pattern_descriptor`)."""
     return 1 + 2 * (order + order * (2 * order + 1))
 
 

@@ -4,7 +4,7 @@ The surrogate's products are small (2 k-row chunks of width 64 in inference, bat
 a second OpenBLAS thread gains little on them and, on a loaded 2-core machine, spins.  Measured (this
 machine kind, load 4-6): a render's 3,072 neural-lod queries took ~100 ms of shading CPU with the default
 two threads against ~6 ms with one; an Adam step of batch 4,096 0.093 CPU-s against 0.025 (docs/notes/neural-log.md).
-Hence every product of :mod:`clothlab.neural` runs inside :func:`one_blas_thread`, whatever the environment
+Hence every product of :mod:`clothlab.surrogate` runs inside :func:`one_blas_thread`, whatever the environment
 (``OPENBLAS_NUM_THREADS`` is read only when numpy loads).  Entering the limit costs ~9 us.
 """
 

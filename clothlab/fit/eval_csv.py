@@ -6,7 +6,7 @@ v along the warp): then the model's *texture* model (:meth:`clothlab.models.base
 texture model of Irawan & Marschner 2012, sec. 7.2) is evaluated at those points instead of the reflectance
 model.  With u, v an optional column ``footprint`` (a box footprint's side in tiles, > 0) gives the texture
 model's components averaged over the footprint centred at (u, v) instead (Chen, Wang & Wang 2024, eqs. 3-5;
-:func:`clothlab.models.footprint.footprint_components`: periodic summed-area tables of the noise-free texture
+:func:`clothlab.footprint.footprint_components`: periodic summed-area tables of the noise-free texture
 by default, or stratified Monte Carlo); a model that answers box-footprint queries itself
 (``footprint_queries``: ``kind: neural``, the network's footprint input, Chen, Wang & Wang 2024, sec. 4.2)
 is asked directly and the footprint method options do not apply.  Other columns are ignored.
@@ -46,10 +46,10 @@ MAX_FOOTPRINT_RESOLUTION = 8192
 
 def read_directions(path) -> dict[str, np.ndarray]:
     """The four angle columns of a CSV (degrees) and, when present, u and v (tiles) and footprint (tiles, > 0,
-    only with u and v); every number through :func:`clothlab.strict.parse_number` (plain decimal notation),
+    only with u and v); every number through :func:`clothlab.untrusted.parse_number` (plain decimal notation),
     theta in [0, 90], |phi| <= :data:`MAX_AZIMUTH`, |u|, |v| <= :data:`MAX_TEXTURE_COORDINATE`, footprint in
     (0, :data:`MAX_FOOTPRINT`]; errors name the file, line and column."""
-    from clothlab.strict import MAX_TABLE_BYTES, parse_number, read_text
+    from clothlab.untrusted import MAX_TABLE_BYTES, parse_number, read_text
 
     path = Path(path)
     text = read_text(path, limit=MAX_TABLE_BYTES, what="directions file")
@@ -157,7 +157,7 @@ def evaluate_directions_file(source, directions, *, components: bool = False, ru
         if FOOTPRINT in angles and model.footprint_queries:  # kind neural: the network's own
             comps = model.texture().components(angles["u"], angles["v"], wi, wo, params, footprint=angles[FOOTPRINT])
         elif FOOTPRINT in angles:
-            from clothlab.models.footprint import footprint_components
+            from clothlab.footprint import footprint_components
 
             comps = footprint_components(model.texture(), params, wi, wo, np.column_stack([angles["u"], angles["v"]]),
                                          angles[FOOTPRINT], method=footprint_method, samples=samples, seed=seed,

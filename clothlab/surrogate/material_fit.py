@@ -1,7 +1,7 @@
 """Fast approximate material fit through a multi-material surrogate (Chen, Wang & Wang 2024, sec. 4.2: the
 encoder maps the material to the latent z that the decoder reads).
 
-The material vector m (:func:`clothlab.neural.encodings.material_vector`: normalised parameters, then the
+The material vector m (:func:`clothlab.surrogate.encodings.material_vector`: normalised parameters, then the
 pattern descriptor) is the encoder's input.  With encoder and decoder weights fixed, the free parameters'
 entries of m (each in [0, 1] between its fit bounds, log-mapped where declared) are fitted to measured
 values y (N,) at direction pairs (wi, wo) and one footprint size (the far view by default):
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import nnls
 
-from clothlab.neural.losses import decode_outputs
+from clothlab.surrogate.losses import decode_outputs
 
 
 @dataclass
@@ -191,7 +191,7 @@ def fit_material(objective: MaterialObjective, *, steps: int = 150, lr: float = 
 
 def unit_to_parameter(spec, t: float) -> float:
     """The parameter value (declared unit) at normalised coordinate t of ``spec`` (inverse of
-    :func:`clothlab.neural.encodings.normalised_parameters`)."""
+    :func:`clothlab.surrogate.encodings.normalised_parameters`)."""
     lo, hi = (float(spec.to_internal(b)) for b in spec.bounds)
     return float(spec.from_internal(lo + t * (hi - lo)))
 
@@ -203,7 +203,7 @@ def refine_material(model, wi, wo, values, params: dict, free, *, max_nfev: int 
     coefficients by component, RMS residual)."""
     from scipy.optimize import least_squares
 
-    from clothlab.neural.encodings import normalised_parameters
+    from clothlab.surrogate.encodings import normalised_parameters
 
     y = np.asarray(values, dtype=np.float64).reshape(-1)
     free = list(free)

@@ -26,16 +26,16 @@ import numpy as np
 
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError
-from clothlab.neural.data import COLUMNS
-from clothlab.neural.encodings import BLOB_BINS, n_direction_features, n_yarn_features
-from clothlab.neural.losses import column_weights, encode_targets, highlight_weights, is_specular, loss_and_gradient
-from clothlab.neural.network import Architecture, SurrogateNetwork
-from clothlab.neural.optimizer import Adam, step_schedule
-from clothlab.neural.surrogate import Surrogate
-from clothlab.neural.threads import one_blas_thread
 from clothlab.progress import Progress, get_logger
+from clothlab.surrogate.data import COLUMNS
+from clothlab.surrogate.encodings import BLOB_BINS, n_direction_features, n_yarn_features
+from clothlab.surrogate.losses import column_weights, encode_targets, highlight_weights, is_specular, loss_and_gradient
+from clothlab.surrogate.network import Architecture, SurrogateNetwork
+from clothlab.surrogate.optimizer import Adam, step_schedule
+from clothlab.surrogate.surrogate import Surrogate
+from clothlab.surrogate.threads import one_blas_thread
 
-LOG = get_logger("neural.training")
+LOG = get_logger("surrogate.training")
 SIZE_BINS = (0.01, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0, 2.0, 4.0, 5.0)
 N_QUERY = len(COLUMNS)
 
@@ -94,7 +94,7 @@ def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict
                    probes=None) -> Surrogate:
     """A new (untrained) surrogate of ``spec``; ``references``: per material the reflectance model's label
     source (needed when ``spec.residual`` or ``spec.residual_input``); ``probes``: per material the texture
-    probe (:class:`clothlab.neural.labels.TextureProbe`, needed when ``spec.probe_points``)."""
+    probe (:class:`clothlab.surrogate.labels.TextureProbe`, needed when ``spec.probe_points``)."""
     if (spec.residual or spec.residual_input) and not references:
         raise ValueError("a residual network needs the reflectance model of each material (references)")
     if spec.probe_points and not probes:
@@ -172,7 +172,7 @@ def _load_checkpoint(path: Path, surrogate, optimizer):
 def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, encoding: dict | None = None,
           heldout_materials=(), checkpoint: Path | None = None, resume: bool = False,
           references=None, heldout_pattern=(), probes=None) -> TrainResult:
-    """Train a surrogate on ``data`` (rows of :data:`clothlab.neural.data.COLUMNS` + components ``names``)
+    """Train a surrogate on ``data`` (rows of :data:`clothlab.surrogate.data.COLUMNS` + components ``names``)
     for the materials whose encoder inputs are ``materials`` (M, n_material); ``references``: per material
     the reflectance model's label source (residual networks), ``probes`` its texture probe (probing
     networks).  ``heldout_materials`` / ``heldout_pattern``:
@@ -254,7 +254,7 @@ def heldout_metrics(surrogate: Surrogate, data: np.ndarray, split: dict[str, np.
 
 def output_max(data: np.ndarray, rows: np.ndarray, specular: np.ndarray, block: int = 262_144) -> list[float]:
     """Per component the largest loss-space target T(label) (eqs. 9-11) over ``rows`` of ``data``: the
-    surrogate's output cap (:attr:`clothlab.neural.surrogate.Surrogate.output_cap`)."""
+    surrogate's output cap (:attr:`clothlab.surrogate.surrogate.Surrogate.output_cap`)."""
     top = np.full(specular.shape, -np.inf)
     for start in range(0, rows.size, block):
         labels = np.asarray(data[np.sort(rows[start:start + block]), N_QUERY:])

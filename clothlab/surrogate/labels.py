@@ -13,7 +13,7 @@ Three implementations; each takes the model objects it uses (this package sits b
   whole periods, whose average *is* the tile average, and the L-shaped rest (area s^2 - n^2), the only part
   sampled: the MC variance falls by ~((s^2 - n^2) / s^2)^2 and a footprint of whole tiles is exact.
 * :class:`FootprintLabels`: a footprint estimator with the signature of
-  ``clothlab.models.footprint.footprint_components(texture, params, wi, wo, centre, size, *, method, samples,
+  ``clothlab.footprint.footprint_components(texture, params, wi, wo, centre, size, *, method, samples,
   seed, ...)`` (summed-area tables where the box kernel allows them, MC elsewhere), handed in by the caller.
 
 :class:`TextureProbe` has the same call signature but is an *input* of the network, not a label: the
@@ -119,7 +119,7 @@ class TextureMonteCarloLabels:
 
 class FootprintLabels:
     """Labels from a footprint estimator ``estimate(texture, params, wi, wo, centre, size, **options)`` that
-    returns a dict of components (e.g. ``clothlab.models.footprint.footprint_components``)."""
+    returns a dict of components (e.g. ``clothlab.footprint.footprint_components``)."""
 
     def __init__(self, estimate, texture, params: dict | None = None, **options):
         self.estimate, self.texture, self.params, self.options = estimate, texture, dict(params or {}), options

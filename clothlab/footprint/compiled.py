@@ -1,4 +1,4 @@
-"""Compiled (numba) box sums over periodic summed-area tables (:mod:`clothlab.models.footprint.sat`).
+"""Compiled (numba) box sums over periodic summed-area tables (:mod:`clothlab.footprint.sat`).
 
 For footprint k: the four-corner difference I(x1, y1) - I(x0, y1) - I(x1, y0) + I(x0, y0) of the periodic
 integral I(x, y) = B(rx, ry) + nx B(Ru, ry) + ny B(rx, Rv) + nx ny B(Ru, Rv) (bilinear B of the table;

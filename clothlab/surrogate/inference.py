@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.neural.layers import LEAK
-from clothlab.neural.network import SurrogateNetwork
+from clothlab.surrogate.layers import LEAK
+from clothlab.surrogate.network import SurrogateNetwork
 
 
 class DecoderPlan:

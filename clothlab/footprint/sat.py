@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clothlab.models.footprint.projection import weighted_values
+from clothlab.footprint.projection import weighted_values
 
 DEFAULT_RESOLUTION = 128
 _BUILD_POINTS = 1 << 18  # texture points per evaluation call while building (memory bound)
@@ -67,7 +67,7 @@ class FootprintTable:
 
     Build with :meth:`build`; :meth:`query` returns box-footprint averages (1/sr) for many footprints.
     ``tables``: {component: (P, Rv + 1, Ru + 1)}; ``area``: the a_o table for the eq. 4-5 normalisation, or
-    None (:mod:`clothlab.models.footprint.projection`); ``wi``, ``wo`` (P, 3): the direction pairs;
+    None (:mod:`clothlab.footprint.projection`); ``wi``, ``wo`` (P, 3): the direction pairs;
     ``single``: built for one pair given as (3,) vectors.
     """
 
@@ -198,7 +198,7 @@ class FootprintTable:
         c = np.mod(centre, 1.0) * r  # periodic: stay near the first tile (small integrals, little rounding)
         half_u, half_v = 0.5 * size * r[0], 0.5 * size * r[1]
         x0, x1, y0, y1 = c[:, 0] - half_u, c[:, 0] + half_u, c[:, 1] - half_v, c[:, 1] + half_v
-        from clothlab.models.footprint.compiled import box_sums
+        from clothlab.footprint.compiled import box_sums
 
         def box():  # the four-corner difference of I for every table column at once (compiled)
             stack = self._stack.reshape(-1, self._stack.shape[-1])

@@ -19,12 +19,12 @@ import numpy as np
 
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import ConfigError
-from clothlab.neural.data import DataSpec, assemble, generate
-from clothlab.neural.serialise import save_surrogate
-from clothlab.neural.training import TrainResult, TrainSpec, train
 from clothlab.progress import get_logger
+from clothlab.surrogate.data import DataSpec, assemble, generate
+from clothlab.surrogate.serialise import save_surrogate
+from clothlab.surrogate.training import TrainResult, TrainSpec, train
 
-LOG = get_logger("neural.run")
+LOG = get_logger("surrogate.training_run")
 
 
 def run_training(directory, label_sources, materials, data_spec: DataSpec, train_spec: TrainSpec, *,

@@ -1,7 +1,7 @@
 """The decoder's inputs in one compiled pass (issue 23, build item 3: cheap queries).
 
-The same values as :func:`clothlab.neural.encodings.spatial_features`, :func:`~clothlab.neural.encodings.
-yarn_features` and :func:`~clothlab.neural.encodings.direction_features` (computed in float64, stored in
+The same values as :func:`clothlab.surrogate.encodings.spatial_features`, :func:`~clothlab.surrogate.encodings.
+yarn_features` and :func:`~clothlab.surrogate.encodings.direction_features` (computed in float64, stored in
 float32: the decoder's dtype), written straight into two float32 arrays, without the ~20 temporary (N, k)
 float64 arrays of the numpy path.  The yarn lookup (Irawan & Marschner 2012, sec. 7.2;
 :func:`clothlab.weave.lookup.locate_segments`) reads a per-cell table of segment indices made once per weave
@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from clothlab.neural.encodings import SIZE_MAX, SIZE_S0
+from clothlab.surrogate.encodings import SIZE_MAX, SIZE_S0
 
 INV_E = math.exp(-1.0)
 

@@ -25,10 +25,10 @@ from __future__ import annotations
 import numpy as np
 
 from clothlab.errors import InputError
-from clothlab.models.footprint.kernels import KERNELS, check_kernel
-from clothlab.models.footprint.montecarlo import estimate
-from clothlab.models.footprint.projection import has_micro_normals
-from clothlab.models.footprint.sat import DEFAULT_RESOLUTION, FootprintTable, table_shape
+from clothlab.footprint.kernels import KERNELS, check_kernel
+from clothlab.footprint.montecarlo import estimate
+from clothlab.footprint.projection import has_micro_normals
+from clothlab.footprint.sat import DEFAULT_RESOLUTION, FootprintTable, table_shape
 
 METHODS = ("sat", "mc")
 _TABLE_TEXELS = 1 << 21  # texels of tables held at once by footprint_components (x components x 8 bytes)
@@ -112,7 +112,7 @@ def footprint_components(texture, params, wi, wo, centre, size, *, method: str =
 def mc_estimate(texture, params, wi, wo, centre, size, *, samples: int = 16, seed: int = 0, kernel: str = "box",
                 need=None, noise: bool = False, warn: bool = True):
     """(means, standard errors) of the stratified Monte Carlo estimator, each {component: (N,)}, inputs as
-    :func:`footprint_components` (:func:`clothlab.models.footprint.montecarlo.estimate`)."""
+    :func:`footprint_components` (:func:`clothlab.footprint.montecarlo.estimate`)."""
     try:
         check_kernel(kernel)
     except ValueError as exc:
