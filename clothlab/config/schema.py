@@ -136,13 +136,19 @@ class ReportConfig:
 class SelectConfig:
     """``select``: what ``clothlab select`` / ``fit --select`` tries (clothlab.fit.select, docs/select.md):
     weaves (``preset:<name>`` or resolved .wv paths; empty = every shipped preset), model kinds, orientation
-    starts, the per-candidate evaluation budget and CV folds."""
+    starts, the per-candidate evaluation budget and CV folds, and the optional checks on top (nested CV outer
+    folds, candidate losses and their scales, stability subsamples; 0 / empty = off).  The one definition of
+    the selection's defaults: clothlab.fit.select takes this class as its settings."""
 
     weaves: tuple = ()
     kinds: tuple = ("irawan", "irawan+oren-nayar")
     orientation_starts: int = 2
     max_evals: int = 600
     cv_folds: int = 5
+    nested: int = 0  # outer folds of the nested cross-validation (clothlab.fit.nested); 0: none
+    losses: tuple = ()  # candidate losses (clothlab.fit.loss); empty: fabric.yaml's fit.loss only
+    loss_scales: tuple = ()  # scales tried for huber / cauchy (the CV ranking chooses); empty: fit.loss_scale
+    stability: int = 0  # subsamples of the selection-stability check (clothlab.fit.stability); 0: none
 
 
 @dataclass(frozen=True)

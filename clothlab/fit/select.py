@@ -23,7 +23,7 @@ specular part's defaults by config validation's rule (:func:`clothlab.config.val
 neural the parameters its network was trained over); then its diffuse part's defaults (``sigma``) and
 ``orientation``; the starts are ``model.params`` restricted the same way, else the weave's values.
 
-Optional, on top (docs/select.md): nested cross-validation (``SelectSettings.nested``, :mod:`clothlab.fit.nested`)
+Optional, on top (docs/select.md): nested cross-validation (``SelectConfig.nested``, :mod:`clothlab.fit.nested`)
 for the selected model's honest held-out error, selection stability on subsamples (``stability``,
 :mod:`clothlab.fit.stability`), and always the residual diagnostics of the top candidates
 (:func:`top_residuals`) and the not-determined flags in each row's note (:mod:`clothlab.fit.determined`).
@@ -59,6 +59,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from clothlab.config.schema import SelectConfig
 from clothlab.config.validate import default_free
 from clothlab.fit.metrics import information_criteria
 from clothlab.fit.periodic import wrap
@@ -69,10 +70,8 @@ from clothlab.weave.presets import PRESET_NAMES, PRESET_PREFIX
 
 log = get_logger(__name__)
 
-DEFAULT_KINDS = ("irawan", "irawan+oren-nayar")
-DEFAULT_ORIENTATION_STARTS = 2
-DEFAULT_MAX_EVALS = 600
-DEFAULT_CV_FOLDS = 5
+#: every shipped preset: the weaves tried when ``select.weaves`` is empty
+ALL_PRESETS = tuple(PRESET_PREFIX + name for name in PRESET_NAMES)
 #: orientations of the scan that places the orientation starts (every 5 deg over a half turn)
 SCAN_POINTS = 36
 RANKING = ("cross-validated held-out mean relative error (ascending); candidates whose cross-validation failed "
@@ -108,19 +107,14 @@ class Candidate:
         return f"{weave} {self.kind}{loss}{start}"
 
 
-@dataclass(frozen=True)
-class SelectSettings:
-    """What :func:`select` tries: weaves, kinds, orientation starts, the per-candidate budget and CV folds."""
+#: What :func:`select` tries: the config's own ``select`` section class (one set of defaults,
+#: :class:`clothlab.config.schema.SelectConfig`; empty ``weaves``: every shipped preset, :func:`weaves_of`).
+SelectSettings = SelectConfig
 
-    weaves: tuple = tuple(PRESET_PREFIX + name for name in PRESET_NAMES)
-    kinds: tuple = DEFAULT_KINDS
-    orientation_starts: int = DEFAULT_ORIENTATION_STARTS
-    max_evals: int = DEFAULT_MAX_EVALS
-    cv_folds: int = DEFAULT_CV_FOLDS
-    nested: int = 0  # outer folds of the nested cross-validation (clothlab.fit.nested); 0: none
-    losses: tuple = ()  # candidate losses (clothlab.fit.loss); empty: fabric.yaml's fit.loss only
-    loss_scales: tuple = ()  # scales tried for huber / cauchy (the CV ranking chooses); empty: fit.loss_scale
-    stability: int = 0  # subsamples of the selection-stability check (clothlab.fit.stability); 0: none
+
+def weaves_of(settings: SelectConfig) -> tuple:
+    """The weaves ``settings`` tries: its ``weaves``, or every shipped preset when it names none."""
+    return tuple(settings.weaves) or ALL_PRESETS
 
 
 @dataclass(frozen=True)
@@ -151,32 +145,32 @@ class CandidateResult:
 
 def settings_from_config(config, *, weaves=None, kinds=None, orientation_starts=None, max_evals=None,
                          cv_folds=None, nested=None, losses=None, loss_scales=None,
-                         stability=None) -> SelectSettings:
-    """The :class:`SelectSettings` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
+                         stability=None) -> SelectConfig:
+    """The :class:`SelectConfig` of fabric.yaml's ``select`` section (empty ``weaves``: every shipped preset),
     with the given values (command-line options) replacing it."""
     sel = config.select
-    chosen = tuple(weaves if weaves is not None else sel.weaves) or SelectSettings.weaves
-    return SelectSettings(weaves=chosen, kinds=tuple(kinds if kinds is not None else sel.kinds),
-                          orientation_starts=int(orientation_starts or sel.orientation_starts),
-                          max_evals=int(max_evals or sel.max_evals),
-                          cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds),
-                          nested=int(getattr(sel, "nested", 0) if nested is None else nested),
-                          losses=tuple(losses if losses is not None else getattr(sel, "losses", ())),
-                          loss_scales=tuple(float(x) for x in (loss_scales if loss_scales is not None
-                                                               else getattr(sel, "loss_scales", ()))),
-                          stability=int(getattr(sel, "stability", 0) if stability is None else stability))
+    return SelectConfig(weaves=tuple(weaves if weaves is not None else sel.weaves) or ALL_PRESETS,
+                        kinds=tuple(kinds if kinds is not None else sel.kinds),
+                        orientation_starts=int(orientation_starts or sel.orientation_starts),
+                        max_evals=int(max_evals or sel.max_evals),
+                        cv_folds=int(sel.cv_folds if cv_folds is None else cv_folds),
+                        nested=int(sel.nested if nested is None else nested),
+                        losses=tuple(losses if losses is not None else sel.losses),
+                        loss_scales=tuple(float(x) for x in (loss_scales if loss_scales is not None
+                                                             else sel.loss_scales)),
+                        stability=int(sel.stability if stability is None else stability))
 
 
-def check_settings(settings: SelectSettings, base_dir=".") -> None:
+def check_settings(settings: SelectConfig, base_dir=".") -> None:
     """Input validation before any candidate is fitted: every weave reads (a damaged .wv file is refused here,
     naming its file and line, instead of becoming a "not fitted" row after the other candidates ran)."""
     from clothlab.weave.presets import resolve_weave
 
-    for weave in settings.weaves:
+    for weave in weaves_of(settings):
         resolve_weave(weave, base_dir)
 
 
-def candidates(settings: SelectSettings, isotropic: bool = False) -> list[Candidate]:
+def candidates(settings: SelectConfig, isotropic: bool = False) -> list[Candidate]:
     """The candidate list (module docstring), in weave, kind, orientation-start order; for an ``isotropic``
     measurement one candidate per weave and kind, the orientation not freed (the fit averages the model over
     it: :mod:`clothlab.fit.problem`)."""
@@ -186,7 +180,7 @@ def candidates(settings: SelectSettings, isotropic: bool = False) -> list[Candid
         losses = [(loss, None) if loss in ("squared", "l1") else (loss, s) for loss in settings.losses
                   for s in (scales if loss not in ("squared", "l1") else (None,))]
     out = []
-    for weave in settings.weaves:
+    for weave in weaves_of(settings):
         for kind in settings.kinds:
             for loss, scale in losses:
                 if isotropic or model_class(kind).orientation_period == 0.0:
@@ -458,7 +452,7 @@ class Selection:
 
     ranked: list
     winner: object
-    settings: SelectSettings
+    settings: SelectConfig
     wall_time: float
     nested: dict | None = None  # fit.json selection.nested (clothlab.fit.nested)
     free_by_kind: dict = field(default_factory=dict)  # kind -> {fit.free name: what it became} (map_free)
@@ -477,7 +471,7 @@ def selection_summary(selection: Selection) -> dict:
     return {"candidates": [dict(r.row) for r in selection.ranked], "winner": selection.ranked[0].row["candidate"],
             "ranking": RANKING, "information_criteria": LIKELIHOOD,
             "budget": {"max_evals": s.max_evals, "starts": 1, "polish": s.max_evals // 4, "cv_folds": s.cv_folds},
-            "tried": {"weaves": list(s.weaves), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts,
+            "tried": {"weaves": list(weaves_of(s)), "kinds": list(s.kinds), "orientation_starts": s.orientation_starts,
                       **({"losses": list(s.losses)} if s.losses else {}),
                       **({"loss_scales": list(s.loss_scales)} if s.loss_scales else {})},
             "free_by_kind": selection.free_by_kind, "refit": selection.refit,
@@ -487,7 +481,7 @@ def selection_summary(selection: Selection) -> dict:
             **({"top_residuals": selection.top_residuals} if selection.top_residuals else {})}
 
 
-def select(config, settings: SelectSettings | None = None, *, measurement=None, run_task=None,
+def select(config, settings: SelectConfig | None = None, *, measurement=None, run_task=None,
            posterior=None, fits_dir=None, runner=None) -> Selection:
     """Fit every candidate (``run_task``, default :func:`fit_candidate`, maps one task to its result: the
     place for a parallel scheduler), rank them, refit the winner with ``config``'s own budget, CV and
@@ -499,7 +493,7 @@ def select(config, settings: SelectSettings | None = None, *, measurement=None, 
     from clothlab.io.loader import load_measurement
 
     started = time.perf_counter()
-    settings = settings or SelectSettings()
+    settings = settings or config.select
     if measurement is None:
         measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
                                        else config.measurement.format, **config.measurement.options)
@@ -725,6 +719,8 @@ def save_selection(selection: Selection, *, force: bool = False, fits_dir=None):
 
 
 __all__ = ["CONCEPTS", "IM_COUNTERPARTS", "map_free", "free_mapping",
-           "Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection", "candidate_config",
+           "ALL_PRESETS", "Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection",
+           "candidate_config",
            "candidates", "fit_candidate", "information_criteria", "rank", "save_selection",
-           "select", "selection_summary", "settings_from_config", "check_settings", "table_columns", "table_markdown"]
+           "select", "selection_summary", "settings_from_config", "check_settings", "table_columns", "table_markdown",
+           "weaves_of"]
