@@ -13,10 +13,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from clothlab.errors import ConfigError, GeometryWarning, ParameterError
+from clothlab.errors import ConfigError, GeometryWarning
 from clothlab.frames import to_yarn_frame
 from clothlab.models.irawan.phase import phase_function
-from clothlab.models.irawan.quadrature import RULES, interval_rule
+from clothlab.models.irawan.quadrature import Quadrature, interval_rule
 from clothlab.models.irawan.yarn import staple_path, yarn_integral
 from clothlab.weave.model import YARN_KINDS
 
@@ -44,23 +44,6 @@ def check_filament_arc(value) -> str:
 def arc_matters(params: dict, kind: str) -> bool:
     """Whether ``filament_arc`` changes segment type ``kind``: a filament yarn (sec. 6.2) with smoothing."""
     return abs(math.radians(params[f"{kind}.psi"])) < PSI_FILAMENT_THRESHOLD and params["delta"] > 0.0
-
-
-@dataclass(frozen=True)
-class Quadrature:
-    """A quadrature choice: ``rule`` in RULES and ``nodes`` (per piece for support / adaptive)."""
-
-    rule: str = "trapezoid"
-    nodes: int = 11
-
-    def __post_init__(self):
-        if self.rule not in RULES:
-            raise ParameterError(f"unknown quadrature rule {self.rule!r}; choose one of {', '.join(RULES)}",
-                                 field="model.quadrature.rule")
-        minimum = 2 if self.rule == "trapezoid" else 1
-        if int(self.nodes) != self.nodes or not minimum <= self.nodes <= 1000:
-            raise ParameterError(f"quadrature nodes must be an integer in [{minimum}, 1000], got {self.nodes!r}",
-                                 field="model.quadrature.nodes")
 
 
 def geometry_warnings(params: dict, fabric: str = "", filament_arc: str = "full") -> list[str]:
