@@ -100,14 +100,15 @@ def test_arctan_matches_the_library():
 
 
 def test_irawan_moments_match_the_literal_cosines():
-    """cos u, sin u of eq. 4's u from the half vector equal the library's cos(atan(h_y / h_z))."""
+    """cos u, sin u of eq. 4's u from the half vector (of the weft frame, which the kernel applies itself) equal
+    the library's cos(atan(h_y / h_z))."""
     from clothlab.models.irawan import kernels
     from clothlab.models.irawan.quadrature import interval_rule
 
     wi, wo = _pairs(300, np.random.default_rng(2))
     lw, lo = np.ascontiguousarray(to_yarn_frame(wi, "weft")), np.ascontiguousarray(to_yarn_frame(wo, "weft"))
     nodes, weights = interval_rule("trapezoid", 11, -0.5 * np.pi, 0.5 * np.pi)
-    ok, u, inv, s0, s1, cu, su = kernels.filament_moments(lw, lo, nodes[None], weights[None], False)
+    ok, (u, inv, s0, s1, cu, su) = kernels.filament_moments(wi, wo, nodes[None], weights[None], False, True)
     with np.errstate(invalid="ignore"):  # the retro pair wo = -wi has no half vector
         h = (lw + lo) / np.linalg.norm(lw + lo, axis=1, keepdims=True)
         np.testing.assert_array_equal(ok, (lw[:, 2] > 0) & (lo[:, 2] > 0) & (np.hypot(h[:, 1], h[:, 2]) > 0))
@@ -115,6 +116,58 @@ def test_irawan_moments_match_the_literal_cosines():
     np.testing.assert_allclose(cu[ok], np.cos(u[ok]), rtol=2e-15)
     np.testing.assert_allclose(su[ok], np.sin(u[ok]), rtol=2e-15, atol=1e-16)
     assert np.all(u[~ok] == 0.0) and np.all(s0[~ok] == 0.0) and np.count_nonzero(s0) > 100
+
+
+@pytest.mark.parametrize("rule", [("trapezoid", 11), ("support", 4)])
+def test_moments_take_the_yarn_frame_themselves(rule):
+    """The filament moments of fabric-frame directions with the weft flag equal those of the directions rotated
+    into the weft frame by clothlab.frames.to_yarn_frame (bit for bit), and the warp's are the fabric frame's."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.integrals import _filament_nodes
+
+    wi, wo = _pairs(400, np.random.default_rng(6))
+    nodes = _filament_nodes(Quadrature(*rule))
+    for kind in ("warp", "weft"):
+        lw, lo = np.ascontiguousarray(to_yarn_frame(wi, kind)), np.ascontiguousarray(to_yarn_frame(wo, kind))
+        ok, moments = kernels.filament_moments(wi, wo, *nodes, kind == "weft")
+        ok_yarn, moments_yarn = kernels.filament_moments(lw, lo, *nodes, False)
+        np.testing.assert_array_equal(ok, ok_yarn)
+        np.testing.assert_array_equal(moments, moments_yarn)
+        assert np.count_nonzero(moments[2]) > 200  # s0: the comparison can fail
+
+
+def test_direction_set_kernels_match_numpy():
+    """-wi . wo and the front mask of the compiled direction-set pass equal numpy's (einsum, the previous form);
+    the compiled comparison of direction sets is numpy's array_equal (shape, values, NaN never equal)."""
+    from clothlab.models.irawan import kernels
+
+    wi, wo = _pairs(500, np.random.default_rng(8))
+    cos_x, front = kernels.phase_cosines(wi, wo)
+    np.testing.assert_array_equal(cos_x, -np.einsum("...k,...k->...", wi, wo))
+    np.testing.assert_array_equal(front, (wi[:, 2] > 0) & (wo[:, 2] > 0))
+    assert not front.all() and front.any()
+    assert kernels.same_pairs(wi, wo, wi.copy(), wo.copy())
+    changed = wo.copy()
+    changed[-1, 2] = np.nextafter(changed[-1, 2], 2.0)
+    assert not kernels.same_pairs(wi, wo, wi, changed)
+    assert not kernels.same_pairs(wi, wo, wi[:-1].copy(), wo[:-1].copy())
+    nan = wi.copy()
+    nan[0, 0] = np.nan
+    assert not kernels.same_pairs(nan, wo, nan, wo)
+
+
+def test_irawan_directions_changed_in_place_are_seen():
+    """A direction array changed in place after an evaluation gives the new directions' values, not the kept."""
+    wi, wo = _pairs(80, np.random.default_rng(9))
+    p = IrawanModel(get_preset("polyester-lining")).default_parameters()
+    model = IrawanModel(get_preset("polyester-lining"))
+    before = model.components(wi, wo, p, normalised=False, warn=False)
+    wo[:, 0] *= -1.0
+    after = model.components(wi, wo, p, normalised=False, warn=False)
+    fresh = IrawanModel(get_preset("polyester-lining")).components(wi, wo, p, normalised=False, warn=False)
+    for name in ("specular_warp", "specular_weft"):
+        np.testing.assert_array_equal(after[name], fresh[name])
+        assert not np.array_equal(after[name], before[name])  # the test can fail
 
 
 @pytest.mark.parametrize("fabric", ["cotton-denim", "silk-charmeuse", "wool-gabardine"])

@@ -137,27 +137,51 @@ def _specular_albedo_cached(key, samples):
 
 @dataclass(frozen=True, eq=False)
 class YarnTerms:
-    """What of I_j depends on the directions alone, for one segment type: the yarn-frame directions and, made
-    when first needed (:attr:`filament`), the filament path's moments of
-    :func:`clothlab.models.irawan.kernels.filament_moments` (None for the ``adaptive`` rule, whose node count
-    depends on the values) and, per twist, the staple integrand's lit pieces (:meth:`staple_pieces`).  So a
-    new direction set costs only what its parameter sets use: a staple fit computes no filament moments."""
+    """What of I_j depends on the directions alone, for one segment type, each part made when first needed: the
+    yarn-frame directions (:attr:`wi`, :attr:`wo`; the staple paths), the filament path's moments of
+    :func:`clothlab.models.irawan.kernels.filament_moments` (:attr:`filament`; None for the ``adaptive`` rule,
+    whose node count depends on the values, made from the fabric-frame directions without yarn-frame copies)
+    and, per twist, the staple integrand's lit pieces (:meth:`staple_pieces`).  So a new direction set costs
+    only what its parameter sets use: a staple fit computes no filament moments, a filament fit no yarn frame.
+    ``fabric_wi``, ``fabric_wo`` are the caller's own (N, 3) C-contiguous float64 copies: the lazy parts are
+    computed from them later, so they must not change."""
 
     kind: str  # the segment type (warp / weft)
-    wi: np.ndarray  # (N, 3) yarn frame
-    wo: np.ndarray
+    fabric_wi: np.ndarray  # (N, 3) fabric frame
+    fabric_wo: np.ndarray
     quadrature: Quadrature | None = None
     #: psi (radians) -> (domain, lo, hi): the staple integrand's lit pieces on [-domain, domain]
     #: (:func:`clothlab.models.irawan.yarn.staple_pieces`, for the support / adaptive rules; they depend on the
     #: directions and psi only), the last few psi
     staple: dict = field(default_factory=dict)
     _lazy: dict = field(default_factory=dict, repr=False)
+    _frame: dict = field(default_factory=dict, repr=False)
+
+    def _yarn_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self._frame:
+            for name, w in (("wi", self.fabric_wi), ("wo", self.fabric_wo)):
+                self._frame[name] = np.ascontiguousarray(to_yarn_frame(w, self.kind), dtype=np.float64)
+        return self._frame["wi"], self._frame["wo"]
+
+    @property
+    def wi(self) -> np.ndarray:
+        """(N, 3) yarn-frame wi (computed on first use)."""
+        return self._yarn_frame()[0]
+
+    @property
+    def wo(self) -> np.ndarray:
+        """(N, 3) yarn-frame wo (computed on first use)."""
+        return self._yarn_frame()[1]
+
+    def __len__(self) -> int:
+        return len(self.fabric_wi)
 
     @property
     def filament(self) -> tuple | None:
-        """(ok, u, inv, s0, s1, cos u, sin u), each (N,), computed on first use; None for ``adaptive``."""
+        """(ok (N,), moments (6, N): u, inv, s0, s1, cos u, sin u), computed on first use; None for
+        ``adaptive``."""
         if "filament" not in self._lazy:
-            self._lazy["filament"] = _filament_moments(self.wi, self.wo, self.quadrature)
+            self._lazy["filament"] = _filament_moments(self.fabric_wi, self.fabric_wo, self.kind, self.quadrature)
         return self._lazy["filament"]
 
     def staple_pieces(self, psi: float, umax: float) -> tuple[np.ndarray, np.ndarray]:
@@ -174,28 +198,47 @@ class YarnTerms:
         return hit[1], hit[2]
 
 
-def _filament_moments(lw, lo, quadrature: Quadrature | None) -> tuple | None:
-    """The filament moments of yarn-frame directions under ``quadrature`` (None: the trapezoid-11 default)."""
-    from clothlab.models.irawan import kernels
-    from clothlab.models.irawan.quadrature import unit_rule
+_FILAMENT_NODES: dict = {}
+"""Quadrature -> (nodes (1, K), weights (1, K), on_arc) of the filament moments (made once per rule)."""
 
-    quadrature = quadrature or Quadrature()
-    rule, n = quadrature.rule, int(quadrature.nodes)
-    if rule in ("trapezoid", "gauss"):
-        nodes, weights = interval_rule(rule, n, -0.5 * np.pi, 0.5 * np.pi)
-        return kernels.filament_moments(lw, lo, nodes[None, :], weights[None, :], False)
-    if rule == "support":
-        t, wt = unit_rule("gauss", n)
-        return kernels.filament_moments(lw, lo, t[None, :], wt[None, :], True)
-    return None
+
+def _filament_nodes(quadrature: Quadrature) -> tuple | None:
+    hit = _FILAMENT_NODES.get(quadrature)
+    if hit is None:
+        from clothlab.models.irawan.quadrature import unit_rule
+
+        rule, n = quadrature.rule, int(quadrature.nodes)
+        if rule in ("trapezoid", "gauss"):
+            nodes, weights = interval_rule(rule, n, -0.5 * np.pi, 0.5 * np.pi)
+            hit = (nodes[None, :], weights[None, :], False)
+        elif rule == "support":
+            t, wt = unit_rule("gauss", n)
+            hit = (t[None, :], wt[None, :], True)
+        else:
+            return None
+        _FILAMENT_NODES[quadrature] = hit
+    return hit
+
+
+def _filament_moments(wi, wo, kind: str, quadrature: Quadrature | None) -> tuple | None:
+    """The filament moments of fabric-frame directions for segment type ``kind`` under ``quadrature`` (None:
+    the trapezoid-11 default)."""
+    from clothlab.models.irawan import kernels
+
+    rule = _filament_nodes(quadrature or Quadrature())
+    if rule is None:
+        return None
+    if kind not in YARN_KINDS:
+        raise ValueError(f"yarn kind must be 'warp' or 'weft', got {kind!r}")
+    return kernels.filament_moments(wi, wo, *rule, kind == "weft")
 
 
 def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
-    """The parameter-free part of I_j at fabric-frame directions (N, 3): the yarn-frame directions now, the
-    rest when first used (:class:`YarnTerms`)."""
-    lw = np.ascontiguousarray(to_yarn_frame(wi, kind), dtype=np.float64)
-    lo = np.ascontiguousarray(to_yarn_frame(wo, kind), dtype=np.float64)
-    return YarnTerms(kind, lw, lo, quadrature)
+    """The parameter-free part of I_j at fabric-frame directions (N, 3), each part made when first used
+    (:class:`YarnTerms`); ``wi``, ``wo`` are kept as they are if C-contiguous float64 (so pass copies the
+    caller will not change), else copied."""
+    return YarnTerms(kind, np.ascontiguousarray(wi, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64),
+                     quadrature)
 
 
 def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature,
@@ -223,7 +266,7 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
         return kernels.filament_from_moments(*terms.filament, umax, kappa, w, l, delta, shortened)
     if all(staple) and fixed:
         return kernels.staple_quadrature_sets(terms.wi, terms.wo, *unit_rule(rule, n), psi, umax, kappa, w, l)
-    out = np.empty((len(geometry), len(terms.wi)))
+    out = np.empty((len(geometry), len(terms)))
     for j, on_staple in enumerate(staple):  # mixed paths, or a rule without a batched form
         if not on_staple and rule != "adaptive":
             out[j] = kernels.filament_from_moments(*terms.filament, *cols[[1, 2, 3, 4, 5], j:j + 1], shortened)[0]

@@ -805,37 +805,76 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta, shortened):
 
 
 # ---------------------------------------------------------------------------------------------------------
+# A direction set's parameter-free terms (:meth:`clothlab.models.irawan.model.IrawanModel._at`).
+
+
+@njit(cache=True)
+def phase_cosines(wi, wo):
+    """(-wi . wo (N,), front (N,)) of (N, 3) fabric-frame pairs: the argument of eq. 7's lobe and whether both
+    directions are above the surface (wi_z > 0 and wo_z > 0)."""
+    n_dir = wi.shape[0]
+    cos_x = np.empty(n_dir)
+    front = np.empty(n_dir, dtype=np.bool_)
+    for n in range(n_dir):
+        # eq. 7: -wi . wo, summed x, z, then y: the order of numpy's einsum, the previous form (same values)
+        cos_x[n] = -((wi[n, 0] * wo[n, 0] + wi[n, 2] * wo[n, 2]) + wi[n, 1] * wo[n, 1])
+        front[n] = wi[n, 2] > 0.0 and wo[n, 2] > 0.0
+    return cos_x, front
+
+
+@njit(cache=True)
+def same_pairs(kept_wi, kept_wo, wi, wo):
+    """Whether (wi, wo) equal (kept_wi, kept_wo) element by element (shapes and values; NaN never equal), in one
+    pass that stops at the first difference."""
+    if kept_wi.shape != wi.shape or kept_wo.shape != wo.shape:
+        return False
+    a, b, c, d = kept_wi.ravel(), wi.ravel(), kept_wo.ravel(), wo.ravel()
+    for i in range(a.shape[0]):
+        if a[i] != b[i]:
+            return False
+    for i in range(c.shape[0]):
+        if c[i] != d[i]:
+            return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------------------------
 # Many parameter sets at once (the posterior evaluates every walker of an ensemble half in one call).
 
 
 @njit(cache=True, error_model="numpy")
-def filament_moments(wi, wo, nodes, weights, on_arc):
-    """The parameter-free part of eq. 2 for each direction pair n (yarn frame), as (ok, u, inv, s0, s1, cu, su).
+def filament_moments(wi, wo, nodes, weights, on_arc, weft):
+    """The parameter-free part of eq. 2 for each direction pair n, as (ok (N,), moments (6, N)): moments rows
+    u, inv, s0, s1, cos u, sin u.
 
-    For a filament yarn eq. 4 fixes u per direction, so the clamped cosines of eq. 8 and the lit arc depend on
-    the directions alone; Algorithm 2's sum is then  inv (a R(u) s0 + a^2 s1) fade(u)  with
-    s0 = sum_k w_k A(v_k), s1 = sum_k w_k cos(v_k) A(v_k) (eq. 6 numerator a (R + a cos v) times eq. 8) and
-    inv = 1 / (|wi + wo| |(t x h)_x|).  ok is False where the integrand vanishes whatever the parameters
-    (back-facing, degenerate h); the cuts |u| < umax and the fade of eq. 9 are applied by the caller.
-    cu, su = cos u, sin u of eq. 4's u, from the half vector without trigonometry (h_z > 0:
-    cos u = h_z / sqrt(h_y^2 + h_z^2), sin u = h_y / sqrt(h_y^2 + h_z^2)).
+    ``wi``, ``wo``: (N, 3) *fabric*-frame directions, taken into the yarn frame here (``weft``: the weft frame
+    (x', y', z') = (-y, x, z) of :func:`clothlab.frames.to_yarn_frame`; else the warp's, the fabric frame), so a
+    new direction set costs no yarn-frame copies.  For a filament yarn eq. 4 fixes u per direction, so the
+    clamped cosines of eq. 8 and the lit arc depend on the directions alone; Algorithm 2's sum is then
+    inv (a R(u) s0 + a^2 s1) fade(u)  with  s0 = sum_k w_k A(v_k), s1 = sum_k w_k cos(v_k) A(v_k) (eq. 6
+    numerator a (R + a cos v) times eq. 8) and inv = 1 / (|wi + wo| |(t x h)_x|).  ok is False where the
+    integrand vanishes whatever the parameters (back-facing, degenerate h); the cuts |u| < umax and the fade of
+    eq. 9 are applied by the caller (:func:`filament_from_moments`).  cos u, sin u of eq. 4's u from the half
+    vector without trigonometry (h_z > 0: cos u = h_z / sqrt(h_y^2 + h_z^2), sin u = h_y / sqrt(h_y^2 + h_z^2)).
     ``nodes`` / ``weights`` (1, K) as in :func:`filament_quadrature` (``on_arc``: unit nodes on the lit arc).
     Without ``on_arc`` (the fixed rules) the nodes are the same for every direction: sin v, cos v are computed
     once per node and the loop over the directions is innermost and branch-free (the checks of eq. 8 applied
-    as a select), so it vectorises; each direction's sum runs over the nodes in order, as before."""
+    as a select), so it vectorises; each direction's sum runs over the nodes in order.  Two allocations for
+    the results and one scratch block (issue 27: the seven arrays and six column copies of the previous form
+    cost a third of the kernel's time)."""
     n_dir = wi.shape[0]
     n_nodes = nodes.shape[1]
-    ok = np.zeros(n_dir, dtype=np.bool_)
-    u_out = np.zeros(n_dir)
-    inv = np.zeros(n_dir)
-    s0 = np.zeros(n_dir)
-    s1 = np.zeros(n_dir)
-    cu_out = np.ones(n_dir)
-    su_out = np.zeros(n_dir)
-    ci0 = np.zeros(n_dir)
-    cr0 = np.zeros(n_dir)
-    wix, wiy_, wiz_ = wi[:, 0].copy(), wi[:, 1].copy(), wi[:, 2].copy()
-    wox, woy_, woz_ = wo[:, 0].copy(), wo[:, 1].copy(), wo[:, 2].copy()
+    ok = np.empty(n_dir, dtype=np.bool_)
+    out = np.empty((6, n_dir))
+    u_out, inv, s0, s1, cu_out, su_out = out[0], out[1], out[2], out[3], out[4], out[5]
+    work = np.empty((8, n_dir))  # the yarn-frame columns, then w . n(u, 0) of wi and wo
+    wix, wiy_, wiz_, wox, woy_, woz_, ci0, cr0 = work[0], work[1], work[2], work[3], work[4], work[5], work[6], \
+        work[7]
+    ix, iy = (1, 0) if weft else (0, 1)
+    sign = -1.0 if weft else 1.0  # weft: x' = -y, y' = x (clothlab.frames.to_yarn_frame)
+    for n in range(n_dir):
+        wix[n], wiy_[n], wiz_[n] = sign * wi[n, ix], wi[n, iy], wi[n, 2]
+        wox[n], woy_[n], woz_[n] = sign * wo[n, ix], wo[n, iy], wo[n, 2]
     for n in range(n_dir):  # branch-free (selects) on contiguous columns, so it vectorises
         wiy, wiz, woy, woz = wiy_[n], wiz_[n], woy_[n], woz_[n]
         # h = s / |s| with s = wi + wo (sec. 6.2); |(t x h)_x| = sqrt(h_y^2 + h_z^2) (eq. 6), so
@@ -854,6 +893,8 @@ def filament_moments(wi, wo, nodes, weights, on_arc):
         su_out[n] = su if good else 0.0
         ci0[n] = spine_normal_cosine(wiy, wiz, su, cu) if good else 0.0
         cr0[n] = spine_normal_cosine(woy, woz, su, cu) if good else 0.0
+        s0[n] = 0.0
+        s1[n] = 0.0
     if not on_arc:
         for k in range(n_nodes):
             wk = weights[0, k]
@@ -869,7 +910,7 @@ def filament_moments(wi, wo, nodes, weights, on_arc):
                 lit = ok[n] and ci > 0.0 and cr > 0.0
                 s0[n] += g if lit else 0.0
                 s1[n] += g * cv if lit else 0.0
-        return ok, u_out, inv, s0, s1, cu_out, su_out
+        return ok, out
     for n in range(n_dir):
         if not ok[n]:
             continue
@@ -895,7 +936,7 @@ def filament_moments(wi, wo, nodes, weights, on_arc):
             acc1 += g * cv
         s0[n] = acc0 * span
         s1[n] = acc1 * span
-    return ok, u_out, inv, s0, s1, cu_out, su_out
+    return ok, out
 
 
 @njit(cache=True, error_model="numpy")
@@ -946,13 +987,14 @@ def staple_quadrature_sets(wi, wo, unit_nodes, unit_weights, psi, umax, kappa, w
 
 
 @njit(cache=True, error_model="numpy")
-def filament_from_moments(ok, u, inv, s0, s1, cu, su, umax, kappa, w, l, delta, shortened):
-    """(J, N) filament I_j (eq. 2) from the moments of :func:`filament_moments` (with cos u, sin u) for J
-    parameter sets (umax in radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of
+def filament_from_moments(ok, moments, umax, kappa, w, l, delta, shortened):
+    """(J, N) filament I_j (eq. 2) from ``ok`` and the moments of :func:`filament_moments` for J parameter sets
+    (umax in radians): inv fade(u) (a R(u) s0 + a^2 s1), zero where |u| >= umax or the fade of
     eq. 9 is 0.  Branch-free over the directions (the cuts applied as a select), so the loop vectorises.
     ``shortened``: R on the arc of :func:`spine_arc`, |u| clamped to it."""
     n_sets = umax.shape[0]
-    n_dir = u.shape[0]
+    n_dir = ok.shape[0]
+    u, inv, s0, s1, cu, su = moments[0], moments[1], moments[2], moments[3], moments[4], moments[5]
     out = np.zeros((n_sets, n_dir))
     for j in range(n_sets):
         a = 0.5 * w[j]

@@ -187,21 +187,23 @@ class IrawanModel(Model):
         It is used only if the directions' *contents* equal the copies it keeps (not their identity), so
         directions changed in place, or new arrays at a reused address, never return stale values (nor a
         stale memo)."""
+        import clothlab.models.irawan.kernels as kernels  # (numba: imported with the first evaluation)
+
         d = self._directions
-        if d is not None and d["wi"].shape == wi.shape and np.array_equal(d["wi"], wi) and \
-                np.array_equal(d["wo"], wo):
+        if d is not None and kernels.same_pairs(d["wi"], d["wo"], wi, wo):  # one compiled pass
             return d
         self._memo.clear()
-        self._directions = {"wi": wi.copy(), "wo": wo.copy(), "cos_x": -np.einsum("...k,...k->...", wi, wo),
-                            "front": (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0), "terms": {}}
+        cos_x, front = kernels.phase_cosines(wi, wo)
+        self._directions = {"wi": wi.copy(), "wo": wo.copy(), "cos_x": cos_x, "front": front, "terms": {}}
         return self._directions
 
     def _yarn_terms(self, wi, wo, kind, at: dict | None = None) -> YarnTerms:
         """The parameter-free part of I_j at (wi, wo) (:meth:`_at`; ``at``: its result for these directions,
         if already looked up in this call)."""
-        terms = (self._at(wi, wo) if at is None else at)["terms"]
-        if kind not in terms:
-            terms[kind] = yarn_terms(wi, wo, kind, self.quadrature)
+        at = self._at(wi, wo) if at is None else at
+        terms = at["terms"]
+        if kind not in terms:  # from the kept copies: the terms' lazy parts are computed later
+            terms[kind] = yarn_terms(at["wi"], at["wo"], kind, self.quadrature)
         return terms[kind]
 
     def _integrals(self, wi, wo, resolved: list[dict], kind, at: dict | None = None) -> np.ndarray:
@@ -261,8 +263,8 @@ class IrawanModel(Model):
         The parameter-free parts (yarn frames, the filament moments, -wi.wo) are computed once for all sets,
         the staple sums of all sets in one compiled call (:func:`.integrals.yarn_integrals`)."""
         resolved = self._resolve_many(params_list)
-        wi = np.atleast_2d(np.asarray(wi, dtype=np.float64))
-        wo = np.atleast_2d(np.asarray(wo, dtype=np.float64))
+        wi = np.atleast_2d(np.ascontiguousarray(wi, dtype=np.float64))
+        wo = np.atleast_2d(np.ascontiguousarray(wo, dtype=np.float64))
         need = COMPONENTS if need is None else tuple(need)
         if warn:
             for p in resolved:
