@@ -113,7 +113,7 @@ def check_plain_data(value: Any, at: Location) -> None:
         raise at.error(f"expected plain data (strings, numbers, lists, mappings), got {shown(value)}")
 
 
-def as_cli_int(value: Any, at: Location, lo: int, hi: int | None = None) -> int:
+def as_cli_int(value: Any, at: Location, lo: int | None = None, hi: int | None = None) -> int:
     """A command-line integer: as :func:`as_int`, also accepting its decimal text (``"21"``)."""
     if isinstance(value, str):
         try:

@@ -3,8 +3,8 @@
 :func:`clothlab.config.load_config` builds a :class:`Config` after checking every value
 (:mod:`clothlab.config.validate`); code that runs a fit reads these objects, never the raw mapping.
 Paths are resolved (absolute); parameter values are in the units the model declares (angles in degrees).
-The default quadrature is the one Irawan & Marschner 2012, sec. 7.3 recommend for the integral of eq. 10:
-the trapezoidal rule with 11 samples.
+``model.quadrature`` is a :class:`~clothlab.models.irawan.quadrature.Quadrature`, the one form of the choice
+with its defaults (Irawan & Marschner 2012, sec. 7.3: the trapezoidal rule with 11 samples for eq. 10).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from clothlab.config.choices import DEFAULT_GLOBAL, DEFAULT_LOCAL, DEFAULT_LOSS_SCALE
+from clothlab.models.irawan.quadrature import Quadrature
 from clothlab.models.registry import DEFAULT_KIND
 
 PRESET_PREFIX = "preset:"
@@ -36,12 +37,9 @@ class MeasurementConfig:
     options: dict = field(default_factory=dict)
 
 
-@dataclass(frozen=True)
-class QuadratureConfig:
-    """``model.quadrature``: the rule integrating over the yarn's fibre positions and its node count."""
-
-    rule: str = "trapezoid"
-    nodes: int = 11
+QuadratureConfig = Quadrature
+"""``model.quadrature``: the former name of :class:`~clothlab.models.irawan.quadrature.Quadrature` (kept for one
+release)."""
 
 
 @dataclass(frozen=True)
@@ -50,7 +48,7 @@ class ModelConfig:
 
     kind: str = DEFAULT_KIND
     weave: str | None = None
-    quadrature: QuadratureConfig = field(default_factory=QuadratureConfig)
+    quadrature: Quadrature = field(default_factory=Quadrature)
     params: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)  # passed to the model's constructor (e.g. kang tile_nodes)
 
@@ -201,7 +199,7 @@ class Config:
             "model": {
                 "kind": model.kind,
                 "weave": weave,
-                "quadrature": {"rule": model.quadrature.rule, "nodes": model.quadrature.nodes},
+                "quadrature": model.quadrature.record(),
                 "params": dict(model.params),
                 "options": self._relative_options(),
             },

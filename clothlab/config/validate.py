@@ -69,17 +69,16 @@ from clothlab.config.schema import (
     OptimizerConfig,
     OutputConfig,
     PosteriorConfig,
-    QuadratureConfig,
     ReportConfig,
     SelectConfig,
 )
 from clothlab.errors import ConfigError, InputError, ParameterError
 from clothlab.io.loader import check_reader_options
 from clothlab.models.base import ORIENTATION
+from clothlab.models.irawan.quadrature import RULES, Quadrature
 from clothlab.models.registry import MODEL_KINDS, WEAVE_STAND_IN, model_class, needs_weave
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
-NODES_RANGE = (2, 1000)
 MAX_NAME_CHARS = 200
 MAX_EVALS = 2**31 - 1
 """Most optimiser evaluations of a fit or a candidate (``fit.optimizer.max_evals``, ``--max-evals``,
@@ -292,8 +291,7 @@ class _Validator:
             raise ConfigError(f"missing required key 'weave' (preset:<name> or a .wv file) for kind {kind}",
                               path=where.source, line=where.line, field="model.weave")
         q = self.section(m.get("quadrature", {}), p + ("quadrature",), ("rule", "nodes"))
-        rule = as_choice(q.get("rule", QuadratureConfig.rule), self.at(p + ("quadrature", "rule")), _quadrature_rules())
-        nodes = as_int(q.get("nodes", QuadratureConfig.nodes), self.at(p + ("quadrature", "nodes")), *NODES_RANGE)
+        quadrature = checked_quadrature(q, self.at(p + ("quadrature", "rule")), self.at(p + ("quadrature", "nodes")))
         params = m.get("params", {}) or {}
         if not isinstance(params, dict):
             raise self.at(p + ("params",)).error(f"expected a mapping, got {shown(params)}")
@@ -314,7 +312,7 @@ class _Validator:
                 at = self.at(p + ("params", name))
                 as_number(v, at)
                 checked[name] = _check_parameter(table, name, v, at)
-        return ModelConfig(kind=kind, weave=weave, quadrature=QuadratureConfig(rule, nodes), params=checked,
+        return ModelConfig(kind=kind, weave=weave, quadrature=quadrature, params=checked,
                            options=copy.deepcopy(options))
 
     def declared(self, kind: str, options: dict):
@@ -548,11 +546,16 @@ def _check_parameter(table, name: str, value: float, at: Location) -> float:
         raise at.error(exc.detail) from None
 
 
-def _quadrature_rules() -> tuple:
-    """The rules the quadrature module implements (imported on use: it loads numpy)."""
-    from clothlab.models.irawan.quadrature import RULES
-
-    return RULES
+def checked_quadrature(given: dict, rule_at: Location, nodes_at: Location) -> Quadrature:
+    """The :class:`Quadrature` of ``given`` (``rule``, ``nodes``; a missing one takes the default): the class's
+    own check, the one shared with the API and fit.json, its error raised at the value's location (a misspelt
+    rule with a suggestion)."""
+    try:
+        return Quadrature.from_record(given)
+    except ParameterError as exc:
+        if exc.field == "model.quadrature.rule":
+            raise rule_at.error(exc.detail + suggest(given.get("rule"), RULES)) from None
+        raise nodes_at.error(exc.detail) from None
 
 
 def _format_choices() -> tuple:
@@ -583,12 +586,13 @@ def apply_overrides(config: Config, *, rule=None, nodes=None, max_evals=None, se
 
     Values are checked as in the yaml; errors name the option, e.g. field ``--nodes``.
     """
-    quadrature = config.model.quadrature
     optimizer = config.fit.optimizer
+    given = config.model.quadrature.record()
     if rule is not None:
-        quadrature = replace(quadrature, rule=as_choice(rule, Location(None, "--rule"), _quadrature_rules()))
-    if nodes is not None:
-        quadrature = replace(quadrature, nodes=as_cli_int(nodes, Location(None, "--nodes"), *NODES_RANGE))
+        given["rule"] = rule
+    if nodes is not None:  # its decimal text too ("21")
+        given["nodes"] = as_cli_int(nodes, Location(None, "--nodes"))
+    quadrature = checked_quadrature(given, Location(None, "--rule"), Location(None, "--nodes"))
     if max_evals is not None:
         optimizer = replace(optimizer, max_evals=as_cli_int(max_evals, Location(None, "--max-evals"), 1, MAX_EVALS))
     if seed is not None:

@@ -60,7 +60,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from clothlab.errors import ClothlabError, ConfigError, GeometryWarning
+from clothlab.errors import ClothlabError, GeometryWarning
 from clothlab.models.base import Model
 from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the model's public names)
     ALBEDO_SAMPLES,
@@ -100,11 +100,8 @@ class IrawanModel(Model):
 
     @classmethod
     def from_config(cls, weave: Weave, quadrature=None, **options) -> IrawanModel:
-        """Option ``filament_arc``: ``full`` (default, the paper's text) or ``shortened`` (the renderer's)."""
-        unknown = [name for name in options if name != "filament_arc"]
-        if unknown:
-            raise ConfigError(f"model kind 'irawan' takes no option {unknown[0]!r}; options: filament_arc",
-                              field=f"model.options.{unknown[0]}")
+        """Option ``filament_arc``: ``full`` (default, the paper's text) or ``shortened`` (the renderer's); the
+        registry checks the options (:func:`clothlab.models.registry.build_model`)."""
         q = quadrature if quadrature is None or isinstance(quadrature, Quadrature) else Quadrature(*quadrature)
         return cls(weave, q, **options)
 
