@@ -149,8 +149,8 @@ class ClothMaterial:
 
 def _coefficients_for(model, coefficients: dict, channels) -> dict:
     """``coefficients`` {name: (C,)} mapped onto the coefficient names of ``model``'s components: a name the model
-    uses is kept; ``kd_warp`` / ``kd_weft`` fall back to ``kd`` (as :func:`clothlab.render.shade.surface_models`
-    does), ``kd`` to ``kd_warp``."""
+    uses is kept; ``kd_warp`` / ``kd_weft`` fall back to ``kd`` (as
+    :func:`clothlab.models.components.per_yarn_coefficients` does), ``kd`` to ``kd_warp``."""
     from clothlab.models.components import coefficient_name
 
     out = {}
@@ -232,32 +232,24 @@ def load_material(*, fit=None, preset=None, kind=None, lod: str = "auto", f0: fl
 def material_from_scene(scene, shader: str = "im-lod") -> ClothMaterial:
     """The material ``clothlab render --shader shader`` shades ``scene``'s fabric with (same models, parameters,
     coefficients, LoD thresholds and seed; :class:`clothlab.render.shade.FabricModels`): im-* the fabric (its
-    fit or its weave as kind irawan), kang-* ``fabric.kang``, surface-* the surface model.  neural-lod (a
-    per-pixel network query) has no per-sample form: ConfigError."""
-    from clothlab.render.shade import SHADERS, FabricModels, surface_models
+    fit or its weave as the default kind), kang-* ``fabric.kang``, surface-* the surface model: the shader's
+    kind and policy as the registry declares them.  neural-lod (a per-pixel network query) has no per-sample
+    form: ConfigError."""
+    from clothlab.render.shade import FabricModels, kind_models, shader_kind
 
-    if shader not in SHADERS:
-        raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")
+    kind, policy = shader_kind(shader)
     fabric = FabricModels.build(scene.fabric)
-    lod = {"texture": "texture", "reflectance": "reflectance"}.get(shader.split("-", 1)[1], "auto")
     common = dict(f0=scene.lod.f0, f1=scene.lod.f1, seed=scene.fabric.seed, noise=scene.fabric.noise,
                   source=str(scene.source or ""))
-    if shader.startswith("im-") or shader.startswith("surface-"):
-        models = fabric if shader.startswith("im-") else surface_models(fabric)
+    if policy in ("lod", "texture", "reflectance"):
+        models = kind_models(fabric, kind)
         return material_from_model(models.reflectance, models.params, models.coefficients, models.channels,
-                                   lod=lod, **common)
-    if shader.startswith("kang-"):
-        texture, params, coefficients = fabric.kang()
-        material = material_from_model(texture.model if hasattr(texture, "model") else _kang_model(fabric),
-                                       params, coefficients, fabric.channels, lod="auto", **common)
-        if shader == "kang-texture":  # footprint None: full yarn detail (alpha = 0 of Kang's eq. 5)
+                                   lod="auto" if policy == "lod" else policy, **common)
+    if policy in ("filtered-lod", "filtered-texture"):
+        texture, params, coefficients = fabric.kang(kind)
+        material = material_from_model(texture.model, params, coefficients, fabric.channels, lod="auto", **common)
+        if policy == "filtered-texture":  # footprint None: full yarn detail (alpha = 0 of Kang's eq. 5)
             material.lod = "texture"
         return material
     raise ConfigError(f"shader {shader!r} queries a network once per pixel and has no Mitsuba form; use im-lod, "
                       "kang-lod or surface-lod", field="shader")
-
-
-def _kang_model(fabric):
-    from clothlab.models.registry import build_model
-
-    return build_model("kang", fabric.weave)

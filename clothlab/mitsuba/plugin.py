@@ -206,7 +206,8 @@ def bsdf_class():
                 right /= np.linalg.norm(right)
                 down = np.cross(forward, right)
                 self.camera = (eye, forward, right, down, 2.0 * math.tan(0.5 * math.radians(fov)) / height)
-            glossy = self.material.kind not in ("lambert", "oren-nayar")
+            # glossy unless every component is a diffuse one (the baselines: Lambert, Oren-Nayar)
+            glossy = any(not name.startswith("diffuse") for name in self.material.reflectance.component_names)
             lobe = mi.BSDFFlags.GlossyReflection if glossy else mi.BSDFFlags.DiffuseReflection
             self.lobe = lobe
             flags = lobe | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic | mi.BSDFFlags.SpatiallyVarying

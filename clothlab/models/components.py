@@ -35,3 +35,12 @@ def combine(components: dict, coefficients: dict) -> np.ndarray:
     if total is None:
         raise ValueError(f"no coefficient among {sorted(coefficients)} matches a component of {sorted(components)}")
     return total
+
+
+def per_yarn_coefficients(coefficients: dict) -> dict:
+    """An Irawan-Marschner coefficient set (kd, ks_warp, ks_weft; Irawan & Marschner 2012, sec. 8: one diffuse
+    colour for the fabric) for a model with a diffuse colour per yarn type: kd_warp = kd_weft = kd, the specular
+    coefficients kept; a missing coefficient is 0 (its component is then not computed)."""
+    kd = coefficients.get("kd", 0.0)
+    return {"kd_warp": kd, "kd_weft": kd, "ks_warp": coefficients.get("ks_warp", 0.0),
+            "ks_weft": coefficients.get("ks_weft", 0.0)}

@@ -22,11 +22,38 @@ MODEL_KINDS = {
 #: Composite kinds (clothlab.models.composite): name -> (specular kind, diffuse kind).
 COMPOSITE_KINDS = {f"{s}+{d}": (s, d) for s in ("irawan", "kang") for d in ("lambert", "oren-nayar")}
 MODEL_KINDS.update({name: ("clothlab.models.composite.model", "composite_class") for name in COMPOSITE_KINDS})
+#: Physics options (clothlab.models.composite.terms, issue 28): name -> (base kind, term).
+TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",) for t in ("sheen", "fresnel")}
+MODEL_KINDS.update({name: ("clothlab.models.composite.terms", "term_class") for name in TERM_KINDS})
 DEFAULT_KIND = "irawan"
 #: kinds whose reflectance does not depend on the weave (fabric.yaml may leave ``model.weave`` out)
 WEAVE_FREE_KINDS = ("lambert", "oren-nayar")
 #: the weave recorded for a weave-free kind given none (the model ignores it; docs/fabric-yaml.md)
 WEAVE_STAND_IN = "pattern:plain"
+#: The kind of Irawan & Marschner 2012, the paper whose figures the reports show as references (sec. 8) and whose
+#: scene coefficients (kd, ks_warp, ks_weft) the other kinds' shaders map from (:data:`FROM_IRAWAN`).
+PAPER_KIND = "irawan"
+
+#: Shaders by name (``clothlab render --shader``; a kind offers its shaders here, beside its model line):
+#: shader -> (the kind whose models it shades, its shading policy in :data:`clothlab.render.shade.POLICIES`).
+#: The default kind's shaders shade the scene's own fabric (its fit, of any kind whose texture the renderer
+#: blends, or the default kind); another kind's shade the scene's fabric as that kind (:data:`FROM_IRAWAN`).
+SHADERS = {
+    "im-lod": ("irawan", "lod"),
+    "im-texture": ("irawan", "texture"),
+    "im-reflectance": ("irawan", "reflectance"),
+    "kang-lod": ("kang", "filtered-lod"),
+    "kang-texture": ("kang", "filtered-texture"),
+    "surface-lod": ("surface", "lod"),
+    "surface-texture": ("surface", "texture"),
+    "neural-lod": ("neural", "network-lod"),
+}
+#: A scene's IM fabric as another kind (that kind's shaders in an IM scene): kind -> (module, function), the
+#: function ``(weave, coefficients, params=None) -> (model, params, coefficients)``.
+FROM_IRAWAN = {
+    "kang": ("clothlab.models.kang.from_irawan", "from_irawan"),
+    "surface": ("clothlab.models.surface.from_irawan", "from_irawan"),
+}
 
 
 def needs_weave(kind: str) -> bool:
@@ -51,6 +78,8 @@ def model_class(kind: str):
                           field="model.kind") from None
     if kind in COMPOSITE_KINDS:
         return getattr(import_module(module), name)(kind, *(model_class(part) for part in COMPOSITE_KINDS[kind]))
+    if kind in TERM_KINDS:
+        return getattr(import_module(module), name)(kind, model_class(TERM_KINDS[kind][0]), TERM_KINDS[kind][1])
     return getattr(import_module(module), name)
 
 
@@ -81,3 +110,27 @@ def build_model(kind: str, weave, quadrature=None, **options):
             raise ConfigError(exc.detail, path=exc.path, line=exc.line, field=f"model.options.{name}") from None
     takes_options.check_options(options)  # options that must agree with each other (Model: no check)
     return cls.from_config(weave, quadrature, **options)
+
+
+def shader(name: str) -> tuple[str, str]:
+    """(kind, shading policy) of the shader ``name`` (:data:`SHADERS`; ConfigError at ``shader`` otherwise).
+
+    >>> shader("kang-lod")
+    ('kang', 'filtered-lod')
+    """
+    try:
+        return SHADERS[name]
+    except (KeyError, TypeError):
+        raise ConfigError(f"unknown shader {name!r}; choose one of {', '.join(SHADERS)}", field="shader") from None
+
+
+def from_irawan(kind: str, weave, coefficients: dict, params: dict | None = None):
+    """(model, parameters, coefficients) of kind ``kind`` for ``weave`` standing in for an Irawan-Marschner
+    fabric with coefficients ``coefficients`` (kd, ks_warp, ks_weft; the kind's own mapping, :data:`FROM_IRAWAN`)
+    and the kind's parameters ``params`` (None: its defaults).  ConfigError for a kind without a mapping."""
+    try:
+        module, name = FROM_IRAWAN[kind]
+    except KeyError:
+        raise ConfigError(f"model kind {kind!r} has no mapping from an Irawan-Marschner fabric; kinds with one: "
+                          f"{', '.join(FROM_IRAWAN)}", field="model.kind") from None
+    return getattr(import_module(module), name)(weave, coefficients, params)

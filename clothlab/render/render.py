@@ -22,13 +22,19 @@ from clothlab.render.camera import PinholeCamera
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Scene, check_render_memory
 from clothlab.render.shade import (
+    COUNTERS,
+    FOOTPRINT_POLICIES,
+    SAMPLE_COUNTERS,
     SHADERS,
+    TEXTURE_POLICIES,
     Counter,
     FabricModels,
     Samples,
     lod_weight,
     network_samples,
+    reference_shader,
     shade,
+    shader_kind,
 )
 
 
@@ -128,15 +134,16 @@ def _light(light, position):
 def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> dict:
     shaded_pixels = np.unique(samples.pixel)
     n = max(shaded_pixels.size, 1)
-    if shader in ("im-lod", "surface-lod", "neural-lod"):
+    policy = shader_kind(shader)[1]
+    if policy in FOOTPRINT_POLICIES:
         b = lod_weight(samples.footprint, scene.lod.f0, scene.lod.f1)
-        if shader == "neural-lod":  # network pixels run no texture sample
+        if policy == "network-lod":  # network pixels run no texture sample
             b = np.where(network_samples(samples), 1.0, b)
         texture_pixels = np.unique(samples.pixel[b < 1.0]).size
         reflectance_only = n - np.unique(samples.pixel[b < 1.0]).size if shaded_pixels.size else 0
         blend_pixels = np.unique(samples.pixel[(b > 0.0) & (b < 1.0)]).size
     else:
-        uses_texture = shader in ("im-texture", "kang-texture", "kang-lod", "surface-texture")
+        uses_texture = policy in TEXTURE_POLICIES
         texture_pixels = shaded_pixels.size if uses_texture else 0
         reflectance_only = shaded_pixels.size - texture_pixels
         blend_pixels = 0
@@ -154,7 +161,7 @@ def _stats(shader, scene, samples, counter, pixels, hit_samples, hit_pixel) -> d
         "footprint_median_tiles": float(np.median(finite)) if finite.size else float("nan"),
         "footprint_max_tiles": float(finite.max()) if finite.size else float("nan"),
     }
-    for name in ("texture", "reflectance", "kang", "neural"):
+    for name in COUNTERS:
         stats[f"{name}_evaluations"] = int(counter.get(f"{name}_points", 0))
     return stats
 
@@ -221,10 +228,6 @@ def relative_error(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | 
     return float(np.abs(image - reference).sum() / denominator) if denominator > 0 else float("nan")
 
 
-#: the antialiasing reference of each shader family: its own texture-level shader, supersampled
-REFERENCE_SHADER = {"im": "im-texture", "kang": "kang-texture", "neural": "im-texture"}
-
-
 def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
                 reference_spp: int = 64, repeats: int = 1, repeat_budget_s: float = float("inf"),
                 warmup: bool = True, fabric: FabricModels | None = None, reference_check: bool = False) -> list[dict]:
@@ -247,7 +250,7 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
     fabric = fabric or FabricModels.build(scene.fabric)
     if warmup:
         small = replace(scene, camera=replace(scene.camera, resolution=(4, 3)))
-        for shader in {*shaders, *(REFERENCE_SHADER[s.split("-")[0]] for s in shaders)}:
+        for shader in {*shaders, *(reference_shader(s) for s in shaders)}:
             render(small, shader=shader, spp=1, fabric=fabric)
     rows = []
     for distance in distances:
@@ -256,7 +259,7 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
         row = {"distance_mm": float(distance)}
         for shader in shaders:
             family = shader.split("-")[0]
-            name = REFERENCE_SHADER[family]  # neural-lod shares im-lod's reference
+            name = reference_shader(shader)  # its kind's texture-level shader (neural-lod: im-lod's)
             if name not in references:
                 references[name] = render(s, shader=name, spp=reference_spp, fabric=fabric)
             reference = references[name]
@@ -278,14 +281,10 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
                            "runs": runs, "relative_error": relative_error(best.image, reference.image, mask),
                            "texture_pixel_fraction": st["texture_pixel_fraction"],
                            "blend_pixel_fraction": st["blend_pixel_fraction"],
-                           "texture_evaluations": st["texture_evaluations"],
-                           "reflectance_evaluations": st["reflectance_evaluations"],
-                           "kang_evaluations": st["kang_evaluations"],
-                           "neural_evaluations": st["neural_evaluations"],
-                           "model_evaluations": (st["texture_evaluations"] + st["reflectance_evaluations"]
-                                                 + st["kang_evaluations"] + st["neural_evaluations"]),
+                           **{f"{m}_evaluations": st[f"{m}_evaluations"] for m in COUNTERS},
+                           "model_evaluations": sum(st[f"{m}_evaluations"] for m in COUNTERS),
                            **{f"{m}_{k}": best.timings.get(f"{m}_{k}", 0.0)
-                              for m in ("texture", "reflectance", "kang") for k in ("seconds", "cpu_seconds")}}
+                              for m in SAMPLE_COUNTERS for k in ("seconds", "cpu_seconds")}}
             row.setdefault("pixels", int(mask.sum()))
             row.setdefault("footprint_min_tiles", st["footprint_min_tiles"])
             row.setdefault("footprint_median_tiles", st["footprint_median_tiles"])

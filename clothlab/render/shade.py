@@ -1,5 +1,12 @@
 """The shading policy of :func:`clothlab.render.render`: which model runs at which sample.
 
+A kind offers its shaders in the registry (:data:`clothlab.models.registry.SHADERS`: shader -> (kind,
+policy)); :func:`shade` asks it for the shader's kind and runs the policy (:data:`POLICIES`) on the scene's
+fabric as that kind (:func:`kind_models`; another kind than the scene's is mapped from its IM coefficients by
+:func:`clothlab.models.registry.from_irawan`).  Policies: ``texture``, ``reflectance``, ``lod`` (the blend by
+the footprint), ``filtered-texture`` / ``filtered-lod`` (a texture model that filters itself, without / with
+the footprint), ``network-lod`` (:func:`neural_lod_values`).
+
 Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample):
 
 - ``im-texture``     the Irawan-Marschner texture model (sec. 7.2) at every sample.
@@ -71,11 +78,13 @@ import numpy as np
 
 from clothlab.errors import ConfigError
 from clothlab.models.components import combine
+from clothlab.models.registry import SHADERS as SHADER_KINDS
+from clothlab.models.registry import shader as shader_kind
 from clothlab.render.scene import Fabric, Lod
 from clothlab.weave.model import YARN_KINDS
 
-SHADERS = ("im-lod", "im-texture", "im-reflectance", "kang-lod", "kang-texture", "surface-lod", "surface-texture",
-           "neural-lod")
+#: the shader names (``clothlab render --shader``), as the registry declares them with their kinds
+SHADERS = tuple(SHADER_KINDS)
 #: finite stand-in for an infinite footprint (grazing differentials) handed to the Kang shader
 MAX_FOOTPRINT = 1e6
 
@@ -151,22 +160,27 @@ class FabricModels:
         return cls(spec, weave, model, texture, params, coefficients, tuple(channels), need)
 
     def forget_directions(self) -> None:
-        """Drop the direction memos of the scene's reflectance models (im-*, surface-*, neural-lod), so that
-        a timed render starts cold (:meth:`clothlab.models.base.Model.forget_directions`)."""
-        for models in (self, getattr(self, "_surface", None)):
-            if models is not None:
+        """Drop the direction memos of the scene's reflectance models (the scene's own, those of the scene as
+        another kind, the network's), so that a timed render starts cold
+        (:meth:`clothlab.models.base.Model.forget_directions`)."""
+        self.reflectance.forget_directions()
+        for models in getattr(self, "_as_kind", {}).values():
+            if models is not self:
                 models.reflectance.forget_directions()
         neural = getattr(self, "_neural", None)
         if neural is not None:
             neural.forget_directions()
 
-    def kang(self):
+    def kang(self, kind: str | None = None):
         """(texture model, params, coefficients) of the scene's self-filtering shader (``fabric.kang``): the
-        fit's (``fabric.kang.fit``: a model whose texture model takes the pixel footprint), else the
-        registry's ``kang`` kind, which that section configures."""
+        fit's (``fabric.kang.fit``: a model whose texture model takes the pixel footprint), else the scene's
+        fabric as ``kind`` (default: the kind of the registry's ``kang-lod`` shader), which that section
+        configures (:func:`clothlab.models.registry.from_irawan`; ``fabric.kang.coefficients`` replace the
+        mapped ones)."""
         if self._kang is None:
-            from clothlab.models.registry import build_model
+            from clothlab.models.registry import from_irawan
 
+            kind = shader_kind("kang-lod")[0] if kind is None else kind
             k = self.spec.kang
             if k.fit is not None:
                 from clothlab.fit.store import load_fitted
@@ -180,36 +194,34 @@ class FabricModels:
                     raise ConfigError(f"the Kang fit's channels {list(channels)} differ from the fabric's "
                                       f"{list(self.channels)}", field="fabric.kang.fit")
             else:
-                model, params = build_model("kang", self.weave), k.params
-                coefficients = k.coefficients or {
-                    "kd_warp": self.coefficients.get("kd", 0.0), "kd_weft": self.coefficients.get("kd", 0.0),
-                    "ks_warp": self.coefficients.get("ks_warp", 0.0), "ks_weft": self.coefficients.get("ks_weft", 0.0)}
+                model, params, coefficients = from_irawan(kind, self.weave, self.coefficients, k.params)
+                coefficients = k.coefficients or coefficients
             params = model.resolve(params)
             self._kang = (model.texture(), params,
                           _broadcast(coefficients, len(self.channels), "fabric.kang.coefficients"))
         return self._kang
 
 
-def surface_models(fabric: FabricModels) -> FabricModels:
-    """The scene's fabric as the surface model (``surface-*`` shaders, module docstring), built once."""
-    cached = getattr(fabric, "_surface", None)
-    if cached is not None:
-        return cached
-    from clothlab.models.registry import build_model, model_class
+def kind_models(fabric: FabricModels, kind: str) -> FabricModels:
+    """The scene's fabric as the models of ``kind`` (the models a shader of that kind shades; module
+    docstring), built once per kind: the scene's own when it is of that kind or ``kind`` is the registry's
+    default kind (``fabric.fit`` may be of any kind whose texture the shaders blend), else the kind built for
+    the scene's weave from its IM coefficients at the kind's default parameters
+    (:func:`clothlab.models.registry.from_irawan`)."""
+    from clothlab.models.registry import DEFAULT_KIND, from_irawan
 
-    if isinstance(fabric.reflectance, model_class("surface")):  # the scene's fabric is already the surface model
-        surface = fabric
-    else:
-        model = build_model("surface", fabric.weave)
-        kd = fabric.coefficients.get("kd", np.zeros(len(fabric.channels)))
-        coefficients = {"kd_warp": kd, "kd_weft": kd, **{k: v for k, v in fabric.coefficients.items()
-                                                          if k.startswith("ks_")}}
-        texture = model.texture(seed=fabric.spec.seed)
-        need = tuple(name for name in texture.component_names if _needed(name, coefficients, fabric.weave))
-        surface = FabricModels(fabric.spec, fabric.weave, model, texture, model.default_parameters(), coefficients,
-                               fabric.channels, need)
-    fabric._surface = surface
-    return surface
+    cache = fabric.__dict__.setdefault("_as_kind", {})
+    if kind not in cache:
+        if kind in (DEFAULT_KIND, fabric.reflectance.kind):
+            cache[kind] = fabric
+        else:
+            model, params, coefficients = from_irawan(kind, fabric.weave, fabric.coefficients)
+            coefficients = _broadcast(coefficients, len(fabric.channels), "fabric.coefficients")
+            texture = model.texture(seed=fabric.spec.seed)
+            need = tuple(name for name in texture.component_names if _needed(name, coefficients, fabric.weave))
+            cache[kind] = FabricModels(fabric.spec, fabric.weave, model, texture, params, coefficients,
+                                       fabric.channels, need)
+    return cache[kind]
 
 
 def _broadcast(coefficients: dict, n: int, where: str) -> dict:
@@ -379,14 +391,15 @@ def network_samples(s: Samples) -> np.ndarray:
     return (dither(s.pixel[first]) < network_weight(s.footprint[first]))[back]
 
 
-def neural_model(fabric: FabricModels):
-    """The scene's weave as ``kind: neural`` (shipped weights), built once; ConfigError if the fabric's
-    components are not the network's (it learns the IM texture)."""
+def neural_model(fabric: FabricModels, kind: str | None = None):
+    """The scene's weave as the network kind ``kind`` (default: the kind of the registry's ``neural-lod``
+    shader; its shipped weights), built once; ConfigError if the fabric's components are not the network's (it
+    learns the IM texture)."""
     cached = getattr(fabric, "_neural", None)
     if cached is None:
         from clothlab.models.registry import build_model
 
-        cached = build_model("neural", fabric.weave)
+        cached = build_model(shader_kind("neural-lod")[0] if kind is None else kind, fabric.weave)
         if tuple(cached.component_names) != tuple(fabric.texture.component_names):
             raise ConfigError(f"neural-lod learns the Irawan-Marschner components {list(cached.component_names)}; "
                               f"the scene's fabric has {list(fabric.texture.component_names)}", field="fabric.fit")
@@ -428,34 +441,63 @@ def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: L
     return out
 
 
-def kang_values(fabric: FabricModels, s: Samples, counter: Counter, *, lod: bool) -> np.ndarray:
-    """Kang's point shader f_r (M, C); ``lod``: with the pixel footprint (eq. 5, optionally Algorithm 1)."""
-    texture, params, coefficients = fabric.kang()
+def kang_values(fabric: FabricModels, s: Samples, counter: Counter, *, lod: bool, kind: str | None = None
+                ) -> np.ndarray:
+    """The self-filtering point shader of ``kind`` (Kang's: :meth:`FabricModels.kang`) f_r (M, C), counted
+    under its kind; ``lod``: with the pixel footprint (eq. 5, optionally Algorithm 1)."""
+    kind = shader_kind("kang-lod")[0] if kind is None else kind
+    texture, params, coefficients = fabric.kang(kind)
     if len(s.u) == 0:
         return _zeros(fabric, 0)
     footprint = np.minimum(s.footprint, MAX_FOOTPRINT) if lod else None
     view = None
     if lod and fabric.spec.kang.prefilter:
         view = s.distance / fabric.spec.kang.view_distance_mm
-    comps = counter.run("kang", len(s.u), texture.components, s.u, s.v, s.wi, s.wo, params,
+    comps = counter.run(kind, len(s.u), texture.components, s.u, s.v, s.wi, s.wo, params,
                         footprint=footprint, view_distance=view)
     return combine(comps, coefficients)
 
 
+#: Shading policies by name (what :data:`clothlab.models.registry.SHADERS` names for each shader): policy ->
+#: f(fabric, kind, samples, counter, lod) -> f_r (M, C) of the scene's fabric as ``kind`` (module docstring).
+POLICIES = {
+    "lod": lambda fabric, kind, s, counter, lod: im_lod_values(kind_models(fabric, kind), s, counter, lod),
+    "texture": lambda fabric, kind, s, counter, lod: texture_values(kind_models(fabric, kind), s, counter),
+    "reflectance": lambda fabric, kind, s, counter, lod: reflectance_values(kind_models(fabric, kind), s, counter),
+    "filtered-lod": lambda fabric, kind, s, counter, lod: kang_values(fabric, s, counter, lod=True, kind=kind),
+    "filtered-texture": lambda fabric, kind, s, counter, lod: kang_values(fabric, s, counter, lod=False, kind=kind),
+    "network-lod": lambda fabric, kind, s, counter, lod: neural_lod_values(fabric, s, counter, lod),
+}
+#: policies whose every covered pixel runs a texture model (the others: the reflectance model alone, or a
+#: per-pixel choice by the footprint, :data:`FOOTPRINT_POLICIES`)
+TEXTURE_POLICIES = ("texture", "filtered-lod", "filtered-texture")
+#: policies that choose per sample by the pixel footprint between the texture and the reflectance model
+FOOTPRINT_POLICIES = ("lod", "network-lod")
+#: the reflectance and texture counters of the scene's fabric, then those of the kinds whose shaders count
+#: their own model (a self-filtering texture, a network): the ``<name>_evaluations`` of a render's stats
+COUNTERS = ("texture", "reflectance", *dict.fromkeys(
+    kind for kind, policy in SHADER_KINDS.values() if policy in ("filtered-lod", "filtered-texture", "network-lod")))
+#: the counters of models evaluated per sample (the timed models of :func:`clothlab.render.render.compare_lod`)
+SAMPLE_COUNTERS = ("texture", "reflectance", *dict.fromkeys(
+    kind for kind, policy in SHADER_KINDS.values() if policy in ("filtered-lod", "filtered-texture")))
+
+
+def reference_shader(shader: str) -> str:
+    """The antialiasing reference of ``shader`` (supersampled by :func:`clothlab.render.render.compare_lod`):
+    the texture-level shader of its kind (policy ``texture`` or ``filtered-texture``), or, for a kind with none
+    (a network learns the scene fabric's texture), the default kind's."""
+    from clothlab.models.registry import DEFAULT_KIND
+
+    kind = shader_kind(shader)[0]
+    for want in (kind, DEFAULT_KIND):
+        for name, (k, policy) in SHADER_KINDS.items():
+            if k == want and policy in ("texture", "filtered-texture"):
+                return name
+    raise ConfigError(f"shader {shader!r} has no texture-level reference shader", field="shader")
+
+
 def shade(shader: str, fabric: FabricModels, samples: Samples, lod: Lod, counter: Counter) -> np.ndarray:
-    """f_r (M, C) of ``shader`` at the samples."""
-    if shader == "im-lod":
-        return im_lod_values(fabric, samples, counter, lod)
-    if shader == "im-texture":
-        return texture_values(fabric, samples, counter)
-    if shader == "im-reflectance":
-        return reflectance_values(fabric, samples, counter)
-    if shader in ("kang-lod", "kang-texture"):
-        return kang_values(fabric, samples, counter, lod=shader == "kang-lod")
-    if shader == "surface-lod":
-        return im_lod_values(surface_models(fabric), samples, counter, lod)
-    if shader == "surface-texture":
-        return texture_values(surface_models(fabric), samples, counter)
-    if shader == "neural-lod":
-        return neural_lod_values(fabric, samples, counter, lod)
-    raise ConfigError(f"unknown shader {shader!r}; choose one of {', '.join(SHADERS)}", field="shader")
+    """f_r (M, C) of ``shader`` at the samples: its kind's models shaded by its policy (the registry's
+    :data:`~clothlab.models.registry.SHADERS`, :data:`POLICIES`)."""
+    kind, policy = shader_kind(shader)
+    return POLICIES[policy](fabric, kind, samples, counter, lod)

@@ -39,7 +39,7 @@ from pathlib import Path
 
 from clothlab.render.render import compare_lod
 from clothlab.render.scene import scene_from_dict
-from clothlab.render.shade import FabricModels
+from clothlab.render.shade import SAMPLE_COUNTERS, FabricModels
 
 #: bound on the relative L1 error of im-lod against the supersampled reference, at every distance
 ERROR_BOUND = 0.15
@@ -125,7 +125,7 @@ def render_benchmark(quick: bool = False, *, figures_dir=None, resolution=None, 
     rows = flat_rows(nested, shaders)
     trend = lod_trend(rows, scene.lod.f0, scene.lod.f1) if {"im-lod", "im-texture"} <= set(shaders) else {}
     per_point = {}
-    for model in ("texture", "reflectance", "kang"):
+    for model in SAMPLE_COUNTERS:  # texture, reflectance and the self-filtering shader's kind
         points = sum(r[s][f"{model}_evaluations"] for r in nested for s in shaders)
         seconds = sum(r[s][f"{model}_cpu_seconds"] for r in nested for s in shaders)
         per_point[f"{model}_us_per_point"] = 1e6 * seconds / points if points else float("nan")
