@@ -62,7 +62,8 @@ SECTIONS = (
     Section("report", "clothlab.studies.report_speed",
             "clothlab report of one fit vs 3 s; figures drawn in one vs two processes", ("clothlab.report",)),
     Section("speed", "clothlab.studies.model_speed",
-            "IM model pairs/s vs a quad loop; IM kernels before/after when present", (_IM,)),
+            "IM model pairs/s vs a quad loop; IM kernels before/after when present; issue 27's objective and IM "
+            "cold/warm", (_IM, "clothlab.fit")),
     Section("texture", "clothlab.studies.texture_speed", "512 x 512 texture-model evaluation time vs 1 s", (_IM,)),
     Section("accuracy", "clothlab.studies.quadrature_accuracy", "quadrature rules vs scipy quad, per yarn", (_IM,)),
     Section("fit", "clothlab.studies.full_fit", "one full fit vs 3 s; objective and fit before/after", _FIT),

@@ -23,14 +23,15 @@ point, legendre against peak.
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 
 from clothlab.studies.data import StudyData, paper_directions
-from clothlab.studies.timing import paired_timings
+from clothlab.studies.timing import alternating_timings, paired_timings
 
 REFERENCE_NODES = 400
+COLD_TARGET_PAIRS_PER_S = 1.5e6
+"""Issue 27: Kang's tile average on a new direction set (cold) at >= 1.5 M pairs/s."""
 
 
 def _fitted(data: StudyData, name: str):
@@ -115,23 +116,6 @@ def per_pair_specular(model, wi, wo, p) -> dict:
             for kind in YARN_KINDS if model.shares[kind] > 0.0}
 
 
-def alternating_timings(fns: list, rounds: int, min_sample_s: float = 0.05) -> list[dict]:
-    """Seconds per call of each function in ``fns``, called in strict alternation (f0, f1, ..., f0, f1, ...) for
-    at least ``rounds`` rounds and ``rounds x min_sample_s`` in all: per function the fastest call's wall time
-    (``wall_s``, time.perf_counter) and CPU time (``cpu_s``, time.process_time, this process)."""
-    best = [{"wall_s": np.inf, "cpu_s": np.inf} for _ in fns]
-    start = time.perf_counter()
-    done = 0
-    while done < rounds or time.perf_counter() - start < rounds * min_sample_s:
-        for b, fn in zip(best, fns, strict=True):
-            t, c = time.perf_counter(), time.process_time()
-            fn()
-            b["wall_s"] = min(b["wall_s"], time.perf_counter() - t)
-            b["cpu_s"] = min(b["cpu_s"], time.process_time() - c)
-        done += 1
-    return best
-
-
 def tile_average_rows(quick: bool, data: StudyData) -> list[dict]:
     """Per preset: pairs/s (wall and CPU) of the previous and the current peak rule (fit / cold), their ratio,
     each one's error against the converged reference, and the saved fit's optimisation time."""
@@ -149,7 +133,7 @@ def tile_average_rows(quick: bool, data: StudyData) -> list[dict]:
             return model.components(wi, wo, p, need=specular)
 
         def cold_call(model=model, p=p):
-            model._directions = None  # forget the direction set's parameter-free terms
+            model.forget_directions()  # forget the direction set's parameter-free terms
             return model.components(wi, wo, p, need=specular)
 
         def previous_call(model=model, p=p):
@@ -181,6 +165,57 @@ def tile_average_rows(quick: bool, data: StudyData) -> list[dict]:
             row["fit_optimisation_s"] = fit["timings"]["optimisation_s"]
         rows.append(row)
     return rows
+
+
+def cold_rows(quick: bool, data: StudyData) -> list[dict]:
+    """Issue 27's Kang rows: per preset the specular components on the 1,575 paper directions cold (a new
+    direction set every call) and warm (the set's terms kept), at the defaults and at the saved fit's parameters
+    (``fits/<fabric>-kang``; None without one), the four timed in alternation (CPU of this process)."""
+    from clothlab.models.kang.model import KangModel
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
+
+    wi, wo = paper_directions()
+    specular = ("specular_warp", "specular_weft")
+    rows = []
+    for name in PRESET_NAMES:
+        fitted_model, fitted_p, fit = _fitted(data, name)
+        cases = {"defaults": (KangModel(get_preset(name)), None)}
+        if fit is not None:
+            cases["fitted"] = (fitted_model, fitted_model.resolve(fitted_p))
+        calls = []
+        for model, p in cases.values():
+            p = model.resolve(p)
+
+            def warm(model=model, p=p):
+                return model.components(wi, wo, p, need=specular)
+
+            def cold(model=model, p=p):
+                model.forget_directions()
+                return model.components(wi, wo, p, need=specular)
+
+            calls += [cold, warm]
+        for fn in calls:
+            fn()  # compile outside the timing
+        timed = alternating_timings(calls, 10 if quick else 30)
+        row = {"fabric": name}
+        for k, case in enumerate(cases):
+            row[case] = {"cold": _rates(timed[2 * k], len(wi)), "warm": _rates(timed[2 * k + 1], len(wi))}
+        rows.append(row)
+    return rows
+
+
+def cold_lines(rows: list[dict]) -> list[str]:
+    """The issue-27 Kang rows: M pairs/s from the fastest call's CPU time, cold (warm), defaults and fitted."""
+    def cell(r):
+        return f"{r['cold']['pairs_per_second_cpu'] / 1e6:6.2f} ({r['warm']['pairs_per_second_cpu'] / 1e6:6.2f})"
+
+    out = ["", "  issue 27: Kang specular components, 1,575 directions, cold (warm) in M pairs/s from the fastest "
+               f"call's CPU time; target cold >= {COLD_TARGET_PAIRS_PER_S / 1e6:g} M",
+           f"  {'fabric':17s} {'defaults':>17s} {'fitted':>17s}"]
+    for r in rows:
+        fitted = cell(r["fitted"]) if "fitted" in r else f"{'(no fit)':>17s}"
+        out.append(f"  {r['fabric']:17s} {cell(r['defaults']):>17s} {fitted:>17s}")
+    return out
 
 
 def _rates(timing: dict, n: int) -> dict:
@@ -220,7 +255,7 @@ def run(context) -> dict:
     import os
 
     return {"load_average": os.getloadavg(), "tile_average": tile_average_rows(context.quick, context.data),
-            "weave_level": weave_level_row(context.quick)}
+            "weave_level": weave_level_row(context.quick), "cold": cold_rows(context.quick, context.data)}
 
 
 def _pair(error: dict) -> str:
@@ -255,4 +290,6 @@ def lines(result: dict) -> list[str]:
     out.append(f"  LoD prefiltered weave level (cotton-denim defaults, {w['points']} points, alpha = 1): legendre "
                f"{w['old_us_per_point']:.2f} -> peak {w['new_us_per_point']:.2f} us/point ({w['speedup']:.1f}x), "
                f"max difference {100 * w['max_rel_difference']:.3f} %")
+    if "cold" in result:
+        out += cold_lines(result["cold"])
     return out

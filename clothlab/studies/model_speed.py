@@ -5,6 +5,11 @@ directions (best of repeats), next to a per-direction scipy.integrate.quad loop 
 Beside it, per preset, the ``support`` rule (4 and 8 Gauss-Legendre nodes per lit piece) against trapezoid-11,
 timed call by call in alternation (:func:`support_vs_trapezoid`): the issue-12 target is support within 1.5x.
 
+Then the issue-27 table (:func:`cold_warm_table`): one objective evaluation of the cotton-denim example (1,575 x 3
+values) and, per preset, the IM model warm (a fit's evaluation: the direction set's terms kept) against cold (new
+directions every call), timed call by call in alternation, in CPU seconds of this process (fastest and median
+call), with the load average; the Kang rows are the ``kang`` section's.
+
 When :mod:`clothlab.studies.kernels_speed` is present its ``compare_kernels`` runs too, in the same run: the
 yarn-integral speed of the previous and the current kernels per preset and their ratio (a ratio near 1 means
 no slowdown beyond noise).
@@ -21,9 +26,14 @@ import numpy as np
 
 from clothlab.studies.data import paper_directions
 from clothlab.studies.quad_reference import quad_reference
-from clothlab.studies.timing import best_time, clear_memo, paired_timings
+from clothlab.studies.timing import alternating_timings, best_time, clear_memo, paired_timings
 
 FABRICS = ("polyester-lining", "cotton-denim")
+OBJECTIVE_FABRIC = "cotton-denim"
+OBJECTIVE_TARGET_S = 0.3e-3
+"""Issue 27: one objective evaluation of the cotton-denim example (1,575 x 3 values) within 0.3 ms."""
+COLD_TARGET = 1.5
+"""Issue 27: a model evaluated at new directions (cold) within this factor of a warm evaluation."""
 SUPPORT_NODES = (4, 8)
 SUPPORT_TARGET = 1.5
 """The issue-12 target: the support rule's time on 1,575 directions within this factor of trapezoid-11's."""
@@ -89,7 +99,7 @@ def support_vs_trapezoid(quick: bool, fabrics=None) -> dict:
 
                 def evaluate():
                     if mode == "cold":
-                        model._directions = None  # forget the direction set's terms
+                        model.forget_directions()  # forget the direction set's terms
                     clear_memo(model)
                     return model.components(wi, wo, p, normalised=False, warn=False)
                 evaluate()
@@ -122,6 +132,83 @@ def support_lines(result: dict) -> list[str]:
     return out
 
 
+def objective_timing(quick: bool, data) -> dict:
+    """CPU seconds of one objective evaluation (``FitProblem.__call__``: the model's components at the measured
+    directions, then the NNLS) of the :data:`OBJECTIVE_FABRIC` example (its fabric.yaml) at points near its
+    start, every call timed: the fastest and the median over all calls of two rounds."""
+    import statistics
+
+    from clothlab.fit.problem import build_problem
+
+    problem = build_problem(data.load_config(OBJECTIVE_FABRIC))
+    rng = np.random.default_rng(0)
+    x0 = problem.to_unit(problem.start)
+    points = np.clip(x0[None] + 0.05 * rng.standard_normal((100 if quick else 400, len(x0))), 0.0, 1.0)
+    for x in points[:5]:
+        problem(x)  # compile, fill the direction terms
+    calls = []
+    for _ in range(2):
+        for x in points:
+            t = time.process_time()
+            problem(x)
+            calls.append(time.process_time() - t)
+    return {"fabric": OBJECTIVE_FABRIC, "values": int(problem.y.size), "calls": len(calls),
+            "cpu_fastest_s": min(calls), "cpu_median_s": statistics.median(calls), "target_s": OBJECTIVE_TARGET_S}
+
+
+def im_cold_warm(quick: bool, fabrics=None) -> dict:
+    """Per preset: the whole IM model (raw components, trapezoid-11, the preset's parameters) on the 1,575 paper
+    directions, warm (the memo of integrals cleared, the direction set's terms kept: a fit's evaluation) and cold
+    (the direction set forgotten too: eval, render, CV, the surrogate's R), in alternation
+    (:func:`clothlab.studies.timing.alternating_timings`); ratio = cold / warm CPU time (fastest, median)."""
+    from clothlab.models.irawan.model import IrawanModel
+    from clothlab.weave.presets import PRESET_NAMES, get_preset
+
+    wi, wo = paper_directions()
+    out = {}
+    for name in fabrics or PRESET_NAMES:
+        model = IrawanModel(get_preset(name))
+        p = model.default_parameters()
+
+        def warm(model=model, p=p):
+            model.forget_results()
+            return model.components(wi, wo, p, normalised=False, warn=False)
+
+        def cold(model=model, p=p):
+            model.forget_directions()
+            return model.components(wi, wo, p, normalised=False, warn=False)
+
+        warm_t, cold_t = alternating_timings([warm, cold], 100 if quick else 400, min_sample_s=0.0)
+        out[name] = {"warm": warm_t, "cold": cold_t, "ratio": cold_t["cpu_s"] / warm_t["cpu_s"],
+                     "ratio_median": cold_t["cpu_median_s"] / warm_t["cpu_median_s"]}
+    return out
+
+
+def cold_warm_table(quick: bool, data) -> dict:
+    """The issue-27 rows of this section: :func:`objective_timing` and :func:`im_cold_warm`, with the load."""
+    import os
+
+    return {"load_average": os.getloadavg(), "objective": objective_timing(quick, data), "im": im_cold_warm(quick)}
+
+
+def cold_warm_lines(table: dict) -> list[str]:
+    """The issue-27 rows: the objective, then IM warm / cold per preset (CPU ms per 1,575 directions)."""
+    o = table["objective"]
+    load = table["load_average"]
+    out = ["", f"  issue 27 (CPU time of this process, every call timed; load average {load[0]:.2f} {load[1]:.2f} "
+               f"{load[2]:.2f}):",
+           f"  one objective evaluation, {o['fabric']} {o['values']:,d} values: fastest {1e3 * o['cpu_fastest_s']:.3f} "
+           f"ms, median {1e3 * o['cpu_median_s']:.3f} ms of {o['calls']} calls (target <= {1e3 * o['target_s']:g} ms)",
+           f"  IM whole model, trapezoid-11, 1,575 directions, ms (fastest / median); target cold <= {COLD_TARGET}x "
+           "warm",
+           f"  {'fabric':18s} {'warm':>15s} {'cold':>15s} {'cold/warm':>11s}"]
+    for name, r in table["im"].items():
+        w, c = r["warm"], r["cold"]
+        out.append(f"  {name:18s} {1e3 * w['cpu_s']:7.3f} {1e3 * w['cpu_median_s']:7.3f} "
+                   f"{1e3 * c['cpu_s']:7.3f} {1e3 * c['cpu_median_s']:7.3f} {r['ratio']:5.2f} {r['ratio_median']:5.2f}")
+    return out
+
+
 def kernels_available() -> bool:
     """True when the kernels before/after comparison module is installed."""
     return importlib.util.find_spec(KERNELS_MODULE) is not None
@@ -135,7 +222,8 @@ def kernels_comparison(quick: bool) -> dict | None:
 
 
 def run(context) -> dict:
-    result = {"model": model_speed(context.quick), "support": support_vs_trapezoid(context.quick)}
+    result = {"model": model_speed(context.quick), "support": support_vs_trapezoid(context.quick),
+              "cold_warm": cold_warm_table(context.quick, context.data)}
     kernels = kernels_comparison(context.quick)
     if kernels is not None:
         result["kernels"] = kernels
@@ -169,6 +257,8 @@ def lines(result: dict) -> list[str]:
                    f"quad loop {s['quad_pairs_per_second']:8,.1f} pairs/s; ratio {s['speedup_vs_quad']:,.0f}x")
     if "support" in result:
         out += support_lines(result["support"])
+    if "cold_warm" in result:
+        out += cold_warm_lines(result["cold_warm"])
     if "kernels" in result:
         out += kernel_lines(result["kernels"])
     else:

@@ -75,3 +75,29 @@ def paired_timings(base, fns, rounds: int, min_sample_s: float = MIN_SAMPLE_S):
         base_best = min(base_best, best_b)
         out.append((best_f, best_f / best_b))
     return base_best, [(base_best, 1.0) if o is None else o for o in out]
+
+
+def alternating_timings(fns: list, rounds: int, min_sample_s: float = 0.05) -> list[dict]:
+    """Seconds per call of each function in ``fns``, called in strict alternation (f0, f1, ..., f0, f1, ...) for
+    at least ``rounds`` rounds and ``rounds x min_sample_s`` in all: per function the fastest call's wall time
+    (``wall_s``, time.perf_counter) and CPU time (``cpu_s``, time.process_time, this process), and the median
+    call's CPU time (``cpu_median_s``).  Alternating call by call, a change in the machine's load hits all alike;
+    the CPU time of this process is what other processes disturb least."""
+    import statistics
+
+    best = [{"wall_s": math.inf, "cpu_s": math.inf} for _ in fns]
+    cpu: list[list[float]] = [[] for _ in fns]
+    start = time.perf_counter()
+    done = 0
+    while done < rounds or time.perf_counter() - start < rounds * min_sample_s:
+        for b, calls, fn in zip(best, cpu, fns, strict=True):
+            t, c = time.perf_counter(), time.process_time()
+            fn()
+            c = time.process_time() - c
+            b["wall_s"] = min(b["wall_s"], time.perf_counter() - t)
+            b["cpu_s"] = min(b["cpu_s"], c)
+            calls.append(c)
+        done += 1
+    for b, calls in zip(best, cpu, strict=True):
+        b["cpu_median_s"] = statistics.median(calls)
+    return best
