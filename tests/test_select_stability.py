@@ -58,3 +58,17 @@ def test_stability_runs_inside_select_and_lands_in_the_summary(tmp_path):
 
     page = "".join(html._stability_section(stab))
     assert "Selection stability" in page and "wool-gabardine" in page
+
+
+def test_winners_are_tallied_by_weave_family_too():
+    """The family of the IM paper's fabrics (sec. 8: cotton twill, denim and gabardine twills; polyester lining and
+    shantung plain; charmeuse satin) and of a generated pattern (its name's first word)."""
+    from clothlab.fit.stability import weave_family
+
+    rows = [{"weave": w, "kind": "irawan", "loss": "squared"} for w in
+            ("preset:cotton-twill", "preset:wool-gabardine", "pattern:twill-3x3", "preset:silk-shantung",
+             "pattern:satin-5x5")]
+    counts = tally(rows)
+    assert counts["weave family"] == {"twill": 3, "plain": 1, "satin": 1}
+    assert verdict(counts, 5)["weave family"] == "twill wins 3 of 5"
+    assert weave_family("/some/path/my.wv") == "other" and weave_family(None) is None

@@ -4,7 +4,7 @@ A free parameter is flagged **not determined** when
 
 * its component's coefficient is 0 in every channel: the NNLS switched the component off, so nothing the
   parameter shapes reaches the prediction (``ks_warp`` = 0 -> every ``warp.*`` parameter; ``ks_weft`` ->
-  ``weft.*``; ``kd`` -> the diffuse term's ``sigma``);
+  ``weft.*``; ``kd`` -> the diffuse term's ``sigma``; an added term's coefficient, e.g. ``sheen`` -> ``sheen.r``);
 * the Gauss-Newton Jacobian column is zero (:mod:`clothlab.fit.uncertainty`: "no effect on the residuals
   within the step") - its standard error is then missing;
 * or its value lies within :data:`BOUND_FRACTION` (2 %) of the range from a bound (a periodic parameter such as
@@ -43,7 +43,7 @@ def _owned_by(coefficient: str, parameter: str) -> bool:
         return parameter.startswith(coefficient[3:] + ".")
     if coefficient == "kd":
         return parameter in DIFFUSE_PARAMETERS
-    return False
+    return parameter.startswith(coefficient + ".")  # an added term's own, e.g. sheen -> sheen.r
 
 
 def not_determined(fit: dict) -> dict[str, str]:

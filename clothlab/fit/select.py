@@ -321,8 +321,9 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
                        else {})
     if not free:  # config validation's rule (kind neural: the parameters its network was trained over)
         free = list(default_free(specular, options))
-    diffuse = cls.diffuse_class  # a composite's diffuse term brings its own (sigma); None for a single model
-    free += [n for n in (diffuse.default_free if diffuse else ()) if n not in free and n in table]
+    # what the kind adds to its specular part brings its own defaults: a composite's diffuse term (sigma), a
+    # physics term (sheen.r, smith.alpha: clothlab.models.composite.terms); nothing for a single model
+    free += [n for n in cls.default_free if n not in specular.default_free and n not in free and n in table]
     built = _model_parameters(config, candidate.kind, candidate.weave, tuple(sorted(options.items())))
     if built is not None:  # e.g. Kang declares the parameters of the yarn kinds the weave has
         free = [n for n in free if n in built]

@@ -1,12 +1,13 @@
-"""Selection stability: how often each weave, kind, loss and orientation range wins when the rows change
-(issue 28 build item 3; docs/select.md).
+"""Selection stability: how often each weave, weave family, kind, loss and orientation range wins when the rows
+change (issue 28 build item 3; docs/select.md).
 
 The selection is repeated on ``B`` seeded subsamples of the rows (each without replacement, a fraction
 :data:`SUBSAMPLE` of them - subsampling rather than the bootstrap, whose duplicated rows would sit in the
 training and the held-out part of the same inner CV fold; Politis, Romano & Wolf 1999, "Subsampling", ch. 2),
 every candidate fitted and ranked by its inner CV on the subsample alone.  The winners are tallied by weave,
-by kind (the diffuse option), by loss and by orientation range (:data:`ORIENTATION_BINS` equal ranges of the
-period).  The outer-fold winners of a nested CV (:mod:`clothlab.fit.nested`) are tallied the same way.
+by weave family (plain / twill / satin: :func:`weave_family`), by kind (the diffuse option), by loss and by
+orientation range (:data:`ORIENTATION_BINS` equal ranges of the period).  The outer-fold winners of a nested
+CV (:mod:`clothlab.fit.nested`) are tallied the same way.
 
 Verdict: an aspect is **not determined** by these data when no value of it wins a clear majority, more than
 :data:`MAJORITY` of the repetitions - the selection's counterpart of the parameter flags.
@@ -24,7 +25,24 @@ import numpy as np
 SUBSAMPLE = 0.8
 MAJORITY = 0.5
 ORIENTATION_BINS = 6
-ASPECTS = ("weave", "kind", "loss", "orientation range")
+ASPECTS = ("weave", "weave family", "kind", "loss", "orientation range")
+#: The weave family (Irawan & Marschner 2012, sec. 4: "plain weave, twill, and satin") of each shipped preset, as
+#: the paper describes the fabric it measured (sec. 8, fabrics (1)-(6)); a ``pattern:<name>`` weave's family is
+#: its name's first word (clothlab.weave.patterns); any other weave (a .wv file) is "other".
+PRESET_FAMILIES = {"cotton-twill": "twill", "cotton-denim": "twill", "wool-gabardine": "twill",
+                   "polyester-lining": "plain", "silk-charmeuse": "satin", "silk-shantung": "plain"}
+
+
+def weave_family(weave: str | None) -> str | None:
+    """plain / twill / satin of a candidate's weave (``preset:<name>`` or ``pattern:<name>``), else "other"."""
+    if weave is None:
+        return None
+    text = str(weave)
+    if text.startswith("preset:"):
+        return PRESET_FAMILIES.get(text[len("preset:"):], "other")
+    if text.startswith("pattern:"):
+        return text[len("pattern:"):].split("-")[0]
+    return "other"
 
 
 def orientation_range(orientation, period: float) -> str | None:
@@ -44,7 +62,8 @@ def tally(rows: list[dict], periods: dict | None = None) -> dict:
     ``periods``: kind -> orientation period (deg)."""
     out = {a: {} for a in ASPECTS}
     for row in rows:
-        values = {"weave": row.get("weave"), "kind": row.get("kind"), "loss": _loss(row),
+        values = {"weave": row.get("weave"), "weave family": weave_family(row.get("weave")), "kind": row.get("kind"),
+                  "loss": _loss(row),
                   "orientation range": orientation_range(row.get("orientation"),
                                                          (periods or {}).get(row.get("kind"), 0.0))}
         for aspect, value in values.items():
@@ -126,4 +145,5 @@ def stability_lines(stab: dict) -> list[str]:
     return lines
 
 
-__all__ = ["ASPECTS", "orientation_range", "stability", "stability_lines", "subsample_masks", "tally", "verdict"]
+__all__ = ["ASPECTS", "PRESET_FAMILIES", "weave_family",
+           "orientation_range", "stability", "stability_lines", "subsample_masks", "tally", "verdict"]
