@@ -102,20 +102,20 @@ def run(args) -> int:
     if not args.source or args.output is None:
         raise ConfigError("give a source (preset:<name>, a .wv file or a fabric.yaml) and -o OUTPUT, "
                           "or --paper-examples DIR", field="-o" if args.source else "source")
+    from clothlab.config import apply_overrides, override_quadrature
+    from clothlab.config.build import model_from_config, model_from_weave
     from clothlab.io.table import write_table
-    from clothlab.models.registry import DEFAULT_KIND, build_model
     from clothlab.simulate.gonio import NoiseModel, simulate
     from clothlab.weave.presets import resolve_weave
 
     source = args.source
-    params, rule, nodes, kind, options = {}, "trapezoid", 11, DEFAULT_KIND, {}
+    params = {}
     if source.endswith((".yaml", ".yml")):
         from clothlab.config import load_config
 
-        cfg = load_config(source)
-        weave = resolve_weave(cfg.model.weave, cfg.base_dir)
-        params, rule, nodes = dict(cfg.model.params), cfg.model.quadrature.rule, cfg.model.quadrature.nodes
-        kind, options = cfg.model.kind, dict(cfg.model.options)
+        cfg = apply_overrides(load_config(source), rule=args.rule, nodes=args.nodes)
+        model = model_from_config(cfg)
+        params = dict(cfg.model.params)
     else:
         try:
             weave = resolve_weave(source, Path.cwd())
@@ -123,6 +123,8 @@ def run(args) -> int:
             if exc.path is not None:
                 raise
             raise ConfigError(exc.detail, field="source") from None
+        model = model_from_weave(weave, quadrature=override_quadrature(rule=args.rule, nodes=args.nodes))
+    weave = model.weave
     channels = channel_names(args.channels)
     n = len(channels)
     coefficients = {"kd": channel_values("0.1" if args.kd is None else args.kd, "--kd", n),
@@ -132,7 +134,6 @@ def run(args) -> int:
     if dark:
         raise ConfigError(f"channel {dark[0]} has --kd, --ks-warp and --ks-weft all 0: it would reflect no light",
                           field="--kd")
-    model = build_model(kind, weave, (args.rule or rule, args.nodes or nodes), **options)
     for name in model.component_names:  # per-yarn diffuse components (kind surface) take --kd
         if name.startswith("diffuse_"):
             coefficients.setdefault("kd_" + name.split("_", 1)[1], coefficients["kd"])

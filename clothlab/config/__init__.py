@@ -29,7 +29,7 @@ from clothlab.config.schema import (
     QuadratureConfig,
     ReportConfig,
 )
-from clothlab.config.validate import apply_overrides, config_from_dict, load_config
+from clothlab.config.validate import apply_overrides, config_from_dict, load_config, override_quadrature
 
 __all__ = [
     "GLOBAL_ALGORITHMS",
@@ -50,5 +50,6 @@ __all__ = [
     "config_from_dict",
     "load_config",
     "load_yaml_with_lines",
+    "override_quadrature",
     "parse_yaml_with_lines",
 ]

@@ -581,18 +581,24 @@ def config_from_dict(d: dict, source: str = "<dict>", base_dir=".") -> Config:
     return _Validator(d, LineMap(source=source), Path(base_dir).absolute(), None).config()
 
 
+def override_quadrature(quadrature: Quadrature | None = None, *, rule=None, nodes=None) -> Quadrature:
+    """``quadrature`` (None: the default) with the command line's ``--rule`` / ``--nodes`` (None keeps its own;
+    ``nodes`` also as decimal text), checked as in the yaml; errors name the option."""
+    given = (quadrature or Quadrature()).record()
+    if rule is not None:
+        given["rule"] = rule
+    if nodes is not None:
+        given["nodes"] = as_cli_int(nodes, Location(None, "--nodes"))
+    return checked_quadrature(given, Location(None, "--rule"), Location(None, "--nodes"))
+
+
 def apply_overrides(config: Config, *, rule=None, nodes=None, max_evals=None, seed=None) -> Config:
     """A copy of ``config`` with command-line overrides (``--rule --nodes --max-evals --seed``) applied.
 
     Values are checked as in the yaml; errors name the option, e.g. field ``--nodes``.
     """
     optimizer = config.fit.optimizer
-    given = config.model.quadrature.record()
-    if rule is not None:
-        given["rule"] = rule
-    if nodes is not None:  # its decimal text too ("21")
-        given["nodes"] = as_cli_int(nodes, Location(None, "--nodes"))
-    quadrature = checked_quadrature(given, Location(None, "--rule"), Location(None, "--nodes"))
+    quadrature = override_quadrature(config.model.quadrature, rule=rule, nodes=nodes)
     if max_evals is not None:
         optimizer = replace(optimizer, max_evals=as_cli_int(max_evals, Location(None, "--max-evals"), 1, MAX_EVALS))
     if seed is not None:

@@ -114,13 +114,10 @@ def _model_source(source, rule, nodes):
         model, params, coefficients, channels = load_fitted(source)
     else:
         from clothlab.config import load_config
-        from clothlab.models.registry import build_model
-        from clothlab.weave.presets import resolve_weave
+        from clothlab.config.build import model_from_config
 
         cfg = load_config(source)
-        q = cfg.model.quadrature
-        model = build_model(cfg.model.kind, resolve_weave(cfg.model.weave, cfg.base_dir), (q.rule, q.nodes),
-                            **cfg.model.options)
+        model = model_from_config(cfg)
         params, coefficients, channels = dict(cfg.model.params), None, ()
     if rule is not None or nodes is not None:  # a model that integrates nothing ignores them
         model = model.with_quadrature(rule, nodes)

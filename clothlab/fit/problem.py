@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from clothlab.config.build import model_from_config
 from clothlab.config.schema import DEFAULT_ORIENTATION_AVERAGE
 from clothlab.errors import ConfigError, GeometryWarning
 from clothlab.fit.loss import DEFAULT_SCALE, check_loss, effective_residuals, irls_coefficients, loss_value
@@ -42,8 +43,6 @@ from clothlab.fit.nnls import nnls_sets, nnls_small
 from clothlab.io.loader import load_measurement
 from clothlab.models.base import ORIENTATION
 from clothlab.models.components import coefficient_name
-from clothlab.models.registry import build_model
-from clothlab.weave.presets import resolve_weave
 
 
 @dataclass(frozen=True)
@@ -267,9 +266,7 @@ def build_problem(config, measurement=None) -> FitProblem:
     if measurement is None:
         measurement = load_measurement(config.measurement.path, None if config.measurement.format == "auto"
                                        else config.measurement.format, **config.measurement.options)
-    weave = resolve_weave(config.model.weave, config.base_dir)
-    q = config.model.quadrature
-    model = build_model(config.model.kind, weave, (q.rule, q.nodes), **config.model.options)
+    model = model_from_config(config)
     fit = config.fit
     return FitProblem(model, measurement, fit.free, config.model.params, fit.bounds, fit.metric,
                       loss=fit.loss, loss_scale=fit.loss_scale, valid_geometry=fit.valid_geometry,

@@ -34,12 +34,12 @@ import numpy as np
 
 from clothlab import __version__
 from clothlab.atomic import atomic_directory
+from clothlab.config.build import model_from_fit
 from clothlab.errors import InputError, ResultError
 from clothlab.fit.fitreport import Reportable
 from clothlab.frames import spherical_to_vector
-from clothlab.models.registry import build_model, model_class
 from clothlab.untrusted import load_json_file
-from clothlab.weave.wvformat import format_wv, parse_wv
+from clothlab.weave.wvformat import format_wv
 
 MAX_SLICE_DIRECTIONS = 24
 """Most exitant directions slices.csv holds (the report's slice figure shows a grid of panels; a table with
@@ -138,26 +138,16 @@ def load_fitted(fit_dir):
     """(model, params, coefficients {name: (C,)}, channels) of a saved fit, ready to evaluate."""
     fit_dir = Path(fit_dir)
     fit = read_fit_json(fit_dir)
-    weave_path = fit_dir / "weave.wv"
-    if not weave_path.is_file():
-        raise InputError("weave.wv is missing from the fit directory", path=weave_path)
+    model = model_from_fit(fit, fit_dir)  # kind, weave.wv, quadrature and options as fitted
     try:
-        kind = fit["model"]["kind"]
-        q = fit["model"].get("quadrature") or {}
         params = {k: _number(v["value"], f"parameters.{k}.value", fit_dir) for k, v in fit["parameters"].items()}
         channels = tuple(fit["measurement"]["channels"])
         coefficients = {k: np.array([_number(v[c], f"coefficients.{k}.{c}", fit_dir) for c in channels])
                         for k, v in fit["coefficients"].items()}
         if not coefficients or not channels:
             raise KeyError("coefficients and measurement.channels must not be empty")
-        # the model's constructor options as fitted (e.g. kang: alternating, tile_nodes)
-        options = dict(fit["model"].get("options") or (fit.get("config") or {}).get("model", {}).get("options") or {})
-        for name in model_class(kind).options_class().path_options:  # copies in the fit directory
-            if options.get(name) and not Path(options[name]).is_absolute():
-                options[name] = str(fit_dir / options[name])
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise InputError(f"fit.json lacks or mangles a required entry ({exc})", path=fit_dir / "fit.json") from None
-    model = build_model(kind, parse_wv(weave_path), (q.get("rule", "trapezoid"), int(q.get("nodes", 11))), **options)
     return model, params, coefficients, channels
 
 

@@ -92,8 +92,8 @@ def _texture_source(model, params, coefficients, channels, origin, *, path=None,
 def load_source(source) -> TextureSource:
     """A fit directory (fit.json + weave.wv), a fabric.yaml, or ``preset:<name>`` / a preset name (the registry's
     default model kind); its model must have a texture model with the layout's parameters."""
-    from clothlab.models.registry import DEFAULT_KIND, build_model
-    from clothlab.weave.presets import PRESET_NAMES, get_preset
+    from clothlab.config.build import model_from_config, model_from_weave
+    from clothlab.weave.presets import PRESET_NAMES
 
     text = str(source)
     path = Path(text)
@@ -105,12 +105,9 @@ def load_source(source) -> TextureSource:
                                field="model.kind")
     if path.suffix.lower() in (".yaml", ".yml") and path.is_file():
         from clothlab.config import load_config
-        from clothlab.weave.presets import resolve_weave
 
         config = load_config(path)
-        q = config.model.quadrature
-        model = build_model(config.model.kind, resolve_weave(config.model.weave, path.parent), (q.rule, q.nodes),
-                            **config.model.options)
+        model = model_from_config(config)
         return _texture_source(model, model.resolve(config.model.params), None, None, f"config:{path}", path=path,
                                field="model.kind")
     name = text[len("preset:"):] if text.lower().startswith("preset:") else text
@@ -119,7 +116,7 @@ def load_source(source) -> TextureSource:
                          f"({', '.join(PRESET_NAMES)})", field="source")
     from clothlab.simulate.examples import YARN_COLOURS
 
-    model = build_model(DEFAULT_KIND, get_preset(name))
+    model = model_from_weave(f"preset:{name}")
     colours = YARN_COLOURS.get(model.weave.name)
     coefficients = None if colours is None else {k: np.asarray(v, dtype=np.float64) for k, v in colours.items()}
     return _texture_source(model, model.default_parameters(), coefficients, ("R", "G", "B") if colours else None,

@@ -110,8 +110,3 @@ def tile_comparison_figure(result, *, view: int = 0, repeat: int = 2, title: str
                     f"{view_text}",
                     fontsize=10, y=0.995)
     return figure
-
-
-def error_table(result) -> dict:
-    """The per-image error percentiles of a fit (JSON-ready): relative errors of tile averages and pixels."""
-    return result.errors

@@ -224,9 +224,6 @@ class _Parser:
         self.pos += 1
         return tok
 
-    def peek(self) -> _Token:
-        return self.tokens[self.pos]
-
     def fail(self, message: str, tok: _Token, field: str | None = None):
         raise InputError(message, path=self.source, line=tok.line, field=field)
 

@@ -56,7 +56,7 @@ class Quadrature:
 
     def __post_init__(self):
         if not isinstance(self.rule, str) or self.rule not in RULES:
-            raise ParameterError(f"unknown quadrature rule {self.rule!r}; choose one of {', '.join(RULES)}",
+            raise ParameterError(f"unknown quadrature rule {self.rule!r}; expected one of {', '.join(RULES)}",
                                  field="model.quadrature.rule")
         lo, hi = NODES_RANGE
         if isinstance(self.nodes, bool) or not isinstance(self.nodes, numbers.Integral) or \
