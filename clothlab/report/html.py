@@ -67,8 +67,10 @@ SCATTERED_CAPTIONS = {
                    "overlaid, coloured by their relative error. Several channels are shown as their mean.",
     "slices": "The fitted model in the incidence plane of the incident directions shown above, with the "
               "samples of their window that lie near that plane (only planes with such samples are drawn).",
-    "residuals": "Relative error (model \u2212 measured) / measured against \u03b8i, \u03b8o and the phase "
-                 "angle between the incident and exitant directions, with binned medians.",
+    "residuals": "Relative error (model \u2212 measured) / measured against \u03b8i, \u03b8o, the phase "
+                 "angle between the incident and exitant directions (the distance to retro-reflection), the "
+                 "half-vector polar angle and the distance to the mirror direction, with binned medians; the "
+                 "p80 tail (the rows whose |error| exceeds its 80th percentile) ringed in black.",
     "parity": "Measured against model BRDF on log-log axes: points on the diagonal are fitted exactly; dashed "
               "lines at \u00b120 %.",
 }

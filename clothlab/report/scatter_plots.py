@@ -4,8 +4,8 @@ the number of directions.
 - :func:`plot_scattered_hemispheres` - for each representative incident direction, the exitant hemisphere
   of the fitted model (tangent-plane projection, warp up, Irawan & Marschner 2012 sec. 4.1) with the measured
   samples of that window overlaid, coloured by their relative error (model - measured) / measured (sec. 8).
-- :func:`plot_residuals` - the relative error against theta_i, theta_o and the phase angle
-  g = arccos(wi . wo), with binned medians.
+- :func:`plot_residuals` - the relative error against theta_i, theta_o, the phase angle g = arccos(wi . wo),
+  the half-vector polar angle and the distance to the mirror direction, with binned medians and the p80 tail.
 - :func:`plot_parity` - measured against model on log-log axes with the 1:1 line.
 - :func:`plot_scattered_slices` - the model in the incidence plane of the panels' incident directions, only
   where measured samples lie near that plane.
@@ -35,7 +35,7 @@ from clothlab.report.plots import (
     set_log_axis,
     tangent_plane_xy,
 )
-from clothlab.report.sampling import WINDOW_DEG, Panel, angle_between, unit_vectors
+from clothlab.report.sampling import WINDOW_DEG, Panel, unit_vectors
 
 MAP_PIXELS = 61
 """Exitant directions across a model map (about 2,900 inside the disc; matplotlib smooths the image)."""
@@ -130,13 +130,6 @@ def plot_scattered_hemispheres(predictions: dict, panels: list[Panel], maps: lis
     return fig
 
 
-def phase_angle(predictions: dict) -> np.ndarray:
-    """g = angle between wi and wo (deg) of every row: 0 at retro-reflection, 2 theta at the mirror."""
-    wi = unit_vectors(predictions["theta_i"], predictions["phi_i"])
-    wo = unit_vectors(predictions["theta_o"], predictions["phi_o"])
-    return angle_between(wi, wo)
-
-
 def _binned_median(x, y, bins: int = 12):
     edges = np.linspace(np.nanmin(x), np.nanmax(x), bins + 1)
     index = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
@@ -150,34 +143,40 @@ def _binned_median(x, y, bins: int = 12):
 
 
 def plot_residuals(predictions: dict):
-    """Relative error (model - measured) / measured in percent against theta_i, theta_o and the phase angle,
-    per channel, with binned medians (black) and the zero line."""
+    """Relative error (model - measured) / measured in percent against the geometry a missing term would follow
+    (:data:`clothlab.fit.residuals.BINS`: theta_i, theta_o, the phase angle = distance to retro-reflection, the
+    half-vector polar angle and the distance to the mirror direction), per channel, with binned medians (black),
+    the zero line and the p80 tail (rows whose |error| exceeds its 80th percentile) ringed in black."""
+    from clothlab.fit.residuals import LABELS, TAIL, features
+
     channels = channels_of(predictions)
-    fig = _figure(11.0, 3.5, margins={"left": 0.8, "right": 0.15, "top": 0.45, "bottom": 0.6, "wspace": 0.05})
-    axes = fig.subplots(1, 3, sharey=True)
+    geometry = features(*(np.asarray(predictions[k], float) for k in ("theta_i", "phi_i", "theta_o", "phi_o")))
+    fig = _figure(16.0, 3.6, margins={"left": 0.8, "right": 0.15, "top": 0.45, "bottom": 0.75, "wspace": 0.05})
+    axes = fig.subplots(1, len(geometry), sharey=True)
     errors = {c: 100.0 * signed_relative_error(predictions[f"measured_{c}"], predictions[f"model_{c}"])
               for c in channels}
     pooled = np.concatenate(list(errors.values()))
     finite = np.abs(pooled[np.isfinite(pooled)])
     limit = max(float(np.percentile(finite, 99)) * 1.15, 1.0) if finite.size else 1.0
-    xs = (("theta_i", np.asarray(predictions["theta_i"], float), "\u03b8i (deg)"),
-          ("theta_o", np.asarray(predictions["theta_o"], float), "\u03b8o (deg)"),
-          ("phase", phase_angle(predictions), "phase angle g = \u2220(wi, wo) (deg)"))
-    for ax, (_, x, xlabel) in zip(axes, xs, strict=True):
+    cut = float(np.percentile(finite, TAIL)) if finite.size else np.inf
+    for ax, (name, x) in zip(axes, geometry.items(), strict=True):
         for index, c in enumerate(channels):
-            ax.plot(x, np.clip(errors[c], -limit, limit), ".", ms=3, alpha=0.5, color=_channel_colour(c, index),
-                    label=c)
+            shown = np.clip(errors[c], -limit, limit)
+            ax.plot(x, shown, ".", ms=3, alpha=0.5, color=_channel_colour(c, index), label=c)
+            tail = np.abs(errors[c]) > cut
+            ax.plot(x[tail], shown[tail], "o", ms=5, mfc="none", mec="black", mew=0.6,
+                    label=f"p{TAIL:g} tail" if index == 0 else None)
         centres, medians = _binned_median(np.tile(x, len(channels)), pooled)
         if centres.size:
             ax.plot(centres, medians, "-", color="black", lw=1.4, label="binned median")
         ax.axhline(0.0, color="0.4", lw=0.8)
-        ax.set_xlabel(xlabel)
+        ax.set_xlabel("\n".join(textwrap.wrap(f"{LABELS[name]} (deg)", 28)), fontsize=8)
         ax.grid(alpha=0.3, lw=0.5)
     axes[0].set_ylim(-limit, limit)
     axes[0].set_ylabel("(model \u2212 measured) / measured (%)")
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"Relative error against the angles (values beyond \u00b1{limit:.3g} % drawn at the edge)",
-                 fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"Relative error against the geometry (values beyond \u00b1{limit:.3g} % drawn at the edge; "
+                 f"ringed: the p{TAIL:g} tail, |error| > {cut:.3g} %)", fontsize=9)
     return fig
 
 
