@@ -220,3 +220,19 @@ def test_equal_row_groups_is_the_partition_of_equal_rows():
     for g in range(len(first)):  # the group's first row is the earliest row with that value
         assert np.flatnonzero(inverse == g)[0] == first[g]
     assert len(np.unique(expected_inverse.ravel())) == len(first)
+
+
+def test_yarn_integrals_keep_the_callers_geometry():
+    """yarn_integrals converts psi, umax to radians on its own copy: a one-set geometry (whose transpose is a
+    view) is not changed in place, so a repeated call gives the same values."""
+    from clothlab.models.irawan.integrals import yarn_geometry_key, yarn_integrals, yarn_terms
+
+    wi, wo = _pairs(100, np.random.default_rng(10))
+    model = IrawanModel(get_preset("cotton-denim"))
+    geometry = np.array([yarn_geometry_key(model.default_parameters(), "warp")])
+    kept = geometry.copy()
+    terms = yarn_terms(wi, wo, "warp", model.quadrature)
+    first = yarn_integrals(terms, geometry, model.quadrature)
+    np.testing.assert_array_equal(geometry, kept)
+    np.testing.assert_array_equal(yarn_integrals(terms, geometry, model.quadrature), first)
+    assert np.count_nonzero(first) > 10

@@ -16,7 +16,7 @@ import numpy as np
 from clothlab.errors import ConfigError, GeometryWarning
 from clothlab.frames import to_yarn_frame
 from clothlab.models.irawan.phase import phase_function
-from clothlab.models.irawan.quadrature import Quadrature, interval_rule
+from clothlab.models.irawan.quadrature import Quadrature, cosine_mapped_unit_rule, interval_rule, unit_rule
 from clothlab.models.irawan.yarn import staple_path, yarn_integral
 from clothlab.weave.model import YARN_KINDS
 
@@ -205,8 +205,6 @@ _FILAMENT_NODES: dict = {}
 def _filament_nodes(quadrature: Quadrature) -> tuple | None:
     hit = _FILAMENT_NODES.get(quadrature)
     if hit is None:
-        from clothlab.models.irawan.quadrature import unit_rule
-
         rule, n = quadrature.rule, int(quadrature.nodes)
         if rule in ("trapezoid", "gauss"):
             nodes, weights = interval_rule(rule, n, -0.5 * np.pi, 0.5 * np.pi)
@@ -241,6 +239,10 @@ def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
                      quadrature)
 
 
+_TO_RADIANS = np.array([[math.pi / 180.0], [math.pi / 180.0], [1.0], [1.0], [1.0], [1.0]])
+"""Per row of the transposed geometry of :func:`yarn_integrals`: psi and umax from degrees (np.deg2rad's factor)."""
+
+
 def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadrature,
                    filament_arc: str = "full") -> np.ndarray:
     """I_j (eq. 10 without f_c) for J parameter sets at once: (J, N).
@@ -250,12 +252,12 @@ def yarn_integrals(terms: YarnTerms, geometry: np.ndarray, quadrature: Quadratur
     moments (equal to :func:`yarn_integral_fabric` to rounding), staple sets under a fixed rule one compiled
     call for all of them (bit-identical), the rest :func:`clothlab.models.irawan.yarn.yarn_integral` per set.
     ``filament_arc``: one of :data:`FILAMENT_ARCS`."""
-    from clothlab.models.irawan import kernels
-    from clothlab.models.irawan.quadrature import cosine_mapped_unit_rule, unit_rule
+    import clothlab.models.irawan.kernels as kernels  # (numba: imported with the first evaluation)
 
-    geometry = np.atleast_2d(np.asarray(geometry, dtype=np.float64))
-    cols = np.ascontiguousarray(geometry.T)  # rows: psi, umax, kappa, w, l, delta
-    cols[:2] = np.deg2rad(cols[:2])
+    geometry = np.asarray(geometry, dtype=np.float64)
+    if geometry.ndim == 1:
+        geometry = geometry[None, :]
+    cols = np.multiply(geometry.T, _TO_RADIANS, order="C")  # rows: psi, umax (radians), kappa, w, l, delta
     psi, umax, kappa, w, l, delta = cols
     rule, n = quadrature.rule, int(quadrature.nodes)
     shortened = check_filament_arc(filament_arc) == "shortened"
