@@ -421,8 +421,8 @@ def test_fuzz_eval_directions(tmp_path):
 def test_fuzz_vary_specs():
     """A drawn ``--vary NAME=LO:HI:N`` is refused at field --vary, or gives a bounded grid of finite sets
     inside the parameter's fit bounds."""
-    from clothlab.cli.train_surrogate import MAX_VARY_MATERIALS, material_grid
     from clothlab.models.registry import build_model
+    from clothlab.surrogate.materials import MAX_VARY_MATERIALS, material_grid
     from clothlab.weave.presets import get_preset
 
     model = build_model("irawan", get_preset("cotton-denim"))
@@ -866,8 +866,8 @@ def test_the_largest_footprint_and_coordinates_give_the_tile_average(tmp_path):
                                   "alpha=0.01:0.1", "orientation=0:10:3"])
 def test_vary_specs_are_strict(spec):
     """Before: float() / int() read 0_01 and Arabic-Indic digits and N was unbounded."""
-    from clothlab.cli.train_surrogate import material_grid
     from clothlab.models.registry import build_model
+    from clothlab.surrogate.materials import material_grid
     from clothlab.weave.presets import get_preset
 
     model = build_model("irawan", get_preset("cotton-denim"))
@@ -877,8 +877,8 @@ def test_vary_specs_are_strict(spec):
 
 
 def test_a_grid_too_large_is_refused_and_a_valid_one_is_read():
-    from clothlab.cli.train_surrogate import material_grid
     from clothlab.models.registry import build_model
+    from clothlab.surrogate.materials import material_grid
     from clothlab.weave.presets import get_preset
 
     model = build_model("irawan", get_preset("cotton-denim"))

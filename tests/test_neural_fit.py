@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from clothlab.cli.train_surrogate import material_grid
 from clothlab.errors import ConfigError
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 from clothlab.surrogate.material_fit import unit_to_parameter
+from clothlab.surrogate.materials import material_grid
 
 
 def test_material_grid_is_the_product_with_geometric_midpoints_held_out():

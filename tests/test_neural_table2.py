@@ -19,13 +19,14 @@ TINY = ["--target", "surface", "--labels", "model", "--pairs", "2", "--width", "
 
 
 def test_table2_draw_follows_its_ranges_and_is_seeded():
-    from clothlab.cli.train_surrogate import material_draw
+    from clothlab.models.surface.parameters import draw_table2
+    from clothlab.surrogate.materials import material_draw
 
-    sets, held = material_draw("twill-3x3", {"gap": 0.2, "blend": 0.5}, 4000, 0.25, 3)
+    sets, held = material_draw("twill-3x3", {"gap": 0.2, "blend": 0.5}, 4000, 0.25, 3, draw=draw_table2)
     assert len(held) == 1000 and len(set(held)) == 1000 and max(held) < 4000
-    again, held_again = material_draw("twill-3x3", {"gap": 0.2, "blend": 0.5}, 4000, 0.25, 3)
+    again, held_again = material_draw("twill-3x3", {"gap": 0.2, "blend": 0.5}, 4000, 0.25, 3, draw=draw_table2)
     assert again == sets and held_again == held
-    other, _ = material_draw("plain", {"gap": 0.2, "blend": 0.5}, 4000, 0.25, 3)
+    other, _ = material_draw("plain", {"gap": 0.2, "blend": 0.5}, 4000, 0.25, 3, draw=draw_table2)
     assert other[0] != sets[0]  # each weave its own draw
     for kind in ("warp", "weft"):
         psi = np.array([q[f"{kind}.psi"] for q in sets])
@@ -38,7 +39,7 @@ def test_table2_draw_follows_its_ranges_and_is_seeded():
             assert abs(x.mean() - 0.5 * (lo + hi)) < 0.03 * (hi - lo)
             assert abs(x.std() - (hi - lo) / 12 ** 0.5) < 0.03 * (hi - lo)
     assert all(q["gap"] == 0.2 and q["blend"] == 0.5 for q in sets)
-    _, every = material_draw("twill-5x5", {}, 3, 0.25, 3, heldout_all=True)
+    _, every = material_draw("twill-5x5", {}, 3, 0.25, 3, draw=draw_table2, heldout_all=True)
     assert every == [0, 1, 2]
 
 

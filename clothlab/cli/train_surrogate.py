@@ -8,9 +8,24 @@ import contextlib
 from pathlib import Path
 
 from clothlab.cli.options import add_force, add_output, add_parallel, count_type, number_type
+from clothlab.surrogate.materials import LABEL_CHOICES
 
-TARGETS = {"im": "irawan", "surface": "surface"}
-LABELS = ("mc", "sat", "model")
+TARGET_ALIASES = {"im": "irawan"}
+"""Short names of ``--target`` (the kind names themselves are accepted too)."""
+
+
+def target_choices() -> tuple[str, ...]:
+    """``--target`` values: the aliases and the kinds that kind neural takes as targets, as registered
+    (:data:`clothlab.models.neural.model.TARGET_KINDS`, each a kind of :mod:`clothlab.models.registry`)."""
+    from clothlab.models.neural.model import TARGET_KINDS
+    from clothlab.models.registry import MODEL_KINDS
+
+    return tuple(TARGET_ALIASES) + tuple(k for k in TARGET_KINDS if k in MODEL_KINDS)
+
+
+def target_kind(target: str) -> str:
+    """The model kind of a ``--target`` value."""
+    return TARGET_ALIASES.get(target, target)
 
 
 def add_parser(sub):
@@ -21,12 +36,12 @@ def add_parser(sub):
                                   "separated by commas (e.g. pattern:plain,pattern:twill-3x3): one network over the "
                                   "materials of all of them")
     add_output(p, "output directory (data, checkpoint, surrogate.npz/json, training.json, PNGs)", metavar="DIR")
-    p.add_argument("--target", choices=tuple(TARGETS), default="im",
+    p.add_argument("--target", choices=target_choices(), default="im",
                    help="the model whose footprint averages are learnt (default im: Irawan-Marschner texture)")
     p.add_argument("--budget", type=number_type(0.01, 1e6), default=5.0,
                    help="CPU-minutes for labelling and training (default 5)")
     p.add_argument("--resume", action="store_true", help="continue a run in DIR (its data and checkpoint)")
-    p.add_argument("--labels", choices=LABELS, default="mc",
+    p.add_argument("--labels", choices=LABEL_CHOICES, default="mc",
                    help="label source: mc (default: stratified MC of the texture model over the part of the "
                         "footprint that is not whole tiles, the rest exact), sat (summed-area tables of "
                         "clothlab.footprint: one table per direction pair, and each query here has its "
@@ -80,9 +95,10 @@ def add_parser(sub):
 
 def _model(source: str, target: str):
     from clothlab.models.registry import build_model
+    from clothlab.surrogate.materials import tile_average_model
     from clothlab.weave.presets import resolve_weave
 
-    kind, params = TARGETS[target], {}
+    kind, params = target_kind(target), {}
     if source.endswith((".yaml", ".yml")):
         from clothlab.config import load_config
 
@@ -92,95 +108,17 @@ def _model(source: str, target: str):
             params = dict(cfg.model.params)
     else:
         weave = resolve_weave(source, Path.cwd())
-    return weave, build_model(kind, weave), params
+    # the network's configured model: the kind with its converged tile average (surrogate.materials)
+    return weave, tile_average_model(build_model(kind, weave)), params
 
 
-def _labels(choice: str, model, params: dict, samples: int, seed: int):
-    from clothlab.errors import ConfigError
-    from clothlab.surrogate.labels import FootprintLabels, ModelLabels, TextureMonteCarloLabels
-
-    if choice == "model":
-        return ModelLabels(model, params)
-    if not model.has_texture:
-        raise ConfigError(f"model kind {model.kind!r} has no texture model to average over footprints; "
-                          "use --labels model", field="--labels")
-    texture = model.texture(seed=seed)
-    if choice == "sat":
-        try:
-            from clothlab.footprint import footprint_components
-        except ImportError:
-            raise ConfigError("the footprint estimator (clothlab.footprint) is not available; "
-                              "use --labels mc", field="--labels") from None
-        return FootprintLabels(footprint_components, texture, params, method="sat")
-    return TextureMonteCarloLabels(texture, params, samples=max(2, samples), seed=seed,
-                                   tile_average=ModelLabels(model, params))
-
-
-MAX_VARY_STEPS = 64
-"""Most values N of one ``--vary NAME=LO:HI:N``."""
-MAX_VARY_MATERIALS = 4096
-"""Most materials of a ``--vary`` grid, the held-out midpoints included (each one is labelled)."""
-
-
-def material_grid(table, base: dict, vary) -> tuple[list[dict], list[int]]:
-    """Parameter sets of ``--vary NAME=LO:HI:N`` (all combinations, then the held-out midpoints) and the
-    indices of the held-out ones; ``[base], []`` without ``--vary``.  LO and HI are plain decimal numbers
-    (:func:`clothlab.untrusted.parse_number`) inside NAME's fit bounds with LO < HI, N an integer from 2 to
-    :data:`MAX_VARY_STEPS`, NAME a parameter given once; the grid holds at most :data:`MAX_VARY_MATERIALS`
-    materials.  ConfigError at ``--vary`` otherwise."""
-    import itertools
-    import math
-    import re
-
-    import numpy as np
-
-    from clothlab.errors import ConfigError
-    from clothlab.untrusted import parse_number
-
-    axes, mids = [], []
-    for text in vary:
-        shown = repr(text) if len(text) <= 60 else repr(text[:57] + "...")
-        parts = text.split("=", 1)
-        pieces = parts[1].split(":") if len(parts) == 2 else []
-        if len(pieces) != 3:
-            raise ConfigError(f"expected NAME=LO:HI:N, got {shown}", field="--vary")
-        name = parts[0].strip()
-        if name not in table.names():
-            varied = ", ".join(n for n in table.names() if n != "orientation")
-            raise ConfigError(f"unknown parameter {name[:60]!r} in {shown}; parameters: {varied}", field="--vary")
-        if name in [a[0] for a in axes]:
-            raise ConfigError(f"parameter {name!r} is varied twice", field="--vary")
-        if name == "orientation":  # models.base.ORIENTATION: a rotation of the directions, not an encoder input
-            raise ConfigError("orientation is a rotation applied outside the network and cannot be varied",
-                              field="--vary")
-        try:
-            lo, hi = (parse_number(x, error=ConfigError, field="--vary") for x in pieces[:2])
-        except ConfigError as exc:
-            raise ConfigError(f"{shown}: LO and HI: {exc.detail}", field="--vary") from None
-        if not re.fullmatch(r"[0-9]{1,6}", pieces[2].strip()):
-            raise ConfigError(f"N = {pieces[2][:20]!r} in {shown} is not an integer from 2 to {MAX_VARY_STEPS}",
-                              field="--vary")
-        n = int(pieces[2])
-        spec = table[name]
-        if not 2 <= n <= MAX_VARY_STEPS or not (spec.bounds[0] <= lo < hi <= spec.bounds[1]):
-            raise ConfigError(f"{name}: need 2 <= N <= {MAX_VARY_STEPS} and {spec.bounds[0]:g} <= LO < HI <= "
-                              f"{spec.bounds[1]:g}, got {shown}", field="--vary")
-        steps = [len(a[1]) for a in axes] + [n]
-        total = math.prod(steps) + math.prod(k - 1 for k in steps)
-        if total > MAX_VARY_MATERIALS:
-            raise ConfigError(f"the --vary grid has {total} materials (with its held-out midpoints); at most "
-                              f"{MAX_VARY_MATERIALS}", field="--vary")
-        t = np.linspace(spec.to_internal(lo), spec.to_internal(hi), 2 * n - 1)
-        values = [float(spec.from_internal(x)) for x in t]
-        axes.append((name, values[::2]))
-        mids.append((name, values[1::2]))
-    if not axes:
-        return [dict(base)], []
-    sets = [dict(base, **dict(zip([a[0] for a in axes], combo, strict=True)))
-            for combo in itertools.product(*[a[1] for a in axes])]
-    held = [dict(base, **dict(zip([a[0] for a in mids], combo, strict=True)))
-            for combo in itertools.product(*[a[1] for a in mids])]
-    return sets + held, list(range(len(sets), len(sets) + len(held)))
+def _footprint_estimate():
+    """``clothlab.footprint.footprint_components`` (the estimator of ``--labels sat``), or None without it."""
+    try:
+        from clothlab.footprint import footprint_components
+    except ImportError:
+        return None
+    return footprint_components
 
 
 def _weave_specs(args) -> tuple[list[str], str | None]:
@@ -209,23 +147,6 @@ def _resolve(spec: str, target: str, option: str):
         return _model(spec, target)
     except ConfigError as exc:
         raise ConfigError(f"{spec!r}: {exc.detail}", field=option, path=exc.path) from None
-
-
-def material_draw(weave_name: str, base: dict, n: int, share: float, seed: int, *, heldout_all: bool = False):
-    """``n`` surface parameter sets of Table 2 for one weave (seeded by (seed, weave name)) and the indices of
-    the held-out ones: a seeded ``share`` of them (at least one when n >= 2), or all with ``heldout_all``."""
-    import zlib
-
-    import numpy as np
-
-    from clothlab.models.surface.parameters import draw_table2
-
-    rng = np.random.default_rng([seed, 104723, zlib.crc32(weave_name.encode())])
-    sets = draw_table2(rng, n, base={k: base[k] for k in ("gap", "blend") if k in base})
-    if heldout_all:
-        return sets, list(range(n))
-    k = 0 if n < 2 else min(n - 1, max(1, int(round(share * n))))
-    return sets, sorted(int(i) for i in rng.permutation(n)[:k])
 
 
 def run(args) -> int:
@@ -303,6 +224,7 @@ def _run(args, held, lines: list[str]) -> int:
 
     from clothlab.models.base import ORIENTATION
     from clothlab.surrogate.labels import ModelLabels, TextureProbe
+    from clothlab.surrogate.materials import label_source, material_draw, material_grid, reference_quadrature
 
     # per weave its materials (trained weaves first, then the held-out pattern's), one list over all
     sets, heldout, held_pattern, owner = [], [], [], []
@@ -310,8 +232,10 @@ def _run(args, held, lines: list[str]) -> int:
         p = model.resolve(params)
         is_held = held_spec is not None and i == len(resolved) - 1
         if args.draw is not None:
+            from clothlab.models.surface.parameters import draw_table2
+
             own, own_held = material_draw(weave.name, p, args.draw, args.heldout_share, args.seed,
-                                          heldout_all=is_held)
+                                          draw=draw_table2, heldout_all=is_held)
         else:
             own, own_held = material_grid(model.params, p, args.vary)
         offset = len(sets)
@@ -321,9 +245,10 @@ def _run(args, held, lines: list[str]) -> int:
             held_pattern += list(range(offset, offset + len(own)))
         else:
             heldout += [offset + j for j in own_held]
-    labels = [_labels(args.labels, resolved[i][1], q, args.samples, args.seed) for i, q in zip(owner, sets,
-                                                                                                strict=True)]
-    # the far-view metric; what --residual corrects: R of each material on its own weave
+    estimate = _footprint_estimate() if args.labels == "sat" else None
+    labels = [label_source(args.labels, resolved[i][1], q, args.samples, args.seed, footprint_estimate=estimate)
+              for i, q in zip(owner, sets, strict=True)]
+    # what --residual corrects (and the R of the far view): R of each material on its own weave
     references = [ModelLabels(resolved[i][1], q) for i, q in zip(owner, sets, strict=True)]
     probes = None
     if args.probe_points:
@@ -338,6 +263,8 @@ def _run(args, held, lines: list[str]) -> int:
                           for i, q in zip(owner, sets, strict=True)])
     encoding = {"parameters": names, "pattern_order": PATTERN_ORDER, "kind": model.kind, "weave": weave.name,
                 "labels": type(labels[0]).__name__, "params": p, "weave_wv": format_wv(weave)}
+    if reference_quadrature(model) is not None:  # the R a query evaluates (clothlab.models.neural.reference_model)
+        encoding["reference_quadrature"] = reference_quadrature(model)
     if args.vary or args.draw is not None or several:
         encoding["materials_params"] = [{k: q[k] for k in names} for q in sets]
         encoding["heldout_materials"] = heldout
@@ -393,6 +320,7 @@ def _run(args, held, lines: list[str]) -> int:
             lines.append(f"  footprint {b['size_lo']:g}-{b['size_hi']:g} tiles: {what}: relative RMSE "
                          f"{b['relative_rmse']:.3f} ({b['rows']} queries{spread})")
     if m.get("far_view", {}).get("rows"):
-        lines.append(f"  far view (>= 4 tiles, held-out pairs): {m['far_view']['relative_rms_vs_reflectance']:.3f} "
-                     "relative RMS from the reflectance model")
+        far = m["far_view"]
+        lines.append(f"  far view (>= 4 tiles, held-out pairs): {far['relative_rms_vs_texture']:.3f} relative RMS from "
+                     f"the texture labels (the reflectance model: {far['reflectance_vs_texture']:.3f})")
     return 0

@@ -219,6 +219,10 @@ def read_sidecar(path) -> dict:
             check.string(sidecar[key], key)
     check.mapping(sidecar.get("metrics"), "metrics", required=False)
     _check_encoding(check, check.mapping(sidecar.get("encoding"), "encoding", required=False), arch)
+    if sidecar.get("estimator_choice") is not None:  # neural-lod's per-weave crossovers (optional)
+        from clothlab.surrogate.estimator_choice import check_choice
+
+        check_choice(check, sidecar["estimator_choice"])
     return sidecar
 
 
@@ -258,6 +262,10 @@ def _check_encoding(check: _Schema, enc: dict, arch: dict) -> None:
                    f"{len(names) + pattern_length(order)}")
     if "params" in enc:
         check.numbers(enc["params"], at + "params", most=MAX_WIDTH)
+    if enc.get("reference_quadrature") is not None:  # the configured R's quadrature (surrogate.materials)
+        quadrature = check.mapping(enc["reference_quadrature"], at + "reference_quadrature")
+        check.string(quadrature.get("rule"), at + "reference_quadrature.rule", limit=32)
+        check.integer(quadrature.get("nodes"), at + "reference_quadrature.nodes", 1, 1000)
     n = 1
     if "materials_params" in enc:
         sets = enc["materials_params"]

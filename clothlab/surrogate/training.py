@@ -263,10 +263,14 @@ def output_max(data: np.ndarray, rows: np.ndarray, specular: np.ndarray, block: 
 
 
 def far_view_error(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, min_size: float = 4.0) -> dict:
-    """Far view (issue 10: footprints >= 4 tiles): relative RMS difference of f between the surrogate and
-    the reflectance model (``surrogate.references``) on the ``rows`` with size >= ``min_size`` tiles."""
+    """Far view (footprints >= ``min_size`` tiles, issue 23 item 5): relative RMS difference of f between the
+    surrogate and the rows' labels (the texture model's box average: texture MC with the whole tiles from the
+    converged tile average, :mod:`clothlab.surrogate.materials`), and of the reflectance model R
+    (``surrogate.references``) from the same labels and from the surrogate, on the ``rows`` with size >=
+    ``min_size`` tiles."""
     block = np.asarray(data[np.sort(rows)])
-    q = block[block[:, 3] >= min_size, :N_QUERY]
+    keep = block[:, 3] >= min_size
+    q, truth = block[keep, :N_QUERY], block[keep, N_QUERY:]
     if not len(q):
         return {"rows": 0}
     f_pred, f_ref = np.zeros(len(q)), np.zeros(len(q))
@@ -275,8 +279,12 @@ def far_view_error(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, min
         args = (q[sel, 1:3], q[sel, 3], q[sel, 4:7], q[sel, 7:10])
         f_pred[sel] = surrogate.query(*args, material=int(m)).sum(axis=1)
         f_ref[sel] = surrogate.references[m](args[2], args[3], args[0], args[1]).sum(axis=1)
-    return {"rows": int(len(q)), "min_size": min_size,
-            "relative_rms_vs_reflectance": float(np.sqrt(np.sum((f_pred - f_ref) ** 2) / np.sum(f_ref ** 2)))}
+    f_true = truth.sum(axis=1)
+
+    def rel(a, b) -> float:
+        return float(np.sqrt(np.sum((a - b) ** 2) / max(np.sum(b ** 2), 1e-300)))
+    return {"rows": int(len(q)), "min_size": min_size, "relative_rms_vs_texture": rel(f_pred, f_true),
+            "reflectance_vs_texture": rel(f_ref, f_true), "relative_rms_vs_reflectance": rel(f_pred, f_ref)}
 
 
 def errors_by_size(surrogate: Surrogate, data: np.ndarray, rows: np.ndarray, bins=SIZE_BINS) -> list[dict]:
