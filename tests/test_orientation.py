@@ -12,7 +12,7 @@ from clothlab.errors import ConfigError, GeometryWarning
 from clothlab.frames import rotate_about_normal, spherical_to_vector, to_weave_frame
 from clothlab.io.measurement import Measurement
 from clothlab.models.base import ORIENTATION, common_period
-from clothlab.models.registry import build_model, model_class
+from clothlab.models.registry import MODEL_KINDS, build_model, model_class
 from clothlab.weave.presets import get_preset
 
 RNG = np.random.default_rng(14)
@@ -198,7 +198,7 @@ def test_config_frees_orientation_with_a_start_and_one_period_of_bounds(tmp_path
 
 
 def test_texture_models_refuse_an_orientation():
-    for kind in ("irawan",):  # kang's texture resolves through its point shader: not yet refused (known gap)
+    for kind in [k for k in sorted(MODEL_KINDS) if model_class(k).has_texture]:  # every texture, one base
         texture = build_model(kind, TWILL).texture()
         wi, wo = WI[:3], WO[:3]
         texture.components(np.full(3, 0.2), np.full(3, 0.4), wi, wo, {ORIENTATION: 0.0})

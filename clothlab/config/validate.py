@@ -25,7 +25,6 @@ rules stay here, in one place.
 from __future__ import annotations
 
 import copy
-import inspect
 import os
 import re
 from dataclasses import replace
@@ -76,7 +75,14 @@ from clothlab.errors import ConfigError, InputError, ParameterError
 from clothlab.io.loader import check_reader_options
 from clothlab.models.base import ORIENTATION
 from clothlab.models.irawan.quadrature import RULES, Quadrature
-from clothlab.models.registry import MODEL_KINDS, WEAVE_STAND_IN, model_class, needs_weave
+from clothlab.models.registry import (
+    MODEL_KINDS,
+    WEAVE_STAND_IN,
+    check_model_options,
+    model_class,
+    model_options,
+    needs_weave,
+)
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9._-]+")
 MAX_NAME_CHARS = 200
@@ -238,20 +244,13 @@ class _Validator:
             # the measurement itself is unreadable: loading it reports that, naming the file
 
     def model_options(self, kind: str, options: dict, p: tuple) -> dict:
-        """``model.options`` checked against the model's keyword-only constructor arguments: the name, and
-        the type of the default where it has one; options the model names in ``path_options`` (files) are
-        resolved against the yaml's directory and must exist.  Returns the options so resolved."""
-        resolved = copy.deepcopy(options)
-        takes = model_class(kind).options_class()  # a composite: its specular part
-        path_options = takes.path_options
-        declared = {q.name: q.default for q in inspect.signature(takes.__init__).parameters.values()
-                    if q.kind == q.KEYWORD_ONLY}
+        """``model.options``: each value of the type of its default where it has one (the YAML's types), then
+        the registry's one check of the options (:func:`clothlab.models.registry.check_model_options`) reported
+        at their lines; options the model names in ``path_options`` (files) are resolved against the yaml's
+        directory and must exist.  Returns the options so resolved."""
+        declared = model_options(kind)
         for name, value in options.items():
-            if name not in declared:
-                raise self.at(p + (name,), key=True).error(
-                    f"model kind {kind!r} takes no option {name!r}{suggest(name, declared)}; options: "
-                    f"{', '.join(declared) or 'none'}")
-            default, at = declared[name], self.at(p + (name,))
+            default, at = declared.get(name), self.at(p + (name,))
             if isinstance(default, bool):
                 if not isinstance(value, bool):
                     raise at.error(f"expected true or false, got {shown(value)}")
@@ -261,20 +260,21 @@ class _Validator:
                 as_number(value, at)
             elif isinstance(default, str):
                 as_str(value, at)
-            try:
-                takes.check_option(name, value)  # a model's own value check (Model: none)
-            except ConfigError as exc:
-                raise at.error(exc.detail) from None
-            if name in path_options and value is not None:
+        try:
+            check_model_options(kind, options)
+        except ConfigError as exc:
+            name = (exc.field or "").removeprefix("model.options.")
+            if name in options and name not in declared:  # an unknown option: at its key, with a suggestion
+                raise self.at(p + (name,), key=True).error(exc.detail + suggest(name, declared)) from None
+            raise self.at(p + (name,) if name in options else p).error(exc.detail) from None
+        resolved = copy.deepcopy(options)
+        for name in model_class(kind).options_class().path_options:
+            value, at = options.get(name), self.at(p + (name,))
+            if value is not None:
                 path = self.resolve(as_str(value, at), at)
                 if not self.is_there(path, need_file=True):
                     raise at.error(f"file not found: {path} (from {value!r}, relative to {self.base_dir})")
                 resolved[name] = str(path)
-        try:  # options that must agree with each other (Model: no check)
-            takes.check_options(options)
-        except ConfigError as exc:
-            name = (exc.field or "").removeprefix("model.options.")
-            raise self.at(p + (name,) if name in options else p).error(exc.detail) from None
         return resolved
 
     def model(self, value: Any) -> ModelConfig:

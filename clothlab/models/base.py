@@ -62,14 +62,20 @@ direction pair is the unrotated model's at the directions turned back into the w
 
     f_r(wi, wo; orientation) = f_r(R(-orientation) wi, R(-orientation) wo; 0)     (R: rotation about z)
 
-(:func:`clothlab.frames.to_weave_frame`).  A subclass writes its model in the weave's frame and never sees
-``orientation``: :meth:`Model.__init_subclass__` adds the declaration to its parameter table(s) and wraps its
-``components`` / ``components_many`` to take the parameter out and rotate the directions (a batch of several
-orientations is evaluated orientation by orientation).  Absent or 0, nothing is rotated: results are
-bitwise those of the model alone.  :meth:`resolve` lists ``orientation`` only when it is given, and
-:meth:`default_parameters` never (so existing fits and simulated tables are unchanged); a configuration
-that frees it gets the start value 0 (:mod:`clothlab.config.validate`).  Texture models (u, v) do not rotate
-the tile: they refuse an orientation other than 0 (:func:`texture_parameters`).
+(:func:`clothlab.frames.to_weave_frame`).  The public methods that take parameters are template methods
+(:data:`TEMPLATE_METHODS`): :meth:`Model.components` takes ``orientation`` out of the parameters, turns the
+directions into the weave's frame and calls the subclass's hook ``_components`` with the rest;
+``components_many`` does so per orientation of a batch; ``resolve`` / ``default_parameters``,
+``fitted_weave``, ``geometry_warnings`` and ``declared_parameters`` likewise call ``_resolve``,
+``_default_parameters``, ... .  A subclass writes only the hooks, in the weave's frame, and never sees
+``orientation``; one that defines a template method itself is refused at class creation (TypeError), and
+its parameter table gains the declaration then (an instance that narrows its table declares it with
+:func:`with_orientation`).  Absent or 0, nothing is rotated: results are bitwise those of the model alone.
+:meth:`resolve` lists ``orientation`` only when it is given, and :meth:`default_parameters` never (so
+existing fits and simulated tables are unchanged); a configuration that frees it gets the start value 0
+(:mod:`clothlab.config.validate`).  Texture models (u, v; base :class:`Texture`, the same template form)
+do not rotate the tile: their ``components`` and ``resolve`` refuse an orientation other than 0
+(:func:`texture_parameters`) before their hooks run.
 
 Symmetry (:attr:`orientation_period`).  The tile-averaged models of woven cloth are invariant under a turn by
 180 deg (the yarn integrals of a segment are even in the segment's arc parameter u and a helix keeps its
@@ -81,13 +87,14 @@ linear coefficient is called ks_warp and which ks_weft, so a fit determines the 
 (:meth:`fit_period`).  Isotropic models (Lambert, Oren-Nayar) do not depend on it at all (:data:`ISOTROPIC`).
 The test suite checks these symmetries numerically for every registered kind.
 
-A texture model (what :meth:`Model.texture` returns) has ``weave``, ``component_names``, ``resolve(params)``
-and ``components(u, v, wi, wo, params, *, need=None, noise=True, normalised=True, warn=True, footprint=None,
-view_distance=None)`` returning arrays of the points' shape; models with ``texture_filters`` use
-``footprint`` (tiles) and ``view_distance``, the others ignore them.  Optional members, read by the
-footprint aggregation (:mod:`clothlab.footprint`, docs/footprint.md): ``shared_directions = True``
-when ``components`` takes (1, 3) directions shared by every point (faster), and ``micro_normals(u, v,
-params)`` for a texture whose values are point BSDFs about micro normals (eqs. 4-5 weights then apply).
+A texture model (what :meth:`Model.texture` returns, a :class:`Texture`) has ``weave``, ``params``,
+``component_names``, ``resolve(params)`` and ``components(u, v, wi, wo, params, *, need=None, noise=True,
+normalised=True, warn=True, footprint=None, view_distance=None)`` returning arrays of the points' shape;
+models with ``texture_filters`` use ``footprint`` (tiles) and ``view_distance``, the others ignore them.
+Optional members, read by the footprint aggregation (:mod:`clothlab.footprint`, docs/footprint.md):
+``shared_directions = True`` when ``components`` takes (1, 3) directions shared by every point (faster), and
+``micro_normals(u, v, params)`` for a texture whose values are point BSDFs about micro normals (eqs. 4-5
+weights then apply).
 
 Helpers for implementations: :func:`as_directions` (the (N, 3) float64 arrays every model takes) and
 :func:`front_facing` (the pairs a reflection model lights).
@@ -111,8 +118,22 @@ from clothlab.params import ParamSpec, ParamTable
 
 #: The name of the rotation of the weave about the normal, a parameter of every model (module docstring).
 ORIENTATION = "orientation"
-#: Methods of a model about its weave whose ``params`` lose ``orientation`` before the model sees them.
-WEAVE_FRAME_METHODS = ("fitted_weave", "geometry_warnings", "with_parameters")
+#: The public template methods of :class:`Model`: they apply ``orientation`` and call the hook of the same name
+#: with a leading underscore (``components`` -> ``_components``), which a subclass writes in the weave's frame.
+TEMPLATE_METHODS = ("components", "components_many", "resolve", "default_parameters", "fitted_weave",
+                    "geometry_warnings", "declared_parameters")
+#: The public template methods of :class:`Texture` (they refuse an ``orientation`` other than 0).
+TEXTURE_TEMPLATE_METHODS = ("components", "resolve")
+
+
+def _refuse_template_overrides(cls, names) -> None:
+    """TypeError when class ``cls`` defines one of the template methods ``names`` itself: it writes the hook
+    (``_<name>``) instead, so that the orientation cannot be bypassed."""
+    own = sorted(name for name in names if name in cls.__dict__)
+    if own:
+        raise TypeError(f"{cls.__qualname__} defines {', '.join(own)}: a subclass of {cls.__mro__[1].__name__} "
+                        f"writes the hook{'s' if len(own) > 1 else ''} {', '.join('_' + n for n in own)} instead "
+                        "(the public method applies the orientation; clothlab.models.base)")
 #: :attr:`Model.orientation_period` of a model that does not depend on the orientation at all.
 ISOTROPIC = 0.0
 #: The period of the tile-averaged woven-cloth models (a half turn maps a weave onto itself).
@@ -151,95 +172,6 @@ def split_orientation(params):
     if not params or ORIENTATION not in params:
         return params, 0.0
     return {k: v for k, v in params.items() if k != ORIENTATION}, float(params[ORIENTATION])
-
-
-class _WeaveFrame:
-    """While a model's own code runs inside a wrapped method (``with _WeaveFrame(model):``), its
-    :meth:`Model.resolve` answers without ``orientation``: the model works in the weave's frame and never sees
-    it (a per-instance depth count; a model instance is not shared between threads)."""
-
-    def __init__(self, model):
-        self.model = model
-
-    def __enter__(self):
-        self.model.__dict__["_weave_frame_depth"] = self.model.__dict__.get("_weave_frame_depth", 0) + 1
-
-    def __exit__(self, *exc):
-        self.model.__dict__["_weave_frame_depth"] -= 1
-
-
-def _in_weave_frame(model) -> bool:
-    return model.__dict__.get("_weave_frame_depth", 0) > 0
-
-
-def _oriented_components(method):
-    """Wrap a ``components(wi, wo, params, **kw)``: take ``orientation`` out, rotate the directions."""
-    @functools.wraps(method)
-    def components(self, wi, wo, params=None, **kw):
-        rest, angle = split_orientation(params)
-        if angle != 0.0:
-            self.params[ORIENTATION].check(angle)
-            wi, wo = as_directions(wi, wo)
-            wi, wo = to_weave_frame(wi, angle), to_weave_frame(wo, angle)
-        with _WeaveFrame(self):
-            return method(self, wi, wo, rest, **kw)
-    components.oriented = True
-    return components
-
-
-def _oriented_components_many(method):
-    """Wrap a ``components_many(wi, wo, params_list, **kw)``: sets of one orientation are evaluated together
-    at the directions rotated into that orientation's weave frame; the rows come back in the given order."""
-    @functools.wraps(method)
-    def components_many(self, wi, wo, params_list, **kw):
-        split = [split_orientation(p) for p in params_list]
-        angles = [a for _, a in split]
-        with _WeaveFrame(self):
-            if all(a == 0.0 for a in angles):
-                return method(self, wi, wo, [p for p, _ in split], **kw)
-            wi, wo = as_directions(wi, wo)
-            out: dict = {}
-            for angle in dict.fromkeys(angles):
-                rows = [j for j, a in enumerate(angles) if a == angle]
-                if angle != 0.0:
-                    self.params[ORIENTATION].check(angle)
-                part = method(self, to_weave_frame(wi, angle), to_weave_frame(wo, angle),
-                              [split[j][0] for j in rows], **kw)
-                for name, value in part.items():
-                    if name not in out:
-                        out[name] = np.zeros((len(angles),) + value.shape[1:], dtype=value.dtype)
-                    out[name][rows] = value
-            return out
-    components_many.oriented = True
-    return components_many
-
-
-def _weave_frame_method(method):
-    """Wrap a method ``f(params, ...)`` about the weave itself (``fitted_weave``, ``geometry_warnings``):
-    ``orientation`` taken out; it does not change the weave (the .wv format has no orientation)."""
-    @functools.wraps(method)
-    def wrapped(self, params=None, *args, **kw):
-        with _WeaveFrame(self):
-            return method(self, split_orientation(params)[0], *args, **kw)
-    wrapped.oriented = True
-    return wrapped
-
-
-def _oriented_resolve(method):
-    """Wrap ``resolve(params)`` / ``default_parameters()`` of a subclass: the subclass resolves its own
-    parameters; ``orientation`` is added when it was given, checked against its declaration - except while
-    the model's own code runs (:class:`_WeaveFrame`), which gets its own parameters only."""
-    @functools.wraps(method)
-    def resolve(self, *args):
-        given = args[0] if args else None
-        rest, angle = split_orientation(given)
-        out = method(self, *((rest,) if args else ()))
-        out.pop(ORIENTATION, None)  # tables listing every declaration put its default in
-        if rest is not given and not _in_weave_frame(self):
-            out[ORIENTATION] = self.params[ORIENTATION].check(angle, ORIENTATION)
-        return out
-    resolve.oriented = True
-    return resolve
 
 
 def texture_parameters(params, kind: str):
@@ -297,40 +229,13 @@ class Model(abc.ABC):
     params: ParamTable
 
     def __init_subclass__(cls, **kwargs):
-        """Give the subclass the ``orientation`` parameter (module docstring): its declarations gain the
-        entry, its components are wrapped to rotate the directions."""
+        """Declarations only (module docstring): the subclass's own parameter table gains the ``orientation``
+        entry, and a subclass that defines a template method (:data:`TEMPLATE_METHODS`) instead of its hook
+        is refused (TypeError).  No method is wrapped."""
         super().__init_subclass__(**kwargs)
-        own = cls.__dict__
-        if "params" in own:
-            cls.params = with_orientation(own["params"], cls.orientation_period)
-        if "components" in own and not getattr(own["components"], "oriented", False):
-            cls.components = _oriented_components(own["components"])
-        if "components_many" in own and not getattr(own["components_many"], "oriented", False):
-            cls.components_many = _oriented_components_many(own["components_many"])
-        for name in ("resolve", "default_parameters"):
-            if name in own and not getattr(own[name], "oriented", False):
-                setattr(cls, name, _oriented_resolve(own[name]))
-        for name in WEAVE_FRAME_METHODS:
-            if name in own and not getattr(own[name], "oriented", False):
-                setattr(cls, name, _weave_frame_method(own[name]))
-        if "declared_parameters" in own:
-            declared = own["declared_parameters"].__func__
-
-            @classmethod
-            @functools.wraps(declared)
-            def declared_parameters(klass, options=None):
-                return with_orientation(declared(klass, options), klass.orientation_period)
-            cls.declared_parameters = declared_parameters
-        if "__init__" in own and not getattr(own["__init__"], "oriented", False):
-            init = own["__init__"]
-
-            @functools.wraps(init)
-            def __init__(self, *args, **kw):
-                init(self, *args, **kw)
-                if "params" in self.__dict__:  # an instance narrowing its declarations (e.g. Kang's options)
-                    self.params = with_orientation(self.__dict__["params"], type(self).orientation_period)
-            __init__.oriented = True
-            cls.__init__ = __init__
+        _refuse_template_overrides(cls, TEMPLATE_METHODS)
+        if "params" in cls.__dict__:
+            cls.params = with_orientation(cls.__dict__["params"], cls.orientation_period)
 
     @classmethod
     def options_class(cls) -> type:
@@ -377,7 +282,13 @@ class Model(abc.ABC):
 
     @classmethod
     def declared_parameters(cls, options: dict | None = None) -> ParamTable:
-        """The parameter declarations for these ``model.options`` (used by config validation)."""
+        """The parameter declarations for these ``model.options`` (used by config validation): the hook's
+        (:meth:`_declared_parameters`) with ``orientation`` added."""
+        return with_orientation(cls._declared_parameters(options), cls.orientation_period)
+
+    @classmethod
+    def _declared_parameters(cls, options: dict | None = None) -> ParamTable:
+        """Hook of :meth:`declared_parameters`: the class's table by default."""
         return cls.params
 
     @classmethod
@@ -387,27 +298,83 @@ class Model(abc.ABC):
         model.options = dict(options)
         return model
 
-    @abc.abstractmethod
     def default_parameters(self) -> dict[str, float]:
-        """Every declared parameter's value for this weave (the starting point of a fit)."""
+        """Every declared parameter's value for this weave (the starting point of a fit): the hook's
+        (:meth:`_default_parameters`), never ``orientation`` (module docstring)."""
+        out = self._default_parameters()
+        out.pop(ORIENTATION, None)  # a hook listing every declaration of the table puts its default in
+        return out
+
+    @abc.abstractmethod
+    def _default_parameters(self) -> dict[str, float]:
+        """Hook of :meth:`default_parameters`: every parameter's value for this weave."""
 
     def resolve(self, params: dict | None) -> dict[str, float]:
-        """The default parameters overridden by ``params``, validated against the declarations."""
+        """The default parameters overridden by ``params``, validated against the declarations: the hook's
+        (:meth:`_resolve`, given ``params`` without ``orientation``), with ``orientation`` only when given."""
+        rest, angle = split_orientation(params)
+        out = self._resolve(rest)
+        out.pop(ORIENTATION, None)
+        if rest is not params:  # orientation given
+            out[ORIENTATION] = self.params[ORIENTATION].check(angle, ORIENTATION)
+        return out
+
+    def _resolve(self, params: dict | None) -> dict[str, float]:
+        """Hook of :meth:`resolve` (no ``orientation`` in ``params``): the defaults overridden by ``params``,
+        validated against the declarations."""
         full = self.default_parameters()
         if params:
             full.update(self.params.validate(params))
         return full
 
-    @abc.abstractmethod
     def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
                    warn: bool = True) -> dict[str, np.ndarray]:
-        """Components (1/sr, each (N,)) at fabric-frame directions wi, wo (N, 3); ``need`` limits which."""
+        """Components (1/sr, each (N,)) at fabric-frame directions wi, wo (N, 3); ``need`` limits which.  The
+        directions are turned into the weave's frame by ``orientation`` (module docstring) and the hook
+        :meth:`_components` evaluates them with the other parameters; absent or 0, nothing is rotated."""
+        rest, angle = split_orientation(params)
+        if angle != 0.0:
+            self.params[ORIENTATION].check(angle)
+            wi, wo = as_directions(wi, wo)
+            wi, wo = to_weave_frame(wi, angle), to_weave_frame(wo, angle)
+        return self._components(wi, wo, rest, need=need, normalised=normalised, warn=warn)
+
+    @abc.abstractmethod
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
+        """Hook of :meth:`components`: the components at weave-frame directions, ``params`` without
+        ``orientation``."""
 
     def components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
                         warn: bool = True) -> dict[str, np.ndarray]:
-        """:meth:`components` for J parameter sets, each component (J, N); models override it when they can
-        share work between the sets (the posterior evaluates a whole ensemble half at once)."""
-        rows = [self.components(wi, wo, p, need=need, normalised=normalised, warn=warn) for p in params_list]
+        """:meth:`components` for J parameter sets, each component (J, N): the sets of one orientation are
+        evaluated together by the hook :meth:`_components_many` at the directions turned into that
+        orientation's weave frame; the rows come back in the given order."""
+        split = [split_orientation(p) for p in params_list]
+        angles = [a for _, a in split]
+        kw = dict(need=need, normalised=normalised, warn=warn)
+        if all(a == 0.0 for a in angles):
+            return self._components_many(wi, wo, [p for p, _ in split], **kw)
+        wi, wo = as_directions(wi, wo)
+        out: dict = {}
+        for angle in dict.fromkeys(angles):
+            rows = [j for j, a in enumerate(angles) if a == angle]
+            if angle != 0.0:
+                self.params[ORIENTATION].check(angle)
+            part = self._components_many(to_weave_frame(wi, angle), to_weave_frame(wo, angle),
+                                         [split[j][0] for j in rows], **kw)
+            for name, value in part.items():
+                if name not in out:
+                    out[name] = np.zeros((len(angles),) + value.shape[1:], dtype=value.dtype)
+                out[name][rows] = value
+        return out
+
+    def _components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
+                         warn: bool = True) -> dict[str, np.ndarray]:
+        """Hook of :meth:`components_many` (weave-frame directions, no ``orientation``): one :meth:`_components`
+        per set by default; models override it when they can share work between the sets (the posterior
+        evaluates a whole ensemble half at once)."""
+        rows = [self._components(wi, wo, p, need=need, normalised=normalised, warn=warn) for p in params_list]
         return {name: np.stack([r[name] for r in rows]) for name in rows[0]} if rows else {}
 
     def evaluate(self, wi, wo, coefficients: dict, params: dict | None = None) -> np.ndarray:
@@ -415,11 +382,21 @@ class Model(abc.ABC):
         return combine(self.components(wi, wo, params), coefficients)
 
     def geometry_warnings(self, params: dict) -> list[str]:
-        """Notes on ``params`` that lie outside the geometry the model is valid for (none by default)."""
+        """Notes on ``params`` that lie outside the geometry the model is valid for: the hook's
+        (:meth:`_geometry_warnings`) for ``params`` without ``orientation`` (it does not change the weave)."""
+        return self._geometry_warnings(split_orientation(params)[0])
+
+    def _geometry_warnings(self, params: dict) -> list[str]:
+        """Hook of :meth:`geometry_warnings` (no ``orientation`` in ``params``): none by default."""
         return []
 
     def fitted_weave(self, params: dict):
-        """The weave with ``params`` applied, for the ``.wv`` export of a fit (the weave itself by default)."""
+        """The weave with ``params`` applied, for the ``.wv`` export of a fit: the hook's
+        (:meth:`_fitted_weave`) for ``params`` without ``orientation`` (the .wv format has none)."""
+        return self._fitted_weave(split_orientation(params)[0])
+
+    def _fitted_weave(self, params: dict):
+        """Hook of :meth:`fitted_weave` (no ``orientation`` in ``params``): the weave itself by default."""
         return self.weave
 
     def settings(self) -> dict:
@@ -462,9 +439,44 @@ class Model(abc.ABC):
                           field="model.kind")
 
 
-class ModelTexture:
+class Texture(abc.ABC):
+    """Base class of the texture models (module docstring): :meth:`components` and :meth:`resolve` are
+    template methods that refuse an ``orientation`` other than 0 (:func:`texture_parameters`: a texture
+    evaluates the weave in its tile frame) and call the hooks :meth:`_components` / :meth:`_resolve` with the
+    other parameters.  A subclass declares ``weave``, ``params`` (its model's, ``orientation`` included) and
+    ``component_names``, and writes the hooks."""
+
+    #: the kind of the model whose texture this is (named by the refusal)
+    model_kind: ClassVar[str]
+    component_names: tuple[str, ...]
+    params: ParamTable
+
+    def __init_subclass__(cls, **kwargs):
+        """A subclass writes the hooks, not the template methods (:data:`TEXTURE_TEMPLATE_METHODS`; TypeError)."""
+        super().__init_subclass__(**kwargs)
+        _refuse_template_overrides(cls, TEXTURE_TEMPLATE_METHODS)
+
+    def components(self, u, v, wi, wo, params: dict | None = None, **kw) -> dict[str, np.ndarray]:
+        """Components (1/sr) at texture points u, v (tiles) for fabric-frame directions wi, wo (keywords:
+        module docstring); ConfigError at ``orientation`` for an orientation other than 0."""
+        return self._components(u, v, wi, wo, texture_parameters(params, self.model_kind), **kw)
+
+    @abc.abstractmethod
+    def _components(self, u, v, wi, wo, params: dict | None = None, **kw) -> dict[str, np.ndarray]:
+        """Hook of :meth:`components` (no ``orientation`` in ``params``)."""
+
+    def resolve(self, params: dict | None) -> dict[str, float]:
+        """The resolved parameters (the hook :meth:`_resolve`); an ``orientation`` other than 0 is refused."""
+        return self._resolve(texture_parameters(params, self.model_kind))
+
+    @abc.abstractmethod
+    def _resolve(self, params: dict | None) -> dict[str, float]:
+        """Hook of :meth:`resolve` (no ``orientation`` in ``params``)."""
+
+
+class ModelTexture(Texture):
     """The texture (point) evaluation of a model as a texture model: weave, parameter declarations, defaults and
-    validation come from the model; subclasses add ``components(u, v, wi, wo, params, ...)``."""
+    validation come from the model; subclasses write the hook ``_components(u, v, wi, wo, params, ...)``."""
 
     #: the model attribute naming the point components
     component_attribute: ClassVar[str] = "component_names"
@@ -478,7 +490,10 @@ class ModelTexture:
     def default_parameters(self) -> dict[str, float]:
         return self.model.default_parameters()
 
-    def resolve(self, params: dict | None) -> dict[str, float]:
-        """The model's resolved parameters; an ``orientation`` other than 0 is refused
-        (:func:`texture_parameters`)."""
-        return self.model.resolve(texture_parameters(params, self.model.kind))
+    @property
+    def model_kind(self) -> str:
+        return self.model.kind
+
+    def _resolve(self, params: dict | None) -> dict[str, float]:
+        """The model's resolved parameters."""
+        return self.model.resolve(params)

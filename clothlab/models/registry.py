@@ -95,21 +95,33 @@ def build_model(kind: str, weave, quadrature=None, **options):
     ...
     clothlab.errors.ConfigError: field 'model.options.tile_nodes': model kind 'irawan' takes no option ...
     """
-    cls = model_class(kind)
-    takes_options = cls.options_class()  # a composite passes its options to its specular part
-    accepted = [p.name for p in inspect.signature(takes_options.__init__).parameters.values()
-                if p.kind == p.KEYWORD_ONLY]
-    check = takes_options.check_option  # the model's own value checks (sizes bounded; Model: none)
+    check_model_options(kind, options)
+    return model_class(kind).from_config(weave, quadrature, **options)
+
+
+def model_options(kind: str) -> dict:
+    """{name: default} of the ``model.options`` of ``kind``: the keyword-only constructor arguments of its
+    options class (a composite passes its options to its specular part)."""
+    takes = model_class(kind).options_class()
+    return {p.name: p.default for p in inspect.signature(takes.__init__).parameters.values()
+            if p.kind == p.KEYWORD_ONLY}
+
+
+def check_model_options(kind: str, options: dict) -> None:
+    """The one check of ``model.options`` (fabric.yaml validation and :func:`build_model`): every name is an
+    option of ``kind``, every value passes the class's ``check_option`` and together they pass its
+    ``check_options`` (Model: no check); ConfigError at ``model.options.<name>``."""
+    takes = model_class(kind).options_class()
+    accepted = model_options(kind)
     for name, value in options.items():
         if name not in accepted:
             raise ConfigError(f"model kind {kind!r} takes no option {name!r}; options: {', '.join(accepted) or 'none'}",
                               field=f"model.options.{name}")
         try:
-            check(name, value)
+            takes.check_option(name, value)  # the model's own value checks (sizes bounded; Model: none)
         except ConfigError as exc:
             raise ConfigError(exc.detail, path=exc.path, line=exc.line, field=f"model.options.{name}") from None
-    takes_options.check_options(options)  # options that must agree with each other (Model: no check)
-    return cls.from_config(weave, quadrature, **options)
+    takes.check_options(options)
 
 
 def shader(name: str) -> tuple[str, str]:

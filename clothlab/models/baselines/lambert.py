@@ -30,11 +30,11 @@ class LambertModel(Model):
     default_free = ()
     orientation_period = ISOTROPIC  # f_r does not depend on the azimuths
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         return {}
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True) -> dict[str, np.ndarray]:
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
         """``diffuse`` = 1/pi (1/sr) at front-facing pairs of the (N, 3) fabric-frame directions, else 0.
 
         ``normalised`` and ``warn`` are accepted for the interface: the component already has unit albedo

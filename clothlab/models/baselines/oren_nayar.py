@@ -59,11 +59,11 @@ class OrenNayarModel(Model):
     default_free = ("sigma",)
     orientation_period = ISOTROPIC  # f_r depends on the azimuths only through phi_o - phi_i
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         return {spec.name: float(spec.default) for spec in self.params}
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True) -> dict[str, np.ndarray]:
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
         """``diffuse`` (1/sr) = [A + B max(0, cos dphi) sin(alpha) tan(beta)] / pi at (N, 3) fabric-frame
         directions (eq. 30, module docstring); 0 for back-facing pairs.  ``normalised`` and ``warn`` are
         accepted for the interface (the component is kd's factor as the paper defines it; no warnings)."""

@@ -21,7 +21,7 @@ from functools import cache
 from typing import ClassVar
 
 from clothlab.errors import ConfigError
-from clothlab.models.base import ORIENTATION, Model, common_period
+from clothlab.models.base import ORIENTATION, Model, common_period, with_orientation
 from clothlab.params import ParamTable
 
 
@@ -54,14 +54,15 @@ class CompositeModel(Model):
         self.weave = weave
         self.specular, self.diffuse = specular, diffuse
         self.options = dict(getattr(specular, "options", {}))
-        self.params = union_table(specular.params, diffuse.params, self.kind)
+        self.params = with_orientation(union_table(specular.params, diffuse.params, self.kind),
+                                       self.orientation_period)  # the composite's own orientation
         self._specular_names = frozenset(s.name for s in _own(specular.params))
         self._diffuse_names = frozenset(s.name for s in _own(diffuse.params))
         self._specular_components = tuple(n for n in specular.component_names if not n.startswith("diffuse"))
         self.component_names = self._specular_components + tuple(diffuse.component_names)
 
     @classmethod
-    def declared_parameters(cls, options: dict | None = None) -> ParamTable:
+    def _declared_parameters(cls, options: dict | None = None) -> ParamTable:
         return union_table(cls.specular_class.declared_parameters(options), cls.diffuse_class.declared_parameters(),
                            cls.kind)
 
@@ -74,16 +75,16 @@ class CompositeModel(Model):
         return ({k: v for k, v in p.items() if k in self._specular_names},
                 {k: v for k, v in p.items() if k in self._diffuse_names})
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         return {**self.specular.default_parameters(), **self.diffuse.default_parameters()}
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True):
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True):
         """S's specular components and D's components (1/sr, each (N,)) at fabric-frame directions."""
         many = self.components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
         return {name: value[0] for name, value in many.items()}
 
-    def components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True, warn: bool = True):
+    def _components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True, warn: bool = True):
         """:meth:`components` for J parameter sets (each part evaluates its sets in one call)."""
         need = self.component_names if need is None else tuple(need)
         parts = [self._split(self.resolve(p)) for p in params_list]
@@ -98,11 +99,11 @@ class CompositeModel(Model):
                                                     normalised=normalised, warn=warn))
         return {name: out[name] for name in self.component_names if name in out}
 
-    def geometry_warnings(self, params: dict) -> list[str]:
+    def _geometry_warnings(self, params: dict) -> list[str]:
         specular, diffuse = self._split(self.resolve(params))
         return self.specular.geometry_warnings(specular) + self.diffuse.geometry_warnings(diffuse)
 
-    def fitted_weave(self, params: dict):
+    def _fitted_weave(self, params: dict):
         return self.specular.fitted_weave(self._split(self.resolve(params))[0])
 
     def settings(self) -> dict:

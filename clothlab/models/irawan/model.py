@@ -111,7 +111,7 @@ class IrawanModel(Model):
         if name == "filament_arc":
             check_filament_arc(value)
 
-    def geometry_warnings(self, params: dict) -> list[str]:
+    def _geometry_warnings(self, params: dict) -> list[str]:
         """The segment-fitting notes of sec. 5.3 and, for a fit with ``filament_arc: full`` on a smoothed
         filament yarn, that the exported ``.wv`` is rendered with the other arc."""
         p = self.resolve(params)
@@ -124,7 +124,7 @@ class IrawanModel(Model):
                          "highlight's shape; fit with model.options.filament_arc: shortened for renderer parity")
         return notes
 
-    def fitted_weave(self, params: dict) -> Weave:
+    def _fitted_weave(self, params: dict) -> Weave:
         """The weave with ``params`` applied, recording this model's ``filament_arc`` for the ``.wv`` export."""
         return replace(apply_parameters(self.weave, self.resolve(params)), filament_arc=self.filament_arc)
 
@@ -219,7 +219,7 @@ class IrawanModel(Model):
             self._memo[key] = hit
         return hit[None, :]
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         if getattr(self, "_defaults", None) is None or self._defaults[0] is not self.weave:
             self._defaults = (self.weave, weave_parameters(self.weave))
         return dict(self._defaults[1])
@@ -243,8 +243,8 @@ class IrawanModel(Model):
     def with_parameters(self, params: dict) -> Weave:
         return apply_parameters(self.weave, self.resolve(params))
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True) -> dict[str, np.ndarray]:
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
         """BRDF components (1/sr) at fabric-frame directions wi, wo (N, 3).
 
         ``need``: the component names wanted (others are not computed).
@@ -253,8 +253,8 @@ class IrawanModel(Model):
         many = self.components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
         return {name: value[0] for name, value in many.items()}
 
-    def components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
-                        warn: bool = True) -> dict[str, np.ndarray]:
+    def _components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True,
+                         warn: bool = True) -> dict[str, np.ndarray]:
         """:meth:`components` for J parameter sets at once: each component (J, N).
 
         The parameter-free parts (yarn frames, the filament moments, -wi.wo) are computed once for all sets,

@@ -62,7 +62,7 @@ import numpy as np
 
 from clothlab.errors import GeometryWarning, ParameterError
 from clothlab.frames import to_yarn_frame
-from clothlab.models.base import texture_parameters
+from clothlab.models.base import HALF_TURN, Texture, with_orientation
 from clothlab.models.components import combine
 from clothlab.models.irawan.integrals import (
     COMPONENTS,
@@ -103,14 +103,16 @@ class TexturePoints:
     key_v: np.ndarray
 
 
-class IrawanTexture:
+class IrawanTexture(Texture):
     """Irawan-Marschner texture model of one weave; ``quadrature`` only sets the albedo a_j (use the same
     one as the reflectance model it is combined with); ``seed`` selects the noise realisation;
     ``filament_arc`` the arc of a smoothed filament spine's R(u), as :class:`IrawanModel`'s option
     (:data:`clothlab.models.irawan.integrals.FILAMENT_ARCS`)."""
 
     kind = "irawan-texture"
-    params = IRAWAN_PARAMS
+    model_kind = "irawan"
+    #: :class:`IrawanModel`'s declarations (``orientation`` included; the texture refuses one other than 0)
+    params = with_orientation(IRAWAN_PARAMS, HALF_TURN)
     component_names = COMPONENTS
     #: components() takes (1, 3) directions shared by every point (faster than one row per point)
     shared_directions = True
@@ -134,10 +136,10 @@ class IrawanTexture:
     def default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
 
-    def resolve(self, params: dict | None) -> dict[str, float]:
-        """The weave's parameters overridden by ``params``, validated (as :meth:`IrawanModel.resolve`)."""
+    def _resolve(self, params: dict | None) -> dict[str, float]:
+        """Hook of :meth:`Texture.resolve` (which refuses an orientation other than 0: the weave's own frame):
+        the weave's parameters overridden by ``params``, validated (as :meth:`IrawanModel.resolve`)."""
         full = self.default_parameters()
-        params = texture_parameters(params, "irawan")  # the weave's own frame: orientation 0 only
         if params:
             full.update(IRAWAN_PARAMS.validate(params))
         return full
@@ -184,9 +186,9 @@ class IrawanTexture:
 
     # ------------------------------------------------------------------ the model
 
-    def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
-                   normalised: bool = True, warn: bool = True, footprint=None,
-                   view_distance=None) -> dict[str, np.ndarray]:
+    def _components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
+                    normalised: bool = True, warn: bool = True, footprint=None,
+                    view_distance=None) -> dict[str, np.ndarray]:
         """Texture components (1/sr) at texture points u, v (tile units; arrays broadcast together) for
         fabric-frame directions wi, wo: (N, 3) with one row per point, or (3,) / (1, 3) shared by all.
 

@@ -52,7 +52,7 @@ import numpy as np
 
 from clothlab.errors import ConfigError
 from clothlab.frames import to_yarn_frame
-from clothlab.models.base import Model, as_directions, front_facing
+from clothlab.models.base import Model, as_directions, front_facing, with_orientation
 from clothlab.models.kang import lod, microfacet, yarn
 from clothlab.models.kang.parameters import KANG_ALTERNATING_PARAMS, KANG_PARAMS, default_parameters, resolve_parameters
 from clothlab.weave.lookup import locate_segments
@@ -112,7 +112,9 @@ class KangModel(Model):
                             "prefilter_max_samples": prefilter_max_samples})
         self.weave = weave
         self.alternating = bool(alternating)
-        self.params = KANG_ALTERNATING_PARAMS if self.alternating else KANG_PARAMS
+        # an instance narrowing its declarations declares the orientation too (clothlab.models.base)
+        self.params = with_orientation(KANG_ALTERNATING_PARAMS if self.alternating else KANG_PARAMS,
+                                       self.orientation_period)
         self.tile_rule = tile_rule
         self.tile_nodes = None if tile_nodes is None else int(tile_nodes)
         self.weave_level = weave_level
@@ -279,16 +281,16 @@ class KangModel(Model):
 
         return KangTexture(self)
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         return default_parameters(self.params)
 
-    def resolve(self, params: dict | None) -> dict[str, float]:
+    def _resolve(self, params: dict | None) -> dict[str, float]:
         """Defaults overridden by ``params``, validated against ``self.params`` (the fit-facing interface;
         when alternating, ``weft.nx`` / ``weft.ny`` raise a ParameterError saying they are tied)."""
         return resolve_parameters(params, self.params)
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True) -> dict[str, np.ndarray]:
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
         """Tile-averaged components (1/sr) at (N, 3) fabric-frame directions; zero below the horizon.
 
         ``diffuse`` (Lambert 1/pi) and ``specular_warp`` / ``specular_weft`` (module docstring).  ``need``

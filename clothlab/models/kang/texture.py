@@ -18,9 +18,9 @@ class KangTexture(ModelTexture):
 
     component_attribute = "point_component_names"
 
-    def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
-                   normalised: bool = True, warn: bool = True, footprint=None,
-                   view_distance=None) -> dict[str, np.ndarray]:
+    def _components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
+                    normalised: bool = True, warn: bool = True, footprint=None,
+                    view_distance=None) -> dict[str, np.ndarray]:
         """Point components (1/sr, (N,)) at texture points u, v (tiles) for (N, 3) direction pairs;
         ``footprint`` (tiles) and ``view_distance`` as :meth:`KangModel.point_components`.  ``normalised``
         and ``warn`` exist for interface parity (the components are in albedo units, no warnings)."""

@@ -155,7 +155,7 @@ class NeuralModel(Model):
             raise ConfigError(f"refine must be true or false, got {value!r:.40}", field="model.options.refine")
 
     @classmethod
-    def declared_parameters(cls, options: dict | None = None):
+    def _declared_parameters(cls, options: dict | None = None):
         """The declarations of the target kind of ``options["weights"]`` (its sidecar's ``encoding.kind``);
         without weights those of the shipped per-preset networks (Irawan-Marschner)."""
         weights = (options or {}).get("weights")
@@ -182,7 +182,7 @@ class NeuralModel(Model):
             self._reference = reference_model(self.sidecar, self.weave)
         return self._reference
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         return {**self.exact_model().default_parameters(), **self._trained}
 
     def forget_directions(self) -> None:
@@ -290,8 +290,8 @@ class NeuralModel(Model):
         values = self.surrogate.query(centre, size, wi, wo, material=material, reference=reference, probe=probe)
         return {name: values[:, i] for i, name in enumerate(self.component_names)}
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True) -> dict[str, np.ndarray]:
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
         """The far view (footprint :data:`FAR_SIZE` tiles); ``normalised`` / ``warn`` as the interface."""
         wi, wo = as_directions(wi, wo)
         n = wi.shape[0]
@@ -421,8 +421,8 @@ class NeuralTexture(ModelTexture):
 
     kind = "neural-texture"
 
-    def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
-                   normalised: bool = True, warn: bool = True, footprint=None, view_distance=None):
+    def _components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
+                    normalised: bool = True, warn: bool = True, footprint=None, view_distance=None):
         """Arrays of the points' shape; ``footprint``: size in tiles (scalar or per point)."""
         from clothlab.models.base import texture_parameters
 

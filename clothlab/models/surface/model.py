@@ -145,13 +145,13 @@ class SurfaceModel(Model):
         if name == "tile_nodes":
             _tile_nodes(value)
 
-    def default_parameters(self) -> dict[str, float]:
+    def _default_parameters(self) -> dict[str, float]:
         return weave_parameters(self.weave)
 
     def settings(self) -> dict:
         return {"options": {"tile_nodes": list(self.tile_nodes)}}
 
-    def fitted_weave(self, params: dict):
+    def _fitted_weave(self, params: dict):
         p = self.resolve(params)
         weave = self.weave
         for kind in YARN_KINDS:
@@ -174,8 +174,8 @@ class SurfaceModel(Model):
             return np.broadcast_to(projected_area(w[:1], self.shares, p), (len(w),))
         return projected_area(w, self.shares, p)
 
-    def components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                   warn: bool = True) -> dict[str, np.ndarray]:
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
         """Tile-averaged components (1/sr, each (N,)) at (N, 3) fabric-frame directions (module docstring);
         ``need`` limits those computed; ``normalised`` and ``warn`` change nothing (decision 6)."""
         from clothlab.models.surface import kernels

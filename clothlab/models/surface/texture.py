@@ -36,9 +36,9 @@ class SurfaceTexture(ModelTexture):
         super().__init__(model)
         self._is_weft = np.array([s.kind == "weft" for s in self.weave.segments])
 
-    def components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
-                   normalised: bool = True, warn: bool = True, footprint=None,
-                   view_distance=None) -> dict[str, np.ndarray]:
+    def _components(self, u, v, wi, wo, params: dict | None = None, *, need=None, noise: bool = True,
+                    normalised: bool = True, warn: bool = True, footprint=None,
+                    view_distance=None) -> dict[str, np.ndarray]:
         """Components (1/sr) at texture points u, v (tiles, broadcast together) for fabric-frame directions
         wi, wo: (N, 3) one row per point, or (3,) / (1, 3) shared by all.  Arrays of the points' shape.
         ``noise``, ``normalised``, ``warn``, ``footprint`` and ``view_distance`` belong to the texture
