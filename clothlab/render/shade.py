@@ -428,7 +428,21 @@ def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> 
 
 
 def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: Lod) -> np.ndarray:
-    """neural-lod (module docstring): per pixel the network or im-lod, chosen by the footprint."""
+    """neural-lod: per pixel the cheapest estimator of its footprint average that meets the error, by the
+    crossovers measured for the weave's network (:mod:`clothlab.render.neural_lod`); for a network without
+    them (its sidecar has no ``estimator_choice``) the documented default (module docstring): the network
+    or im-lod, chosen by the footprint."""
+    from clothlab.render.neural_lod import estimator_choice, pixel_values
+
+    choice = estimator_choice(fabric.weave)
+    if choice is not None:
+        if not fabric.need or len(s.u) == 0:
+            return _zeros(fabric, len(s.u))
+        first, back = pixel_runs(s.pixel)
+        count = np.bincount(back)
+        centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
+        return pixel_values(fabric, neural_model(fabric), choice, centre, s.footprint[first], s.wi[first],
+                            s.wo[first], counter)[back]
     chosen = network_samples(s) if np.any(network_weight(s.footprint) > 0.0) else None  # per pixel only if needed
     if chosen is None or not chosen.any():
         return im_lod_values(fabric, s, counter, lod)

@@ -340,3 +340,152 @@ def lines(results: list[dict]) -> list[str]:
         out += table_lines(r) + [""]
     out.append("'<=': the surrogate costs less than MC-1; the ratio is against MC-1 (a lower bound).")
     return out
+
+
+#: bins of neural-lod's crossover measurement (:func:`measure_estimator_choice`): those of :data:`BINS` and,
+#: below them, the data's smallest footprints (a close-up render's pixels reach 0.01 tile)
+CHOICE_BINS = ((0.01, 0.03),) + BINS
+#: its sizes: fewer queries than the bench's tables (the choice needs the order of the costs and errors)
+CHOICE_SIZES = {"per_bin": 96, "samples": 4096, "timing": 1024, "repeats": 2, "materials": 1}
+CHOICE_MC_SAMPLES = (1, 2, 4, 8, 16, 32, 64)
+
+
+def measure_estimator_choice(path, error_target: float | None = None, sizes: dict | None = None) -> dict:
+    """neural-lod's per-weave crossovers of the per-fabric network at ``path``: :func:`bin_figures` on
+    :data:`CHOICE_BINS` (:data:`CHOICE_SIZES`, MC-k for k in :data:`CHOICE_MC_SAMPLES`), each bin's cheapest
+    estimator meeting ``error_target`` (:func:`clothlab.surrogate.estimator_choice.choice_from_rows`)."""
+    import datetime
+
+    from clothlab.models.neural.model import load_neural
+    from clothlab.surrogate.data import DataSpec
+    from clothlab.surrogate.estimator_choice import DEFAULT_ERROR_TARGET, choice_from_rows
+
+    size = {**CHOICE_SIZES, **(sizes or {})}
+    start = time.process_time()
+    surrogate, sidecar = load_neural(path)
+    spec = DataSpec(**sidecar["encoding"]["data_spec"])
+    materials = [Material(surrogate, sidecar, 0)]
+    rows = [bin_figures(surrogate, materials, spec, lo, hi, per_bin=size["per_bin"], samples=size["samples"],
+                        timing=size["timing"], repeats=size["repeats"], seed=QUERY_SEED + 500 + 1000 * i,
+                        mc_samples=CHOICE_MC_SAMPLES)
+            for i, (lo, hi) in enumerate(CHOICE_BINS)]
+    target = DEFAULT_ERROR_TARGET if error_target is None else float(error_target)
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d")
+    measured = (f"clothlab.studies.neural_bins.measure_estimator_choice, {when}: {size['per_bin']} queries per bin, "
+                f"{size['samples']}-point texture reference, CPU-us end to end ({time.process_time() - start:.0f} "
+                "CPU-s)")
+    return choice_from_rows(rows, target, measured)
+
+
+def store_estimator_choice(name: str, error_target: float | None = None, sizes: dict | None = None) -> dict:
+    """:func:`measure_estimator_choice` of the shipped per-fabric network ``name``, written into its sidecar
+    (``estimator_choice``; the file rewritten atomically, every other key kept); returns the choice."""
+    import json
+
+    from clothlab.atomic import atomic_write_bytes
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.surrogate.serialise import read_sidecar
+
+    path = SHIPPED / f"{name}.json"
+    choice = measure_estimator_choice(path.with_suffix(".npz"), error_target, sizes)
+    sidecar = json.loads(path.read_text(encoding="utf-8"))
+    sidecar["estimator_choice"] = choice
+    atomic_write_bytes(path, (json.dumps(sidecar, indent=2) + "\n").encode())
+    read_sidecar(path)  # the schema holds
+    return choice
+
+
+def choice_lines(name: str, choice: dict) -> list[str]:
+    """Markdown rows of one network's estimator choice: per bin the estimator, its CPU-us and relative RMSE."""
+    out = [f"{name} (error target {choice['error_target']:g}; {choice.get('measured', '')})", "",
+           "| bin (tiles) | estimator | CPU-us/query | rel. RMSE |", "|---|---|---|---|"]
+    for b in choice["bins"]:
+        what = f"MC-{b['samples']}" if b["estimator"] == "mc" else b["estimator"]
+        out.append(f"| {b['lo']:g}-{b['hi']:g} | {what} | {b['us']:.2f} | {b['relative_rmse']:.3f} |")
+    return out
+
+
+#: the close-up render of :func:`closeup_comparison`: receding-plane views whose pixel footprints span
+#: 0.03-1 tile together (each view about a factor 1.8 of footprints)
+CLOSEUP_DISTANCES = (3.0, 5.0, 8.0, 12.0, 20.0, 30.0, 45.0, 70.0)
+CLOSEUP_IM_LOD_SPP = (1, 2, 4, 8, 16, 32)
+
+
+def closeup_comparison(weave: str = "cotton-denim", *, distances=CLOSEUP_DISTANCES, resolution=(64, 48),
+                       reference_spp: int = 256, neural_spp=(1, 4), im_lod_spp=CLOSEUP_IM_LOD_SPP,
+                       repeats: int = 3) -> dict:
+    """neural-lod against im-lod at equal shading CPU time on a close-up render (issue 23 item 4): the
+    receding plane (:func:`clothlab.studies.render_lod.receding_plane_scene`, noise off: the networks learn
+    the noise-free texture) of ``weave`` at ``distances``, against im-texture at ``reference_spp`` stratified
+    samples.  Per shader and spp: relative L1 error over the fully covered pixels of all views together,
+    and the least shading CPU seconds (``process_time``, in-process, each render cold) of ``repeats``, summed
+    over the views; im-lod's error at neural-lod's CPU is interpolated log-log between its spp rows."""
+    from dataclasses import replace
+
+    from clothlab.render.render import render
+    from clothlab.render.shade import FabricModels
+    from clothlab.studies.render_lod import receding_plane_scene
+
+    scene = receding_plane_scene(tuple(resolution))
+    scene = replace(scene, fabric=replace(scene.fabric, noise=False, weave=f"preset:{weave}"))
+    fabric = FabricModels.build(scene.fabric)
+    start = time.process_time()
+    views = [replace(scene, camera=scene.camera.at_distance(d)) for d in distances]
+    small = replace(scene, camera=replace(scene.camera, resolution=(4, 3)))
+    for shader in ("im-lod", "neural-lod", "im-texture"):  # compilation out of the timings
+        render(small, shader=shader, spp=1, fabric=fabric)
+    refs = [render(v, shader="im-texture", spp=reference_spp, fabric=fabric) for v in views]
+    masks = [r.coverage >= 1.0 for r in refs]
+    footprints = [(r.stats["footprint_min_tiles"], r.stats["footprint_max_tiles"]) for r in refs]
+
+    def run(shader, spp):
+        err, den, cpu, per_view = 0.0, 0.0, 0.0, []
+        for v, ref, mask in zip(views, refs, masks, strict=True):
+            best = None
+            for _ in range(max(1, repeats)):
+                fabric.forget_directions()
+                res = render(v, shader=shader, spp=spp, fabric=fabric)
+                if best is None or res.timings["shading_cpu"] < best.timings["shading_cpu"]:
+                    best = res
+            e = float(np.abs(best.image[mask] - ref.image[mask]).sum())
+            d = float(np.abs(ref.image[mask]).sum())
+            err, den, cpu = err + e, den + d, cpu + best.timings["shading_cpu"]
+            per_view.append({"error": e / d, "shading_cpu_s": best.timings["shading_cpu"],
+                             "neural_evaluations": best.stats.get("neural_evaluations", 0),
+                             "texture_evaluations": best.stats.get("texture_evaluations", 0)})
+        return {"shader": shader, "spp": spp, "relative_l1": err / den, "shading_cpu_s": cpu, "views": per_view}
+
+    im_lod = [run("im-lod", k) for k in im_lod_spp]
+    neural = [run("neural-lod", k) for k in neural_spp]
+    times = np.array([r["shading_cpu_s"] for r in im_lod])
+    order = np.argsort(times)
+    for r in neural:
+        t = r["shading_cpu_s"]
+        lt, le = np.log(times[order]), np.log([im_lod[i]["relative_l1"] for i in order])
+        if t <= times[order[0]]:
+            r["im_lod_equal_time"], r["im_lod_equal_time_note"] = float(np.exp(le[0])), "im-lod's cheapest (costs more)"
+        elif t >= times[order[-1]]:
+            r["im_lod_equal_time"], r["im_lod_equal_time_note"] = float(np.exp(le[-1])), "im-lod's dearest (costs less)"
+        else:
+            r["im_lod_equal_time"], r["im_lod_equal_time_note"] = float(np.exp(np.interp(np.log(t), lt, le))), ""
+    return {"weave": weave, "distances": list(distances), "footprints": footprints, "resolution": list(resolution),
+            "reference_spp": reference_spp, "im_lod": im_lod, "neural_lod": neural,
+            "cpu_s": time.process_time() - start}
+
+
+def closeup_lines(result: dict) -> list[str]:
+    """Markdown rows of :func:`closeup_comparison`."""
+    lo = min(f[0] for f in result["footprints"])
+    hi = max(f[1] for f in result["footprints"])
+    out = [f"close-up render, {result['weave']}: {len(result['distances'])} receding-plane views "
+           f"{result['resolution'][0]} x {result['resolution'][1]} px, footprints {lo:.3f}-{hi:.2f} tile; relative "
+           f"L1 against im-texture at {result['reference_spp']} spp; shading CPU summed over the views "
+           f"({result['cpu_s']:.0f} CPU-s)", "",
+           "| shader | spp | shading CPU-s | rel. L1 | im-lod rel. L1 at equal CPU |", "|---|---|---|---|---|"]
+    for r in result["im_lod"]:
+        out.append(f"| im-lod | {r['spp']} | {r['shading_cpu_s']:.3f} | {r['relative_l1']:.4f} | |")
+    for r in result["neural_lod"]:
+        note = f" ({r['im_lod_equal_time_note']})" if r["im_lod_equal_time_note"] else ""
+        out.append(f"| neural-lod | {r['spp']} | {r['shading_cpu_s']:.3f} | {r['relative_l1']:.4f} | "
+                   f"{r['im_lod_equal_time']:.4f}{note} |")
+    return out

@@ -1,0 +1,166 @@
+"""Issue 23 item 4: neural-lod's per-pixel estimator choice (clothlab.surrogate.estimator_choice,
+clothlab.render.neural_lod) - the pick is the cheapest candidate meeting the target (checked by brute force),
+the sidecar field is schema-checked, a footprint finds its bin, and neural-lod renders by the stored choice
+(each pixel's estimator evaluated independently here) or, without one, by its documented default."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from clothlab.errors import InputError
+from clothlab.surrogate.estimator_choice import estimator_at, mc_fit, pick, rechoose
+
+
+def _options(rng, n):
+    kinds = rng.choice(["mc", "surrogate", "reflectance"], n)
+    return [{"estimator": str(k), "samples": int(rng.integers(1, 64)) if k == "mc" else 0,
+             "us": float(rng.uniform(0.1, 50.0)), "relative_rmse": float(rng.uniform(0.0, 0.5))} for k in kinds]
+
+
+def test_the_pick_is_the_cheapest_candidate_that_meets_the_target():
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        options, target = _options(rng, int(rng.integers(1, 10))), float(rng.uniform(0.0, 0.4))
+        chosen = pick(options, target)
+        meeting = [c for c in options if c["relative_rmse"] <= target]
+        if meeting:
+            assert chosen["relative_rmse"] <= target
+            assert all(chosen["us"] <= c["us"] for c in meeting)
+        else:  # nothing meets it: the most accurate
+            assert all(chosen["relative_rmse"] <= c["relative_rmse"] for c in options)
+
+
+def test_the_mc_fit_recovers_a_power_law_and_a_linear_cost():
+    k = np.array([1, 2, 4, 8, 16, 32])
+    us, mse = mc_fit(k, 0.3 + 0.4 * k, 2.0 * k ** -1.5)
+    assert np.allclose(us, 0.3 + 0.4 * k) and np.allclose(mse, 2.0 * k ** -1.5)
+    _, flat = mc_fit(k, 1.0 + k, np.linspace(1.0, 2.0, k.size))  # rising MSE (noise): never rising with k
+    assert np.all(np.diff(flat) <= 1e-15)
+
+
+def _choice():
+    candidates = [{"estimator": "mc", "samples": 2, "us": 1.0, "relative_rmse": 0.05},
+                  {"estimator": "surrogate", "samples": 0, "us": 1.5, "relative_rmse": 0.08},
+                  {"estimator": "reflectance", "samples": 0, "us": 0.3, "relative_rmse": 0.5}]
+    bins = [(0.01, 0.1, candidates[0]), (0.1, 1.0, candidates[1]), (1.0, 5.0, candidates[2])]
+    return {"error_target": 0.15, "measured": "test",
+            "bins": [{"lo": lo, "hi": hi, **c, "candidates": candidates} for lo, hi, c in bins]}
+
+
+def test_a_footprint_finds_its_bin_and_rechoose_applies_another_target():
+    choice = _choice()
+    index, samples = estimator_at(choice, [0.001, 0.01, 0.05, 0.1, 0.99, 1.0, 4.9, 7.0, np.inf])
+    assert index.tolist() == [0, 0, 0, 1, 1, 2, 2, 2, 2]
+    assert samples.tolist() == [2, 2, 2, 0, 0, 0, 0, 0, 0]
+    loose = rechoose(choice, 1.0)  # everything meets it: the cheapest everywhere (R)
+    assert {b["estimator"] for b in loose["bins"]} == {"reflectance"}
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda c: c["bins"][1].update(estimator="magic"), "estimator_choice.bins[1].estimator"),
+    (lambda c: c["bins"][0].update(samples=0), "estimator_choice.bins[0].samples"),
+    (lambda c: c["bins"][1].update(lo=0.05), "estimator_choice.bins[1]"),
+    (lambda c: c.update(error_target=-1), "estimator_choice.error_target"),
+    (lambda c: c.update(bins=[]), "estimator_choice.bins"),
+])
+def test_the_sidecar_field_is_schema_checked(tmp_path, change, field):
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.surrogate.serialise import read_sidecar
+
+    sidecar = json.loads((SHIPPED / "silk-shantung.json").read_text(encoding="utf-8"))
+    sidecar["estimator_choice"] = _choice()
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(sidecar), encoding="utf-8")
+    assert read_sidecar(good)["estimator_choice"]["bins"][2]["estimator"] == "reflectance"
+    change(sidecar["estimator_choice"])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(sidecar), encoding="utf-8")
+    with pytest.raises(InputError) as caught:
+        read_sidecar(bad)
+    assert caught.value.field == field
+
+
+def _scene(distance):
+    from clothlab.studies.render_lod import receding_plane_scene
+
+    scene = receding_plane_scene((12, 9))
+    scene = replace(scene, fabric=replace(scene.fabric, noise=False, weave="preset:silk-shantung"))
+    return replace(scene, camera=scene.camera.at_distance(distance))
+
+
+def _samples_of(scene, fabric):
+    """The shading samples of a 1-spp render of ``scene`` (the renderer's own geometry, captured)."""
+    import importlib
+
+    rendering = importlib.import_module("clothlab.render.render")  # the module (the package exports a function)
+    box = {}
+    original = rendering.shade
+
+    def grab(shader, fabric_, samples, lod, counter):
+        box["s"] = samples
+        return original(shader, fabric_, samples, lod, counter)
+    rendering.shade = grab
+    try:
+        rendering.render(scene, shader="im-reflectance", spp=1, fabric=fabric)
+    finally:
+        rendering.shade = original
+    return box["s"]
+
+
+def test_neural_lod_shades_each_pixel_by_its_bins_estimator(monkeypatch):
+    """With a stored choice, each pixel (1 spp: one sample) is its bin's estimator at the pixel's box: MC-2 of
+    the texture, the network's query or the network's configured R, computed here from the models."""
+    import clothlab.render.neural_lod as policy
+    from clothlab.models.components import combine
+    from clothlab.render import shade
+    from clothlab.render.shade import FabricModels, neural_model
+    from clothlab.surrogate.labels import TextureMonteCarloLabels
+
+    scene = _scene(20.0)
+    fabric = FabricModels.build(scene.fabric)
+    samples = _samples_of(scene, fabric)
+    f = samples.footprint
+    split = float(np.sqrt(f.min() * f.max()))
+    choice = _choice()
+    bins = choice["bins"]
+    choice["bins"] = [dict(bins[0], lo=0.0, hi=split * 0.95), dict(bins[1], lo=split * 0.95, hi=split * 1.05),
+                      dict(bins[2], lo=split * 1.05, hi=1e6)]
+    monkeypatch.setattr(policy, "estimator_choice", lambda weave: choice)
+    counter = shade.Counter()
+    values = shade.neural_lod_values(fabric, samples, counter, scene.lod)
+    near, far = f < split * 0.95, f >= split * 1.05
+    mid = ~near & ~far
+    assert near.any() and mid.any() and far.any()
+    c, wi, wo = np.column_stack([samples.u, samples.v]), samples.wi, samples.wo
+    network = neural_model(fabric)
+    mc = TextureMonteCarloLabels(fabric.texture, fabric.params, samples=2, seed=policy.MC_SEED + 2, noise=False)
+    texture = mc(wi[near], wo[near], c[near], f[near])
+    names = fabric.texture.component_names
+    expected = np.empty_like(values)
+    expected[near] = combine({n: texture[:, i] for i, n in enumerate(names)}, fabric.coefficients)
+    expected[mid] = combine(network.query(c[mid], f[mid], wi[mid], wo[mid], fabric.params), fabric.coefficients)
+    expected[far] = combine(network.exact_model().components(wi[far], wo[far], fabric.params, warn=False),
+                            fabric.coefficients)
+    assert np.allclose(values, expected, rtol=1e-9, atol=1e-12)
+    assert counter["texture_points"] == 2 * near.sum() and counter["neural_points"] == mid.sum()
+    assert counter["reflectance_points"] == far.sum()
+
+
+def test_a_sidecar_without_a_choice_keeps_the_documented_default(monkeypatch):
+    """No ``estimator_choice``: neural-lod is the session-10 policy (the network over 0.12-0.5 tile, im-lod
+    elsewhere): near, where no pixel reaches 0.12 tile, the image is im-lod's exactly."""
+    import clothlab.render.neural_lod as policy
+    from clothlab.render.render import render
+    from clothlab.render.shade import FabricModels
+
+    monkeypatch.setattr(policy, "estimator_choice", lambda weave: None)
+    scene = _scene(1.5)
+    fabric = FabricModels.build(scene.fabric)
+    neural = render(scene, shader="neural-lod", spp=2, fabric=fabric)
+    im_lod = render(scene, shader="im-lod", spp=2, fabric=fabric)
+    assert neural.stats["neural_evaluations"] == 0
+    assert np.array_equal(neural.image, im_lod.image)
