@@ -53,7 +53,8 @@ MIN_FOOTPRINT = 0.01  # tiles
 
 
 def reference_model(sidecar: dict, weave=None, name: str | None = None):
-    """The reflectance model a residual surrogate corrects: the sidecar's ``kind`` on ``weave`` (default:
+    """The reflectance model a residual surrogate corrects: the sidecar's ``kind`` with its
+    ``encoding.reference_quadrature`` (the kind's default for older files) on ``weave`` (default:
     the weave recorded in the sidecar, ``encoding["weave_wv"]``, or with ``name`` the weave of that name in
     ``encoding["weaves_wv"]``, networks over several weaves)."""
     from clothlab.models.registry import build_model
@@ -64,7 +65,8 @@ def reference_model(sidecar: dict, weave=None, name: str | None = None):
 
         text = enc["weave_wv"] if name is None else enc["weaves_wv"][name]
         weave = parse_wv_text(text, source="surrogate sidecar")
-    return build_model(enc.get("kind", "irawan"), weave)
+    q = enc.get("reference_quadrature")  # the network's configured R (clothlab.surrogate.materials); else defaults
+    return build_model(enc.get("kind", "irawan"), weave, None if q is None else (q["rule"], q["nodes"]))
 
 
 def load_neural(path, weave=None):
