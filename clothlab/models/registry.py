@@ -23,7 +23,7 @@ MODEL_KINDS = {
 COMPOSITE_KINDS = {f"{s}+{d}": (s, d) for s in ("irawan", "kang") for d in ("lambert", "oren-nayar")}
 MODEL_KINDS.update({name: ("clothlab.models.composite.model", "composite_class") for name in COMPOSITE_KINDS})
 #: Physics options (clothlab.models.composite.terms, issue 28): name -> (base kind, term).
-TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",) for t in ("sheen", "fresnel")}
+TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",) for t in ("sheen", "fresnel", "fresnel-smith")}
 MODEL_KINDS.update({name: ("clothlab.models.composite.terms", "term_class") for name in TERM_KINDS})
 DEFAULT_KIND = "irawan"
 #: kinds whose reflectance does not depend on the weave (fabric.yaml may leave ``model.weave`` out)
