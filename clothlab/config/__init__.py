@@ -10,7 +10,9 @@ found and what was expected.  The package holds one concept per module:
 - :mod:`~clothlab.config.checks` - checks of one value, raising at its location;
 - :mod:`~clothlab.config.validate` - the rules of every section, :func:`load_config`,
   :func:`config_from_dict`, :func:`apply_overrides`;
-- :mod:`~clothlab.config.choices` - the metric and nlopt algorithm names (closed lists no lower layer owns).
+- :mod:`~clothlab.config.choices` - the metric and nlopt algorithm names (closed lists no lower layer owns);
+- :mod:`~clothlab.config.build` - the one builder of a model: from a Config (:func:`model_from_config`), a fit
+  directory (:func:`model_from_fit`) or a weave (:func:`model_from_weave`).
 
 The key-by-key reference is the project's fabric.yaml reference page (``fabric-yaml.md``).
 """
