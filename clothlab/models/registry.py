@@ -84,10 +84,13 @@ def model_class(kind: str):
 
 
 def build_model(kind: str, weave, quadrature=None, **options):
-    """An instance of the model ``kind`` for ``weave``; ``quadrature`` = (rule, nodes) for integrating models.
+    """An instance of the model ``kind`` for ``weave``; ``quadrature`` a
+    :class:`~clothlab.models.irawan.quadrature.Quadrature` (or None: the default) for integrating models (a
+    (rule, nodes) pair is taken too); fabric.yaml and fit directories build through :mod:`clothlab.config.build`.
 
+    >>> from clothlab.models.irawan.quadrature import Quadrature
     >>> from clothlab.weave.presets import get_preset
-    >>> model = build_model("irawan", get_preset("cotton-twill"), ("gauss", 8))
+    >>> model = build_model("irawan", get_preset("cotton-twill"), Quadrature("gauss", 8))
     >>> model.component_names  # the linear parts whose coefficients a fit solves (kd, ks_warp, ks_weft)
     ('diffuse', 'specular_warp', 'specular_weft')
     >>> build_model("irawan", get_preset("cotton-twill"), tile_nodes=3)

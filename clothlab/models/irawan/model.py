@@ -129,8 +129,7 @@ class IrawanModel(Model):
         return replace(apply_parameters(self.weave, self.resolve(params)), filament_arc=self.filament_arc)
 
     def settings(self) -> dict:
-        return {"quadrature": {"rule": self.quadrature.rule, "nodes": self.quadrature.nodes},
-                "options": {"filament_arc": self.filament_arc}}
+        return {"quadrature": self.quadrature.record(), "options": {"filament_arc": self.filament_arc}}
 
     @classmethod
     def describe_settings(cls, settings: dict) -> str:
