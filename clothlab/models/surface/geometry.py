@@ -46,20 +46,13 @@ def cylinder_angles(x, y, w: float, l: float, umax: float):
 
 def ply_frame(u, v, psi: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
     """(n_p, t_p), each (..., 3), at cylinder angles u, v (radians) for twist psi (radians) and height-field
-    scaling beta (module docstring; all four broadcast together); yarn frame."""
+    scaling beta (module docstring; all four broadcast together); yarn frame.  Compiled, point by point
+    (:func:`clothlab.models.surface.kernels.ply_frame_at`, which the texture kernel also calls)."""
+    from clothlab.models.surface import kernels
+
     u, v, psi, beta = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (u, v, psi, beta)))
-    su, cu, sv, cv = np.sin(u), np.cos(u), np.sin(v), np.cos(v)
-    n = np.stack([sv, su * cv, cu * cv], axis=-1)
-    spine = np.stack([np.zeros_like(u), cu, -su], axis=-1)
-    around = np.cross(n, spine)
-    t = np.cos(psi)[..., None] * spine + np.sin(psi)[..., None] * around
-    scale = np.stack([beta, beta, np.ones_like(beta)], axis=-1)
-    n_p = n * scale
-    n_p /= np.linalg.norm(n_p, axis=-1, keepdims=True)
-    t_p = t * np.stack([np.ones_like(beta), np.ones_like(beta), beta], axis=-1)
-    t_p -= np.sum(t_p * n_p, axis=-1, keepdims=True) * n_p  # re-orthogonalised
-    t_p /= np.linalg.norm(t_p, axis=-1, keepdims=True)
-    return n_p, t_p
+    frames = kernels.ply_frames(*(np.ascontiguousarray(a.reshape(-1)) for a in (u, v, psi, beta)))
+    return frames[:, :3].reshape(u.shape + (3,)), frames[:, 3:].reshape(u.shape + (3,))
 
 
 def yarn_area(w: np.ndarray, umax, beta, gap: float, nodes: int = AREA_NODES) -> np.ndarray:

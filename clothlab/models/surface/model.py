@@ -85,6 +85,22 @@ def ply_nodes(p: dict, kind: str, nodes: tuple[int, int]) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate([n_p, t_p], axis=1))
 
 
+AREA_PARAMETERS = ("gap",) + tuple(f"{kind}.{name}" for kind in YARN_KINDS for name in ("umax", "beta"))
+"""The parameters the tile's projected area A~ depends on (:func:`.geometry.projected_area`)."""
+
+
+def _runs(w: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(first row of each run, run of each row) of the runs of equal consecutive rows of ``w`` (N, 3); (None,
+    None) when no two consecutive rows are equal."""
+    from clothlab.models.surface import kernels
+
+    run = np.empty(len(w), dtype=np.int64)
+    count = kernels.direction_runs(np.ascontiguousarray(w, dtype=np.float64), run)
+    if count == len(w):
+        return None, None
+    return np.flatnonzero(np.diff(run, prepend=-1)), run
+
+
 MAX_TILE_NODES = 1024
 """Most midpoint nodes per axis of ``tile_nodes``."""
 MAX_TILE_POINTS = 1 << 18
@@ -133,6 +149,7 @@ class SurfaceModel(Model):
         self.tile_nodes = _tile_nodes(tile_nodes)
         self.options = {} if tile_nodes is None else {"tile_nodes": list(self.tile_nodes)}
         self.shares = {kind: weave.cell_share(kind) for kind in YARN_KINDS}
+        self._area_memo: dict[int, tuple] = {}  # slot (0 wi, 1 wo) -> (parameters, directions, A~)
 
     @classmethod
     def from_config(cls, weave, quadrature=None, **options) -> SurfaceModel:
@@ -166,13 +183,29 @@ class SurfaceModel(Model):
         return SurfaceTexture(self)
 
     def projected_areas(self, wi: np.ndarray, wo: np.ndarray, p: dict) -> tuple[np.ndarray, np.ndarray]:
-        """A~(wi), A~(wo) (N,) of the tile (decision 2), computed once per distinct direction."""
-        return tuple(self._area_once(w, p) for w in (wi, wo))
+        """A~(wi), A~(wo) (N,) of the tile (decision 2), computed once per run of equal consecutive directions
+        (the texture points of one footprint share theirs, as do those under a directional light).  The last
+        set of each is kept with the parameters it depends on, so R and the texture probe of one surrogate
+        query (the same directions) compute it once; :meth:`forget_directions` drops it."""
+        return tuple(self._areas(slot, w, p) for slot, w in enumerate((wi, wo)))
 
-    def _area_once(self, w: np.ndarray, p: dict) -> np.ndarray:
-        if len(w) > 1 and np.all(w == w[:1]):  # one direction for all (a directional light)
-            return np.broadcast_to(projected_area(w[:1], self.shares, p), (len(w),))
-        return projected_area(w, self.shares, p)
+    def _areas(self, slot: int, w: np.ndarray, p: dict) -> np.ndarray:
+        starts, runs = _runs(w)
+        unique = w if starts is None else w[starts]
+        key = tuple(p[name] for name in AREA_PARAMETERS)
+        if not all(np.ndim(k) == 0 for k in key):  # per-row parameters: nothing kept
+            return projected_area(w, self.shares, p)
+        kept = self._area_memo.get(slot)
+        if kept is not None and kept[0] == key and kept[1].shape == unique.shape and np.array_equal(kept[1], unique):
+            area = kept[2]
+        else:
+            area = projected_area(unique, self.shares, p)
+            self._area_memo[slot] = (key, unique.copy(), area.copy())
+        return area if runs is None else area[runs]
+
+    def forget_directions(self) -> None:
+        """Drop the projected areas kept of the last directions (:meth:`projected_areas`)."""
+        self._area_memo = {}
 
     def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
                     warn: bool = True) -> dict[str, np.ndarray]:
