@@ -1,4 +1,5 @@
-"""The neural-lod shader (clothlab.render.shade): texture model where the pixel resolves the yarns, the
+"""The neural-lod shader's documented default (clothlab.render.shade; a network whose sidecar has no
+estimator_choice): texture model where the pixel resolves the yarns, the
 shipped network once per pixel between ~0.12 and ~0.5 tile (im-lod elsewhere), the reflectance model beyond;
 checked on a
 head-on view of silk shantung at three heights against the other shaders and against the network queried
@@ -14,6 +15,15 @@ from clothlab.render import render, scene_from_dict
 from clothlab.render.shade import NEURAL_FALL, NEURAL_RISE, FabricModels, network_weight
 
 LIGHT = [0.3, -0.2, 1.0]
+
+
+@pytest.fixture(autouse=True)
+def documented_default(monkeypatch):
+    """These tests check neural-lod's documented default, what a network without measured crossovers gets
+    (the shipped sidecars carry them: tests/test_neural_estimator_choice.py checks that policy)."""
+    import clothlab.render.neural_lod as policy
+
+    monkeypatch.setattr(policy, "estimator_choice", lambda weave: None)
 
 
 def head_on_dict(height, resolution=(8, 6), fov=20.0):
