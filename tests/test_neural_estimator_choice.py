@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from clothlab.errors import InputError
-from clothlab.surrogate.estimator_choice import estimator_at, mc_fit, pick, rechoose
+from clothlab.surrogate.estimator_choice import NEAR_BEST, estimator_at, mc_fit, pick, rechoose
 
 
 def _options(rng, n):
@@ -30,8 +30,9 @@ def test_the_pick_is_the_cheapest_candidate_that_meets_the_target():
         if meeting:
             assert chosen["relative_rmse"] <= target
             assert all(chosen["us"] <= c["us"] for c in meeting)
-        else:  # nothing meets it: the most accurate
-            assert all(chosen["relative_rmse"] <= c["relative_rmse"] for c in options)
+        else:  # nothing meets it: the cheapest of those within NEAR_BEST of the most accurate
+            near = [c for c in options if c["relative_rmse"] <= NEAR_BEST * min(o["relative_rmse"] for o in options)]
+            assert chosen in near and all(chosen["us"] <= c["us"] for c in near)
 
 
 def test_the_mc_fit_recovers_a_power_law_and_a_linear_cost():
