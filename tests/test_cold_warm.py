@@ -236,3 +236,23 @@ def test_yarn_integrals_keep_the_callers_geometry():
     np.testing.assert_array_equal(geometry, kept)
     np.testing.assert_array_equal(yarn_integrals(terms, geometry, model.quadrature), first)
     assert np.count_nonzero(first) > 10
+
+
+def test_kang_half_vector_groups_match_the_numpy_form():
+    """The compiled grouping of the warp's and the weft's half vectors (the weft's formed inside, x and y
+    swapped) is numpy's: rint of the scaled blocks concatenated, then the partition of equal rows."""
+    from clothlab.models.kang import kernels
+    from clothlab.models.kang.model import GROUP_TOLERANCE
+
+    wi, wo = _pairs(400, np.random.default_rng(11))
+    wi[200:] = wi[:200]  # repeated pairs: groups with several members
+    wo[200:] = wo[:200]
+    h, _, _ = kernels.direction_terms(wi, wo)
+    for weft in ([False], [True], [False, True]):
+        blocks = np.concatenate([h[:, [1, 0, 2]] if w else h for w in weft])
+        keys = np.rint(blocks * (1.0 / GROUP_TOLERANCE)).astype(np.int64)
+        first, inverse = kernels.equal_row_groups(keys)
+        reps, got_inverse = kernels.half_vector_groups(h, np.array(weft), 1.0 / GROUP_TOLERANCE)
+        np.testing.assert_array_equal(reps, blocks[first])
+        np.testing.assert_array_equal(got_inverse, inverse)
+        assert len(reps) < len(blocks)  # the repeats were grouped

@@ -482,3 +482,29 @@ def equal_row_groups(keys):
                 break
             slot = (slot + 1) & mask
     return first[:groups].copy(), inverse
+
+
+@njit(cache=True)
+def half_vector_groups(h, swaps, scale):
+    """Groups of equal half vectors over ``len(swaps)`` blocks of the rows of h (N, 3) - block b is h itself
+    (``swaps[b]`` 0: the warp's yarn frame) or h with x and y swapped (1: the weft's, :func:`direction_terms`) -
+    as (representatives (M, 3), inverse (B N,)): rows whose components rounded to integers after multiplying
+    by ``scale`` agree form a group (numpy's ``rint``, half to even), evaluated at its first row; the groups of
+    :func:`equal_row_groups` of those integer keys, without forming the blocks (one pass)."""
+    n = h.shape[0]
+    blocks = swaps.shape[0]
+    keys = np.empty((n * blocks, 3), dtype=np.int64)
+    for b in range(blocks):
+        ix, iy = (1, 0) if swaps[b] else (0, 1)
+        for i in range(n):
+            r = b * n + i
+            keys[r, 0] = np.int64(np.rint(h[i, ix] * scale))
+            keys[r, 1] = np.int64(np.rint(h[i, iy] * scale))
+            keys[r, 2] = np.int64(np.rint(h[i, 2] * scale))
+    first, inverse = equal_row_groups(keys)
+    representatives = np.empty((first.shape[0], 3))
+    for g in range(first.shape[0]):
+        b, i = first[g] // n, first[g] % n
+        ix, iy = (1, 0) if swaps[b] else (0, 1)
+        representatives[g, 0], representatives[g, 1], representatives[g, 2] = h[i, ix], h[i, iy], h[i, 2]
+    return representatives, inverse

@@ -215,7 +215,7 @@ class KangModel(Model):
         # swaps |h_x| and |h_y|, and eq. 1's factors do not change under that rotation
         h, m5, inv_denom = kernels.direction_terms(np.ascontiguousarray(wi, dtype=np.float64),
                                                    np.ascontiguousarray(wo, dtype=np.float64))
-        d["h"] = {"warp": h, "weft": np.ascontiguousarray(h[:, [1, 0, 2]])}
+        d["h"] = h  # the warp's; the weft's has x and y swapped (made only inside the grouping, _half_vector_groups)
         d["m5"] = {"warp": m5, "weft": m5}
         d["inv_denom"] = {"warp": inv_denom, "weft": inv_denom}
         self._directions = d
@@ -236,7 +236,7 @@ class KangModel(Model):
         out = {}
         for group_kinds in sets:
             if group_kinds not in d["groups"]:
-                d["groups"][group_kinds] = _half_vector_groups(np.concatenate([d["h"][k] for k in group_kinds]))
+                d["groups"][group_kinds] = _half_vector_groups(d["h"], [k == "weft" for k in group_kinds])
             representatives, inverse = d["groups"][group_kinds]
             nx, ny = lobes[group_kinds[0]]
             a = kernels.peak_tile_average(representatives, float(nx), float(ny), float(p["yarn_curvature"]),
@@ -400,8 +400,10 @@ def nodes_for_axis(curvature: float, exponent: float) -> int:
 GROUP_TOLERANCE = 1e-12
 
 
-def _half_vector_groups(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(representatives (M, 3), inverse (N,)) for half vectors h (N, 3): rows whose components round to the
+def _half_vector_groups(h: np.ndarray, weft: list[bool]) -> tuple[np.ndarray, np.ndarray]:
+    """(representatives (M, 3), inverse (B N,)) for the half vectors of B yarn types, each the warp's h (N, 3)
+    or (``weft[b]``) the weft's, h with x and y swapped, one block after the other (compiled in one pass,
+    :func:`.kernels.half_vector_groups`): rows whose components round to the
     same multiple of :data:`GROUP_TOLERANCE` form a group, evaluated once at its first row (a symmetric
     gonioreflectometer sampling repeats |h| up to rounding: the paper's 1,575 pairs x 2 yarn types give 770
     groups).  A member's value is the rule's value at a half vector within 1e-12 of its own: the same to rounding,
@@ -409,9 +411,7 @@ def _half_vector_groups(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     > 99 % of the values to 1e-9 relative, all to 1e-4 floored at 1 % of the mean; the rule's error is ~4e-4)."""
     from clothlab.models.kang import kernels
 
-    keys = np.rint(h * (1.0 / GROUP_TOLERANCE)).astype(np.int64)
-    first, inverse = kernels.equal_row_groups(keys)  # each group's first row, in order of appearance
-    return np.ascontiguousarray(h[first]), inverse
+    return kernels.half_vector_groups(h, np.array(weft, dtype=np.bool_), 1.0 / GROUP_TOLERANCE)
 
 
 @cache
