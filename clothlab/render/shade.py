@@ -422,7 +422,7 @@ def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> 
                         need=fabric.need, warn=False)
     reference = np.column_stack([comps[k] if k in comps else np.zeros(first.size)
                                  for k in fabric.reflectance.component_names])
-    net = counter.run("neural", first.size, model.query, centre, s.footprint[first], wi, wo, fabric.params,
+    net = counter.run(model.kind, first.size, model.query, centre, s.footprint[first], wi, wo, fabric.params,
                       reference=reference)
     return combine({k: net[k] for k in fabric.need}, fabric.coefficients)[back]
 

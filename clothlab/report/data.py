@@ -29,6 +29,7 @@ from clothlab.config.schema import DEFAULT_PERCENTILES
 from clothlab.errors import InputError
 from clothlab.io.table import ANGLE_COLUMNS as DIRECTION_COLUMNS
 from clothlab.io.table import MAX_VALUE, MIN_VALUE
+from clothlab.models.registry import PAPER_KIND
 from clothlab.untrusted import (
     MAX_NUMBER_CHARS,
     MAX_TABLE_BYTES,
@@ -489,7 +490,7 @@ def free_parameters(fit: dict) -> dict[str, dict]:
 
 #: The model whose fits the published figures of :data:`PAPER_RELATIVE_ERRORS` are (Irawan & Marschner 2012,
 #: sec. 8): a row of another model does not show them as its reference.
-PAPER_MODEL_KIND = "irawan"
+PAPER_MODEL_KIND = PAPER_KIND
 #: Provenance key naming the paper fabric a measurement is (or simulates), e.g. ``paper_fabric: cotton-twill``.
 PAPER_FABRIC_KEY = "paper_fabric"
 

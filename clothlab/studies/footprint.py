@@ -58,16 +58,17 @@ def footprint_benchmark(quick: bool, *, pairs: int | None = None, footprints: in
                         kinds=None, reference_resolution: int = REFERENCE_RESOLUTION, check: int | None = None) -> dict:
     """Figures per kind: settings, one row per estimator (queries_per_second, relative_rmse by size bin),
     the SAT build time per pair and the query time, and the tables' discretisation check (``check``
-    queries per bin).  ``quick``: 4 pairs x 250 footprints, 20 checked per bin, IM only."""
+    queries per bin).  ``quick``: 4 pairs x 250 footprints, 20 checked per bin, the registry's default kind
+    (IM) only."""
     from clothlab.footprint import FootprintTable, mc_estimate
-    from clothlab.models.registry import MODEL_KINDS, build_model, model_class
+    from clothlab.models.registry import DEFAULT_KIND, MODEL_KINDS, build_model, model_class
     from clothlab.weave.presets import get_preset
 
     pairs = pairs or (4 if quick else 16)
     footprints = footprints or (250 if quick else 500)
     check = check or (20 if quick else 200)
     if kinds is None:
-        kinds = ("irawan",) if quick else tuple(k for k in MODEL_KINDS if model_class(k).has_texture)
+        kinds = (DEFAULT_KIND,) if quick else tuple(k for k in MODEL_KINDS if model_class(k).has_texture)
     bins = [(SIZE_BINS[i], SIZE_BINS[i + 1]) for i in range(len(SIZE_BINS) - 1)]
     out = {"settings": {"weave": WEAVE, "pairs": pairs, "footprints_per_pair": footprints,
                         "resolution": RESOLUTION, "reference_resolution": reference_resolution,

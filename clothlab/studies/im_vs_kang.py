@@ -42,13 +42,16 @@ def im_vs_kang(quick: bool, data: StudyData) -> list[dict]:
         weave = get_preset(name)
         im, im_params, im_fit = fitted(name, IrawanModel(weave, Quadrature("trapezoid", 11)))
         kang, kang_params, kang_fit = fitted(f"{name}-kang", KangModel(weave))
-        candidates = [(f"irawan {im.quadrature.rule}-{im.quadrature.nodes}{' (fit)' if im_fit else ''}", im, im_params,
-                       im_fit),
-                      ("irawan support-8", IrawanModel(weave, Quadrature("support", 8)), im_params, None),
-                      (f"kang {kang.tile_rule}{' (fit)' if kang_fit else ''}", kang, kang_params, kang_fit),
-                      ("kang legendre-8", KangModel(weave, tile_rule="legendre", tile_nodes=8,
-                                                    alternating=kang.alternating), kang_params, None)]
-        for label, model, p, fit in candidates:
+        support = IrawanModel(weave, Quadrature("support", 8))
+        legendre = KangModel(weave, tile_rule="legendre", tile_nodes=8, alternating=kang.alternating)
+        # (label, model, parameters, its own fit, the fit its parameters come from)
+        candidates = [(f"{im.kind} {im.quadrature.rule}-{im.quadrature.nodes}{' (fit)' if im_fit else ''}", im,
+                       im_params, im_fit, im_fit),
+                      (f"{support.kind} support-8", support, im_params, None, im_fit),
+                      (f"{kang.kind} {kang.tile_rule}{' (fit)' if kang_fit else ''}", kang, kang_params, kang_fit,
+                       kang_fit),
+                      (f"{legendre.kind} legendre-8", legendre, kang_params, None, kang_fit)]
+        for label, model, p, fit, source in candidates:
             p = {k: v for k, v in p.items() if k in model.params}
 
             def evaluate(model=model, p=p):
@@ -60,7 +63,7 @@ def im_vs_kang(quick: bool, data: StudyData) -> list[dict]:
             evaluate()
             seconds = best_time(evaluate, 3 if quick else 7)
             row = {"fabric": name, "model": label, "pairs_per_second": len(wi) / seconds, "seconds_1575": seconds,
-                   "parameters": "fitted" if (im_fit if label.startswith("irawan") else kang_fit) else "defaults"}
+                   "parameters": "fitted" if source else "defaults"}
             if fit is not None:
                 row.update({"fit": fit["name"], "p50": fit["errors"]["overall"]["p50"],
                             "p80": fit["errors"]["overall"]["p80"], "fit_wall_time_s": optimisation_seconds(fit)})
