@@ -142,7 +142,10 @@ def test_direction_set_kernels_match_numpy():
     from clothlab.models.irawan import kernels
 
     wi, wo = _pairs(500, np.random.default_rng(8))
-    cos_x, front = kernels.phase_cosines(wi, wo)
+    cos_x, front, kept_wi, kept_wo = kernels.phase_cosines(wi, wo)
+    np.testing.assert_array_equal(kept_wi, wi)
+    np.testing.assert_array_equal(kept_wo, wo)
+    assert not np.shares_memory(kept_wi, wi) and not np.shares_memory(kept_wo, wo)
     np.testing.assert_array_equal(cos_x, -np.einsum("...k,...k->...", wi, wo))
     np.testing.assert_array_equal(front, (wi[:, 2] > 0) & (wo[:, 2] > 0))
     assert not front.all() and front.any()

@@ -810,30 +810,35 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta, shortened):
 
 @njit(cache=True)
 def phase_cosines(wi, wo):
-    """(-wi . wo (N,), front (N,)) of (N, 3) fabric-frame pairs: the argument of eq. 7's lobe and whether both
-    directions are above the surface (wi_z > 0 and wo_z > 0)."""
+    """(-wi . wo (N,), front (N,), copies of wi and wo) of (N, 3) fabric-frame pairs in one pass: the argument of
+    eq. 7's lobe, whether both directions are above the surface (wi_z > 0 and wo_z > 0), and the direction set a
+    model keeps to recognise it (:func:`same_pairs`)."""
     n_dir = wi.shape[0]
     cos_x = np.empty(n_dir)
     front = np.empty(n_dir, dtype=np.bool_)
+    kept_wi = np.empty((n_dir, 3))
+    kept_wo = np.empty((n_dir, 3))
     for n in range(n_dir):
+        ix, iy, iz, ox, oy, oz = wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2]
+        kept_wi[n, 0], kept_wi[n, 1], kept_wi[n, 2] = ix, iy, iz
+        kept_wo[n, 0], kept_wo[n, 1], kept_wo[n, 2] = ox, oy, oz
         # eq. 7: -wi . wo, summed x, z, then y: the order of numpy's einsum, the previous form (same values)
-        cos_x[n] = -((wi[n, 0] * wo[n, 0] + wi[n, 2] * wo[n, 2]) + wi[n, 1] * wo[n, 1])
-        front[n] = wi[n, 2] > 0.0 and wo[n, 2] > 0.0
-    return cos_x, front
+        cos_x[n] = -((ix * ox + iz * oz) + iy * oy)
+        front[n] = iz > 0.0 and oz > 0.0
+    return cos_x, front, kept_wi, kept_wo
 
 
 @njit(cache=True)
 def same_pairs(kept_wi, kept_wo, wi, wo):
-    """Whether (wi, wo) equal (kept_wi, kept_wo) element by element (shapes and values; NaN never equal), in one
-    pass that stops at the first difference."""
+    """Whether (wi, wo) equal (kept_wi, kept_wo) element by element (shapes and values; NaN never equal); a
+    branch-free pass over the elements (it vectorises), the second array only when the first agrees."""
     if kept_wi.shape != wi.shape or kept_wo.shape != wo.shape:
         return False
-    a, b, c, d = kept_wi.ravel(), wi.ravel(), kept_wo.ravel(), wo.ravel()
-    for i in range(a.shape[0]):
-        if a[i] != b[i]:
-            return False
-    for i in range(c.shape[0]):
-        if c[i] != d[i]:
+    for x, y in ((kept_wi.ravel(), wi.ravel()), (kept_wo.ravel(), wo.ravel())):
+        equal = True
+        for i in range(x.shape[0]):
+            equal &= x[i] == y[i]
+        if not equal:
             return False
     return True
 

@@ -189,8 +189,8 @@ class IrawanModel(Model):
         if d is not None and kernels.same_pairs(d["wi"], d["wo"], wi, wo):  # one compiled pass
             return d
         self._memo.clear()
-        cos_x, front = kernels.phase_cosines(wi, wo)
-        self._directions = {"wi": wi.copy(), "wo": wo.copy(), "cos_x": cos_x, "front": front, "terms": {}}
+        cos_x, front, kept_wi, kept_wo = kernels.phase_cosines(wi, wo)
+        self._directions = {"wi": kept_wi, "wo": kept_wo, "cos_x": cos_x, "front": front, "terms": {}}
         return self._directions
 
     def _yarn_terms(self, wi, wo, kind, at: dict | None = None) -> YarnTerms:
