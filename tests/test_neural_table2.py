@@ -244,3 +244,23 @@ def test_fast_fit_through_the_probing_table2_network_recovers_an_unseen_material
     for k in free:
         assert fitted[k] == pytest.approx(truth[k], rel=1e-3), k
     assert refined.fast["params"] == pytest.approx(fast.params)
+
+
+def test_texture_bins_score_every_group_per_bench_bin_against_the_texture_itself():
+    """texture_bins (issue 23 item 7's figures) on tiny settings: one row per bench bin and group over every
+    member material, intervals around the point figure, and at 4-5 tiles R within a few per cent of the
+    texture reference (the tile average is the texture's average; R does not enter the reference)."""
+    from clothlab.models.neural.model import SHIPPED
+    from clothlab.studies.neural_bins import BINS
+    from clothlab.studies.neural_table2 import GROUPS, texture_bins, texture_lines
+
+    result = texture_bins(SHIPPED / f"{TABLE2}.npz", per_bin=40, samples=256)
+    assert set(GROUPS) <= set(result)
+    for g in GROUPS:
+        rows = result[g]
+        assert [(r["size_lo"], r["size_hi"]) for r in rows] == list(BINS)
+        for r in rows:
+            lo, hi = r["surrogate_interval"]
+            assert r["queries"] >= 40 and lo <= r["surrogate"] <= hi
+        assert rows[-1]["reflectance_model"] < 0.05 and rows[-1]["surrogate"] < 0.05
+    assert len(texture_lines(result)) == 2 + len(GROUPS) * len(BINS) + 1

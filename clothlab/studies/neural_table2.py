@@ -10,6 +10,12 @@ of the trained weaves), ``heldout_pattern`` (every material of the weave never t
 bin are spread evenly over the group's materials.
 
 Run: ``python -c "from clothlab.studies.neural_table2 import evaluate; print(chr(10).join(evaluate('PATH.npz')[1]))"``.
+
+:func:`texture_bins` scores the same groups against the per-fabric bench's reference instead (issue 23 item 7):
+the texture's own box average by 16,384 stratified points, no R (:func:`clothlab.studies.neural_bins.
+texture_reference`), on the bench's bins (:data:`clothlab.studies.neural_bins.BINS`), every material of the
+group, with 90 % bootstrap intervals: ``python -c "from clothlab.studies.neural_table2 import texture_bins,
+texture_lines; print(chr(10).join(texture_lines(texture_bins('PATH.npz'))))"``.
 """
 
 from __future__ import annotations
@@ -128,3 +134,60 @@ def evaluate(weights, per_bin: int = 150, samples: int = 1024) -> tuple[dict, li
                                                      f"(R {r['reflectance_model']:.3f})" for r in ranges))
     lines.append(f"CPU {result['cpu_s']:.0f} s")
     return result, lines
+
+
+def texture_bins(weights, per_bin: int = 3000, samples: int = 16384, seed: int = 4111) -> dict:
+    """{group: [{size_lo, size_hi, queries, materials, surrogate, surrogate_interval, reflectance_model,
+    reference_noise}], "cpu_s"} of the network at ``weights`` per bin of the bench
+    (:data:`clothlab.studies.neural_bins.BINS`) against :func:`clothlab.studies.neural_bins.texture_reference`
+    (``samples`` points per query, no R): ``per_bin`` fresh held-out queries per group and bin spread evenly
+    over every material of the group (:func:`group_materials`; seeds ``seed`` + ..., not the bench's)."""
+    from clothlab.models.neural.model import load_neural
+    from clothlab.studies.neural_bins import BINS, Material, texture_reference
+    from clothlab.surrogate.data import DataSpec, heldout_queries
+    from clothlab.surrogate.training import relative_rmse_interval
+
+    start = time.process_time()
+    surrogate, sidecar = load_neural(weights)
+    enc = sidecar["encoding"]
+    spec = DataSpec(**enc["data_spec"])
+    out = {}
+    for group, members in group_materials(enc).items():
+        if not members:
+            continue
+        materials = [Material(surrogate, sidecar, m) for m in members]
+        each = -(-per_bin // len(materials))
+        rows = []
+        for i, (lo, hi) in enumerate(BINS):
+            ref, diff, pred, base = [], [], [], []
+            for m in materials:
+                q = heldout_queries(spec, each, seed=seed + 1000 * i + 7 * m.row, sizes=(lo, hi), material=m.row)
+                f, d = texture_reference(m, q, samples, seed + 3 + 11 * m.row + 1000 * i)
+                ref.append(f)
+                diff.append(d)
+                pred.append(surrogate.query(q[:, 1:3], q[:, 3], q[:, 4:7], q[:, 7:10], material=m.row).sum(axis=1))
+                base.append(m.r(q[:, 4:7], q[:, 7:10], q[:, 1:3], q[:, 3]).sum(axis=1))
+            ref, diff, pred, base = (np.concatenate(x) for x in (ref, diff, pred, base))
+            rows.append({"size_lo": lo, "size_hi": hi, "queries": int(ref.size), "materials": len(materials),
+                         "surrogate": _relative(pred, ref), "surrogate_interval": relative_rmse_interval(pred, ref),
+                         "reflectance_model": _relative(base, ref),
+                         "reference_noise": 0.5 * float(np.sqrt(np.sum(diff ** 2) / np.sum(ref ** 2)))})
+        out[group] = rows
+    out["cpu_s"] = time.process_time() - start
+    return out
+
+
+def texture_lines(result: dict) -> list[str]:
+    """Markdown rows of :func:`texture_bins`: per group and bin the relative RMSE [90 %], R alone, the
+    reference's own noise."""
+    lines = ["| group | bin (tiles) | queries (materials) | rel. RMSE [90 %] | R alone | ref. noise |",
+             "|---|---|---|---|---|---|"]
+    names = {"heldout_pairs": "trained materials", "heldout_materials": "unseen materials",
+             "heldout_pattern": "held-out pattern"}
+    for g in GROUPS:
+        for r in result.get(g, []):
+            lo, hi = r["surrogate_interval"]
+            lines.append(f"| {names[g]} | {r['size_lo']:g}-{r['size_hi']:g} | {r['queries']:,} "
+                         f"({r['materials']}) | {r['surrogate']:.3f} [{lo:.3f}, {hi:.3f}] | "
+                         f"{r['reflectance_model']:.3f} | {r['reference_noise']:.4f} |")
+    return lines + [f"CPU {result['cpu_s']:.0f} s"]
