@@ -227,3 +227,34 @@ def test_orientation_bounds_wider_than_one_period_are_refused():
     with pytest.raises(ConfigError, match="period") as info:
         FitProblem(model, m, ("orientation",), {"orientation": 0.0}, {"orientation": (-period / 2, period / 2 + 1)})
     assert info.value.field == "fit.bounds.orientation"
+
+
+def test_a_subclass_writes_the_hooks_and_cannot_bypass_the_orientation():
+    """The public methods apply the orientation (template methods of models/base.py); a class that defines one
+    itself, as NeuralTexture once did, is refused when it is created, for models and for textures."""
+    from clothlab.models.base import TEMPLATE_METHODS, TEXTURE_TEMPLATE_METHODS, Model, ModelTexture
+    from clothlab.params import ParamTable
+
+    for name in TEMPLATE_METHODS:
+        with pytest.raises(TypeError, match=f"_{name}"):
+            type("Bypass", (Model,), {name: lambda self, *a, **k: None})
+    for name in TEXTURE_TEMPLATE_METHODS:
+        with pytest.raises(TypeError, match=f"_{name}"):
+            type("BypassTexture", (ModelTexture,), {name: lambda self, *a, **k: None})
+
+    class Plain(Model):  # hooks only: the base applies the orientation
+        kind = "plain-test"
+        component_names = ("diffuse",)
+        params = ParamTable([])
+
+        def _default_parameters(self):
+            return {}
+
+        def _components(self, wi, wo, params=None, *, need=None, normalised=True, warn=True):
+            return {"diffuse": np.asarray(wi, dtype=np.float64)[:, 0]}  # the weave-frame x of wi
+
+    model = Plain(TWILL)
+    assert ORIENTATION in Plain.params and model.default_parameters() == {}
+    got = model.components(WI[:4], WO[:4], {ORIENTATION: 90.0})["diffuse"]
+    np.testing.assert_allclose(got, to_weave_frame(WI[:4], 90.0)[:, 0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got, WI[:4, 1], rtol=0, atol=1e-15)  # a quarter turn: the table's y is the weave's x
