@@ -1,10 +1,9 @@
-"""The IM yarn-integral kernels before the equation-by-equation rewrite, kept to measure the rewrite.
+"""The IM yarn-integral kernels before the equation-by-equation rewrite, frozen for one regression test.
 
 A frozen copy of ``clothlab.models.irawan.kernels`` (the quadrature kernels) and of the yarn integral of
 ``clothlab.models.irawan.yarn`` as they were before the kernels were split into helpers named for the
-equations of Irawan & Marschner 2012 (eqs. 3-9).  :func:`clothlab.studies.kernels_speed.compare_kernels`
-times it against the current implementation on the same directions and parameters.  Nothing else uses it.
-Remove this module (and ``kernels_speed``) when the speed ratio has been reported.
+equations of Irawan & Marschner 2012 (eqs. 3-9).  tests/test_irawan_kernels.py checks that the current
+kernels give the same values (the rewrite's speed ratio is reported in docs/notes).  Not part of the package.
 """
 
 from __future__ import annotations

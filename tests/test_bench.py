@@ -6,17 +6,15 @@ import ast
 import importlib
 import json
 import math
-import sys
 import tempfile
 import time
-import types
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from clothlab.errors import ConfigError
-from clothlab.studies import bench, coverage, full_fit, model_speed, nlopt_algorithms, quadrature_tradeoff, timing
+from clothlab.studies import bench, coverage, full_fit, nlopt_algorithms, quadrature_tradeoff, timing
 from clothlab.studies.data import StudyData
 
 REPO = Path(__file__).resolve().parents[1]
@@ -384,20 +382,6 @@ def test_fit_algorithms_section_small(tmp_path, repo_data):
         assert r["objective"] <= f["start_objective"] * (1 + 1e-12) or "+" in r["algorithm"]
         assert np.all(np.diff(r["trace_best"]) <= 0)  # best so far never rises
     assert (tmp_path / "fit_algorithms.png").is_file()
-
-
-def test_speed_section_reports_the_kernels_comparison_when_present(monkeypatch):
-    """The model-speed section calls compare_kernels when its module exists, and shows each preset's figures."""
-    assert model_speed.kernels_comparison(quick=True) is None or model_speed.kernels_available()
-    fake = types.ModuleType(model_speed.KERNELS_MODULE)
-    fake.__spec__ = importlib.machinery.ModuleSpec(model_speed.KERNELS_MODULE, None)
-    fake.compare_kernels = lambda quick: {"cotton-denim": {"old_pairs_per_second": 2.0e6,
-                                                           "new_pairs_per_second": 2.1e6, "ratio": 1.05}}
-    monkeypatch.setitem(sys.modules, model_speed.KERNELS_MODULE, fake)
-    kernels = model_speed.kernels_comparison(quick=True)
-    assert kernels == fake.compare_kernels(True)
-    text = "\n".join(model_speed.kernel_lines(kernels))
-    assert "cotton-denim" in text and "2,100,000" in text and "1.05" in text
 
 
 def test_texture_speed_section():

@@ -250,12 +250,12 @@ def test_regression_snapshot_yarn_integrals():
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_rewrite_matches_the_previous_kernels(name):
-    """Same outputs as the frozen pre-rewrite kernels (clothlab.studies.kernels_baseline), every rule, to
+    """Same outputs as the frozen pre-rewrite kernels (tests/im_kernels_before.py), every rule, to
     round-off; except the staple support / adaptive rules, which now also split at the zeros of eq. 8's clamped
     cosines (issue 12 item 4): where they differ they must be as close to the scipy quad reference as the
     baseline's, or within 1e-4 of it.
     Remove together with the baseline."""
-    from clothlab.studies.kernels_baseline import yarn_integral as previous
+    from im_kernels_before import yarn_integral as previous
 
     params = IrawanModel(get_preset(name)).default_parameters()
     wi, wo = _random_pairs(np.random.default_rng(39), 400, max_theta=89.0)
@@ -283,26 +283,6 @@ def test_rewrite_matches_the_previous_kernels(name):
                 assert err_new <= err_old, (rule, kind, err_new, err_old)
                 continue
             np.testing.assert_allclose(new, old, rtol=1e-11, atol=1e-14 * old.max())
-
-
-def test_compare_kernels_reports_both_speeds(monkeypatch):
-    from clothlab.studies import kernels_speed
-
-    monkeypatch.setattr(kernels_speed, "QUICK_REPEATS", 1)
-    monkeypatch.setattr(kernels_speed, "MIN_SAMPLE_S", 0.0)
-    out = kernels_speed.compare_kernels(quick=True)
-    assert [r["preset"] for r in out["presets"]] == list(PRESET_NAMES)
-    assert out["pairs"] == 1575 and out["rule"] == "trapezoid-11"
-    for row in out["presets"]:
-        assert row["max_rel_diff"] < 1e-12  # the two implementations agree on these very evaluations
-        assert math.isfinite(row["old_pairs_per_s"]) and row["old_pairs_per_s"] > 0
-        assert math.isfinite(row["new_pairs_per_s"]) and row["new_pairs_per_s"] > 0
-    assert out["ratio"] > 0
-    text = "\n".join(kernels_speed.comparison_lines(out))
-    assert all(name in text for name in PRESET_NAMES) and f"{out['ratio']:.3f}" in text
-
-
-# ------------------------------------------------------------------ texture point kernels (Algorithms 3-4)
 
 
 def test_point_kernels_are_the_quadrature_integrands():

@@ -10,15 +10,12 @@ values) and, per preset, the IM model warm (a fit's evaluation: the direction se
 directions every call), timed call by call in alternation, in CPU seconds of this process (fastest and median
 call), with the load average; the Kang rows are the ``kang`` section's.
 
-When :mod:`clothlab.studies.kernels_speed` is present its ``compare_kernels`` runs too, in the same run: the
-yarn-integral speed of the previous and the current kernels per preset and their ratio (a ratio near 1 means
-no slowdown beyond noise).
+The frozen pre-rewrite kernels (issue 10) are no longer timed here: their ratio is reported in docs/notes, and
+the frozen copy lives in tests/im_kernels_before.py, where a regression test compares values with it.
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import time
 import warnings
 
@@ -37,7 +34,6 @@ COLD_TARGET = 1.5
 SUPPORT_NODES = (4, 8)
 SUPPORT_TARGET = 1.5
 """The issue-12 target: the support rule's time on 1,575 directions within this factor of trapezoid-11's."""
-KERNELS_MODULE = "clothlab.studies.kernels_speed"
 
 
 def model_speed(quick: bool, fabrics=FABRICS) -> dict:
@@ -209,45 +205,10 @@ def cold_warm_lines(table: dict) -> list[str]:
     return out
 
 
-def kernels_available() -> bool:
-    """True when the kernels before/after comparison module is installed."""
-    return importlib.util.find_spec(KERNELS_MODULE) is not None
-
-
-def kernels_comparison(quick: bool) -> dict | None:
-    """``compare_kernels(quick)`` of the comparison module, or None when it is not installed."""
-    if not kernels_available():
-        return None
-    return importlib.import_module(KERNELS_MODULE).compare_kernels(quick)
-
-
 def run(context) -> dict:
     result = {"model": model_speed(context.quick), "support": support_vs_trapezoid(context.quick),
               "cold_warm": cold_warm_table(context.quick, context.data)}
-    kernels = kernels_comparison(context.quick)
-    if kernels is not None:
-        result["kernels"] = kernels
     return result
-
-
-def _value(v) -> str:
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        return str(v)
-    return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
-
-
-def kernel_lines(kernels: dict) -> list[str]:
-    """The before/after comparison as one line per preset (every scalar figure it reports)."""
-    out = ["", "  IM kernels before/after (yarn integral, same run):"]
-    for key, value in kernels.items():
-        if isinstance(value, dict) and value and all(isinstance(v, dict) for v in value.values()):
-            out += kernel_lines(value)[2:]  # a mapping of presets
-        elif isinstance(value, dict):
-            out.append(f"  {key:18s} " + ", ".join(f"{k} {_value(v)}" for k, v in value.items()
-                                                  if not isinstance(v, dict | list)))
-        elif not isinstance(value, list):
-            out.append(f"  {key}: {_value(value)}")
-    return out
 
 
 def lines(result: dict) -> list[str]:
@@ -259,8 +220,4 @@ def lines(result: dict) -> list[str]:
         out += support_lines(result["support"])
     if "cold_warm" in result:
         out += cold_warm_lines(result["cold_warm"])
-    if "kernels" in result:
-        out += kernel_lines(result["kernels"])
-    else:
-        out.append(f"  (kernels before/after: {KERNELS_MODULE} not present)")
     return out
