@@ -166,7 +166,6 @@ ALLOWED = {
     **{("fit/select.py", k): "default kinds and candidate families of the selection (item 3)"
        for k in ("irawan", "kang", "surface", "neural", "lambert", "oren-nayar")},
     ("render/neural_lod.py", "neural"): "neural-lod's estimator counter (the surrogate helper's module)",
-    ("simulate/examples.py", "irawan"): "the shipped examples' kind (the one-builder helper's module)",
     ("studies/neural.py", "irawan"): "the network's reference kind (the surrogate helper's study)",
     ("studies/neural_bins.py", "irawan"): "a sidecar's default encoding kind (the surrogate helper's study)",
     ("surrogate/materials.py", "irawan"): "the converged tile-average quadrature per target kind (surrogate)",

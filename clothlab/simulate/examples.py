@@ -115,6 +115,7 @@ def write_paper_examples(root, *, force: bool = False) -> list:
     from clothlab.config.build import model_from_weave
     from clothlab.errors import GeometryWarning, ResultExistsError
     from clothlab.io.table import write_table
+    from clothlab.models.registry import PAPER_KIND
     from clothlab.simulate.gonio import NoiseModel, simulate
 
     files = [Path(root) / name / f for name in YARN_COLOURS for f in EXAMPLE_FILES]
@@ -129,7 +130,7 @@ def write_paper_examples(root, *, force: bool = False) -> list:
     for name, colours in YARN_COLOURS.items():
         folder = Path(root) / name
         folder.mkdir(parents=True, exist_ok=True)
-        model = model_from_weave(f"preset:{name}", kind="irawan")  # the default quadrature
+        model = model_from_weave(f"preset:{name}", kind=PAPER_KIND)  # the paper's model, default quadrature
         coefficients = {k: np.asarray(v) for k, v in colours.items()}
         for variant in ("clean", "noisy"):
             noise = NoiseModel(**NOISE, seed=SEEDS[name]) if variant == "noisy" else None
