@@ -186,3 +186,13 @@ def test_the_checker_catches_what_it_is_for(tmp_path):
                  "docs/fitting.md", "design.md", "example.org"):
         assert good not in text, (good, text)
     assert len(problems) == 6, text
+
+
+def test_design_names_every_package_and_core_module():
+    """docs/design.md's package table names every package of clothlab/ and every top-level module."""
+    text = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    packages = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file())
+    modules = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__")
+    missing = [f"{name}/" for name in packages if f"`{name}/`" not in text]
+    missing += [name for name in modules if f"`{name}`" not in text]
+    assert not missing, f"docs/design.md does not name: {', '.join(missing)}"
