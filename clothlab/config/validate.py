@@ -186,9 +186,12 @@ class _Validator:
                       source=self.source, select=select)
 
     def select(self, value: Any) -> SelectConfig:
-        """``select``: weaves (preset:<name> or .wv files), kinds, orientation_starts, max_evals, cv_folds."""
+        """``select``: weaves (preset:<name> or .wv files), kinds, orientation_starts, max_evals, cv_folds, and
+        the checks on top: nested (outer folds), losses, loss_scales, stability (subsamples) - the bounds of the
+        CLI's --nested, --losses, --loss-scales and --stability."""
         p = ("select",)
-        s = self.section(value, p, ("weaves", "kinds", "orientation_starts", "max_evals", "cv_folds"))
+        s = self.section(value, p, ("weaves", "kinds", "orientation_starts", "max_evals", "cv_folds", "nested",
+                                    "losses", "loss_scales", "stability"))
         d = SelectConfig()
         weaves = tuple(self.weave(w, self.at(p + ("weaves", i)))
                        for i, w in enumerate(as_list(s.get("weaves", []), self.at(p + ("weaves",)))))
@@ -208,7 +211,26 @@ class _Validator:
         cv_folds = as_int(s.get("cv_folds", d.cv_folds), self.at(p + ("cv_folds",)), 0, MAX_CV_FOLDS)
         if cv_folds == 1:
             raise self.at(p + ("cv_folds",)).error("expected 0 (no cross-validation) or at least 2 folds, got 1")
-        return SelectConfig(weaves, kinds, starts, max_evals, cv_folds)
+        nested = as_int(s.get("nested", d.nested), self.at(p + ("nested",)), 0, 100)
+        if nested == 1:
+            raise self.at(p + ("nested",)).error("expected 0 (no nested cross-validation) or at least 2 outer "
+                                                 "folds, got 1")
+        losses = tuple(as_choice(k, self.at(p + ("losses", i)), LOSSES)
+                       for i, k in enumerate(as_list(s.get("losses", list(d.losses)), self.at(p + ("losses",)))))
+        scales = []
+        for i, x in enumerate(as_list(s.get("loss_scales", list(d.loss_scales)), self.at(p + ("loss_scales",)))):
+            at = self.at(p + ("loss_scales", i))
+            scale = as_number(x, at)
+            if not LOSS_SCALE_RANGE[0] <= scale <= LOSS_SCALE_RANGE[1]:
+                raise at.error(f"expected a scale in [{LOSS_SCALE_RANGE[0]:g}, {LOSS_SCALE_RANGE[1]:g}] (the "
+                               f"metric's units), got {scale!r}")
+            scales.append(scale)
+        for key, items in (("losses", losses), ("loss_scales", scales)):
+            for i, item in enumerate(items):
+                if item in items[:i]:
+                    raise self.at(p + (key, i)).error(f"{item!r} is listed twice (as entry {items.index(item)})")
+        stability = as_int(s.get("stability", d.stability), self.at(p + ("stability",)), 0, 1000)
+        return SelectConfig(weaves, kinds, starts, max_evals, cv_folds, nested, losses, tuple(scales), stability)
 
     def measurement(self, value: Any) -> MeasurementConfig:
         p = ("measurement",)
