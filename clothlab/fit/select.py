@@ -294,13 +294,12 @@ def free_mapping(config, kinds) -> dict:
 
 def _model_parameters(config, kind, weave, options):
     """The parameter names of ``kind`` built on ``weave`` (None when it cannot be built: the fit says why)."""
+    from clothlab.config.build import model_from_weave
     from clothlab.errors import ClothlabError
-    from clothlab.models.registry import build_model
-    from clothlab.weave.presets import resolve_weave
 
     try:
-        q = config.model.quadrature
-        model = build_model(kind, resolve_weave(weave, config.base_dir), (q.rule, q.nodes), **dict(options))
+        model = model_from_weave(weave, config.base_dir, kind=kind, quadrature=config.model.quadrature,
+                                 options=options)
     except (ClothlabError, TypeError, ValueError):
         return None
     return {getattr(p, "name", p) for p in model.params}

@@ -217,14 +217,15 @@ def load_material(*, fit=None, preset=None, kind=None, lod: str = "auto", f0: fl
             raise ConfigError(f"the fit in {path} is of kind {model.kind!r}, not {kind!r}", path=path, field="kind")
         return material_from_model(model, params, coefficients, channels, lod=lod, f0=f0, f1=f1, seed=seed,
                                    noise=noise, source=str(path))
-    from clothlab.models.registry import DEFAULT_KIND, build_model
+    from clothlab.config.build import model_from_weave
+    from clothlab.models.registry import DEFAULT_KIND
     from clothlab.render.scene import DEFAULT_CHANNELS, DEFAULT_COEFFICIENTS
-    from clothlab.weave.presets import PRESET_PREFIX, resolve_weave
+    from clothlab.weave.presets import PRESET_PREFIX
 
     spec = str(preset).strip()
     if ":" not in spec and not spec.endswith(".wv"):
         spec = PRESET_PREFIX + spec
-    model = build_model(kind or DEFAULT_KIND, resolve_weave(spec, base))
+    model = model_from_weave(spec, base, kind=kind or DEFAULT_KIND)
     return material_from_model(model, {}, DEFAULT_COEFFICIENTS, DEFAULT_CHANNELS, lod=lod, f0=f0, f1=f1, seed=seed,
                                noise=noise, source=spec)
 

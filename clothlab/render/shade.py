@@ -136,8 +136,7 @@ class FabricModels:
     def build(cls, spec: Fabric) -> FabricModels:
         """The models of ``spec``: the fit's (``fabric.fit``: a model with a texture model), else the
         registry's default kind for the weave with ``fabric.params``."""
-        from clothlab.models.registry import DEFAULT_KIND, build_model
-        from clothlab.weave.presets import resolve_weave
+        from clothlab.config.build import model_from_weave
 
         if spec.fit is not None:
             from clothlab.fit.store import load_fitted
@@ -150,7 +149,7 @@ class FabricModels:
                                   + "; fabric.fit needs a model whose texture model the im-* shaders blend with its "
                                   "reflectance", field="fabric.fit")
         else:
-            model = build_model(DEFAULT_KIND, resolve_weave(spec.weave, spec.base_dir))
+            model = model_from_weave(spec.weave, spec.base_dir)  # the registry's default kind
             params, coefficients, channels = spec.params, spec.coefficients, spec.channels
         weave = model.weave
         params = model.resolve(params)  # validates (ParameterError names the parameter)
@@ -397,9 +396,9 @@ def neural_model(fabric: FabricModels, kind: str | None = None):
     learns the IM texture)."""
     cached = getattr(fabric, "_neural", None)
     if cached is None:
-        from clothlab.models.registry import build_model
+        from clothlab.config.build import model_from_weave
 
-        cached = build_model(shader_kind("neural-lod")[0] if kind is None else kind, fabric.weave)
+        cached = model_from_weave(fabric.weave, kind=shader_kind("neural-lod")[0] if kind is None else kind)
         if tuple(cached.component_names) != tuple(fabric.texture.component_names):
             raise ConfigError(f"neural-lod learns the Irawan-Marschner components {list(cached.component_names)}; "
                               f"the scene's fabric has {list(fabric.texture.component_names)}", field="fabric.fit")

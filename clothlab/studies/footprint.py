@@ -60,8 +60,9 @@ def footprint_benchmark(quick: bool, *, pairs: int | None = None, footprints: in
     the SAT build time per pair and the query time, and the tables' discretisation check (``check``
     queries per bin).  ``quick``: 4 pairs x 250 footprints, 20 checked per bin, the registry's default kind
     (IM) only."""
+    from clothlab.config.build import model_from_weave
     from clothlab.footprint import FootprintTable, mc_estimate
-    from clothlab.models.registry import DEFAULT_KIND, MODEL_KINDS, build_model, model_class
+    from clothlab.models.registry import DEFAULT_KIND, MODEL_KINDS, model_class
     from clothlab.weave.presets import get_preset
 
     pairs = pairs or (4 if quick else 16)
@@ -74,7 +75,7 @@ def footprint_benchmark(quick: bool, *, pairs: int | None = None, footprints: in
                         "resolution": RESOLUTION, "reference_resolution": reference_resolution,
                         "size_bins_tiles": bins, "mc_samples": list(MC_SAMPLES)}, "kinds": {}}
     for kind in kinds:
-        model = build_model(kind, get_preset(WEAVE))
+        model = model_from_weave(get_preset(WEAVE), kind=kind)
         texture, params = model.texture(), model.default_parameters()
         rng = np.random.default_rng(1)
         wi, wo, pair, centre, size = _queries(rng, pairs, footprints)
