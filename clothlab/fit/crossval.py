@@ -59,7 +59,7 @@ LOCAL_EVALS = 300
 """Default evaluations of a ``local`` fold refit."""
 NEUTRAL_EVALS = 2000
 """Default evaluations of a ``neutral`` fold refit (design screen, starts and polish; measured in
-docs/fitting.md: on the polyester-lining example a 5-fold neutral CV costs about 1.3 full fits)."""
+docs/notes/fit-defaults.md: on the polyester-lining example a 5-fold neutral CV costs about 1.3 full fits)."""
 SCHEMES = CV_SCHEMES
 REFITS = CV_REFITS
 SPLITS = {

@@ -393,7 +393,7 @@ def multistart_minimize(problem, x0, opt, callback=None) -> OptimizeResult:
     algorithm; ``opt.global_algorithm`` as well in start 1 only when ``opt.local_algorithm`` is None) run from
     the best screened points at least :data:`START_SEPARATION` apart, sharing the remaining budget.  With
     ``design: none`` every start is a seeded run of the global algorithm then the local one from ``x0`` (the
-    earlier scheme).  The measurements behind this split are in docs/fitting.md ("The global stage").
+    earlier scheme).  The measurements behind this split are in docs/notes/fit-defaults.md ("The global stage").
 
     ``opt`` is a fit's optimizer settings (algorithms, max_evals, starts, seed, max_time, polish_evals, design,
     box_check); ``callback(row)`` is called after each evaluation.  The traces are concatenated (stage names
@@ -422,7 +422,7 @@ def multistart_minimize(problem, x0, opt, callback=None) -> OptimizeResult:
                               at_upper=at_upper, seed=int(opt.seed))
         # probes: short local searches from the best PROBES_PER_START x starts spread screened points; the starts
         # continue from the best probes (successive halving: a screened value alone picks the wrong basin of a
-        # rough valley, measured on cotton-denim, docs/fitting.md)
+        # rough valley, measured on cotton-denim, docs/notes/fit-defaults.md)
         local = opt.local_algorithm or MLSL_LOCAL
         picked = spread_starts(X, values, PROBES_PER_START * opt.starts)
         probe_evals = min(PROBE_EVALS, (opt.max_evals - offset) // (2 * max(len(picked), 1)))

@@ -20,7 +20,8 @@ is that average (``orientation_nodes`` orientations, midpoint rule over one peri
 
     component_k(theta)[n] = (1/M) sum_{m=0}^{M-1} component_k(theta, orientation = (m + 1/2) P / M - P/2)[n]
 
-and ``orientation`` itself cannot be fitted (docs/formats.md, "MERL"; accuracy against M: docs/fitting.md).
+and ``orientation`` itself cannot be fitted (docs/formats.md, "MERL"; accuracy against M:
+docs/notes/orientation-average.md).
 
 :func:`build_problem` makes the problem of a configuration (measurement, weave, model);
 :func:`collinearity_notes` and :func:`evaluation_speed` describe a problem's design at a parameter point.

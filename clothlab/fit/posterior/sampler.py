@@ -298,7 +298,7 @@ class _StepProgress:
 #: The proposal of the posterior (default of :func:`run_posterior`): differential-evolution moves (ter Braak
 #: 2006) with a fifth of snooker updates (ter Braak & Vrugt 2008), emcee's ``DEMove`` and ``DESnookerMove``.
 #: Against emcee's default stretch move, same targets, 32 walkers, seed 1: polyester-lining max tau 57 -> 29,
-#: 3,900 -> 2,700 steps to the tau rule; cotton-twill 112 -> 45, 6,600 -> 3,600 steps (docs/fitting.md;
+#: 3,900 -> 2,700 steps to the tau rule; cotton-twill 112 -> 45, 6,600 -> 3,600 steps (docs/notes/posterior-moves.md;
 #: ``clothlab bench --sections posterior`` measures both side by side).
 DEFAULT_MOVES = "de-snooker"
 MOVES = {"stretch": "emcee stretch move (a = 2)",
