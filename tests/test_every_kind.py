@@ -151,24 +151,13 @@ def test_every_kind_round_trips_through_its_fit_directory_entries(kind, tmp_path
 # ---------------------------------------------------------------------------------------------- kind names
 
 #: (module under clothlab/, kind literal) pairs that may still name a kind outside models/, with the reason.
-#: Files other helpers own (issue 25, session 13) are listed so the lead can remove them as they are changed.
+#: Only file-format keys and names remain (every kind choice asks the registry).
 ALLOWED = {
     # file formats and layouts, not kind choices
     ("render/scene.py", "kang"): "the scene file's fabric.kang section (a file-format key)",
     ("studies/bench.py", "kang"): "a bench section's name (reports/bench/result.json)",
     ("studies/bench.py", "neural"): "a bench section's name (reports/bench/result.json)",
     ("studies/data.py", "kang"): "the kang.yaml variant of measurements/<fabric>/ (the data layout)",
-    # owned by other helpers in issue 25 (to go through the registry there)
-    ("cli/train_surrogate.py", "irawan"): "train-surrogate TARGETS (domain code out of cli/, item 4)",
-    ("cli/train_surrogate.py", "surface"): "train-surrogate TARGETS (domain code out of cli/, item 4)",
-    ("config/schema.py", "irawan"): "default kinds of the selection config (one set of defaults, item 3)",
-    ("config/schema.py", "irawan+oren-nayar"): "default kinds of the selection config (item 3)",
-    **{("fit/select.py", k): "default kinds and candidate families of the selection (item 3)"
-       for k in ("irawan", "kang", "surface", "neural", "lambert", "oren-nayar")},
-    ("render/neural_lod.py", "neural"): "neural-lod's estimator counter (the surrogate helper's module)",
-    ("studies/neural.py", "irawan"): "the network's reference kind (the surrogate helper's study)",
-    ("studies/neural_bins.py", "irawan"): "a sidecar's default encoding kind (the surrogate helper's study)",
-    ("surrogate/materials.py", "irawan"): "the converged tile-average quadrature per target kind (surrogate)",
 }
 
 

@@ -2,7 +2,7 @@
 
 The IM texture averaged over a tile is f_c I_j / a_j with the yarn integral exact
 (clothlab.models.irawan.texture); the reflectance model integrates I_j by quadrature.  These tests measure the
-configured tile average (clothlab.surrogate.materials.TILE_AVERAGE_QUADRATURE) against a dense stratified
+configured tile average (the kind's declared tile_average_quadrature) against a dense stratified
 average of the texture itself, check that a network's sidecar records it and that a query's R is that model.
 """
 
@@ -15,9 +15,12 @@ import numpy as np
 import pytest
 
 from clothlab.errors import InputError
+from clothlab.models.irawan.model import IrawanModel
 from clothlab.models.registry import build_model
-from clothlab.surrogate.materials import TILE_AVERAGE_QUADRATURE, reference_quadrature, tile_average_model
+from clothlab.surrogate.materials import reference_quadrature, tile_average_model
 from clothlab.weave.presets import get_preset
+
+TILE_AVERAGE_QUADRATURE = {"irawan": IrawanModel.tile_average_quadrature}
 
 
 def _directions(rng, n):

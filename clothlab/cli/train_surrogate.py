@@ -8,9 +8,10 @@ import contextlib
 from pathlib import Path
 
 from clothlab.cli.options import add_force, add_output, add_parallel, count_type, number_type
+from clothlab.models.registry import PAPER_KIND  # light: the registry imports no model
 from clothlab.surrogate.materials import LABEL_CHOICES
 
-TARGET_ALIASES = {"im": "irawan"}
+TARGET_ALIASES = {"im": PAPER_KIND}
 """Short names of ``--target`` (the kind names themselves are accepted too)."""
 
 
@@ -94,7 +95,7 @@ def add_parser(sub):
 
 
 def _model(source: str, target: str):
-    from clothlab.models.registry import build_model
+    from clothlab.config.build import model_from_weave
     from clothlab.surrogate.materials import tile_average_model
     from clothlab.weave.presets import resolve_weave
 
@@ -109,7 +110,7 @@ def _model(source: str, target: str):
     else:
         weave = resolve_weave(source, Path.cwd())
     # the network's configured model: the kind with its converged tile average (surrogate.materials)
-    return weave, tile_average_model(build_model(kind, weave)), params
+    return weave, tile_average_model(model_from_weave(weave, kind=kind)), params
 
 
 def _footprint_estimate():
@@ -200,9 +201,11 @@ def _run(args, held, lines: list[str]) -> int:
             raise ConfigError(f"need N >= 1 materials per weave, got {args.draw}", field="--draw")
         if args.vary:
             raise ConfigError("give either --draw (Table 2 at random) or --vary (a grid), not both", field="--draw")
-        if args.target != "surface":
-            raise ConfigError("Table 2's ranges are the surface model's parameters; use --target surface",
-                              field="--draw")
+        from clothlab.models.surface.model import SurfaceModel  # Table 2 is the surface model's (Chen et al.)
+
+        if target_kind(args.target) != SurfaceModel.kind:
+            raise ConfigError(f"Table 2's ranges are the surface model's parameters; use --target "
+                              f"{SurfaceModel.kind}", field="--draw")
     if not 0.0 <= args.heldout_share < 1.0:
         raise ConfigError(f"need 0 <= F < 1, got {args.heldout_share:g}", field="--heldout-share")
     resolved = [_resolve(spec, args.target, "source") for spec in specs]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from clothlab.config.choices import DEFAULT_GLOBAL, DEFAULT_LOCAL, DEFAULT_LOSS_SCALE
 from clothlab.models.irawan.quadrature import Quadrature
-from clothlab.models.registry import DEFAULT_KIND
+from clothlab.models.registry import DEFAULT_KIND, DEFAULT_SELECT_KINDS
 
 PRESET_PREFIX = "preset:"
 """``model.weave: preset:<name>`` names a shipped weave preset instead of a .wv file."""
@@ -139,7 +139,7 @@ class SelectConfig:
     the selection's defaults: clothlab.fit.select takes this class as its settings."""
 
     weaves: tuple = ()
-    kinds: tuple = ("irawan", "irawan+oren-nayar")
+    kinds: tuple = DEFAULT_SELECT_KINDS
     orientation_starts: int = 2
     max_evals: int = 600
     cv_folds: int = 5

@@ -17,11 +17,12 @@ Candidates (:func:`candidates`) are the product of
   ``--loss-scales`` value, so the CV ranking chooses the scale.
 
 The free parameters of a candidate are fabric.yaml's ``fit.free`` mapped to the candidate's kind
-(:func:`map_free`: a declared name kept, another replaced by its role's counterpart, :data:`IM_COUNTERPARTS`,
-:data:`CONCEPTS`; a name of no model's vocabulary is a ConfigError before any fit); when that leaves none, its
-specular part's defaults by config validation's rule (:func:`clothlab.config.validate.default_free`: for kind
-neural the parameters its network was trained over); then its diffuse part's defaults (``sigma``) and
-``orientation``; the starts are ``model.params`` restricted the same way, else the weave's values.
+(:func:`map_free`: a declared name kept, another replaced by its role's counterpart, the models' declared
+``im_counterparts`` and ``parameter_concepts``; a name of no model's vocabulary is a ConfigError before any
+fit); when that leaves none, its specular part's defaults by config validation's rule
+(:func:`clothlab.config.validate.default_free`: for kind neural the parameters its network was trained over);
+then its diffuse part's defaults (``sigma``) and ``orientation``; the starts are ``model.params`` restricted
+the same way, else the weave's values.
 
 Optional, on top (docs/select.md): nested cross-validation (``SelectConfig.nested``, :mod:`clothlab.fit.nested`)
 for the selected model's honest held-out error, selection stability on subsamples (``stability``,
@@ -211,47 +212,31 @@ def orientation_span(kind: str) -> float:
     return float(model_class(kind).params[ORIENTATION].period)
 
 
-#: What a parameter of one model family means in another (issue 28 item 1): concept -> family -> parameters.
-#: A fit.free name a candidate's kind does not declare is replaced by its concept's parameters in the kind's
-#: family (an empty tuple: the concept has no counterpart there, shown as "-> none" in the selection table);
-#: a name in no concept is an error (:func:`map_free`).
-CONCEPTS = {
-    "yarn inclination (IM sec. 5.2; Kang eqs. 3-4 c_y)": {
-        "irawan": ("warp.umax", "weft.umax"), "surface": ("warp.umax", "weft.umax"), "kang": ("yarn_curvature",)},
-    "fibre twist (IM sec. 5.2; Kang s_f)": {
-        "irawan": ("warp.psi", "weft.psi"), "surface": ("warp.psi", "weft.psi"), "kang": ("fibre_slope",)},
-    "fibre scattering lobe (IM eq. 7; SGGX roughness and height scale; Kang eq. 2 exponents)": {
-        "irawan": ("alpha", "beta"), "surface": ("warp.alpha", "weft.alpha", "warp.beta", "weft.beta"),
-        "kang": ("warp.nx", "warp.ny", "weft.nx", "weft.ny")},
-    "spine curvature (IM sec. 5.4)": {"irawan": ("warp.kappa", "weft.kappa")},
-    "filament smoothing (IM eq. 9)": {"irawan": ("delta",)},
-    "highlight band width (IM eq. 12)": {"irawan": ("hwidth",)},
-    "segment rectangle (IM sec. 5.3)": {"irawan": ("warp.w", "warp.l", "weft.w", "weft.l")},
-    "yarn gap (SGGX sec. 5.1)": {"surface": ("gap",)},
-    "diffuse blend (SGGX eq. 1)": {"surface": ("blend",)},
-    "Kang fibre structure (eqs. 1-4)": {"kang": ("fibre_curvature", "n_strands", "fresnel_f0", "noise")},
-    "diffuse roughness (Oren & Nayar eq. 30)": {"diffuse": ("sigma",)},
-}
-#: Name-level counterparts of the IM model's fit.free names in the other families, tried before :data:`CONCEPTS`
-#: (by role: the SGGX surface's per-yarn roughness alpha and height scale beta shape its yarn highlight as the
-#: IM fibre lobe's alpha and beta do; Kang's exponents n_x across / n_y along the yarn likewise).
-IM_COUNTERPARTS = {
-    "surface": {"alpha": ("warp.alpha", "weft.alpha"), "beta": ("warp.beta", "weft.beta")},
-    "kang": {"warp.umax": ("yarn_curvature",), "weft.umax": ("yarn_curvature",), "warp.psi": ("fibre_slope",),
-             "weft.psi": ("fibre_slope",), "alpha": ("warp.nx", "weft.nx"), "beta": ("warp.ny", "weft.ny")},
-}
-FAMILIES = {"irawan": "irawan", "neural": "irawan", "surface": "surface", "kang": "kang", "lambert": "diffuse",
-            "oren-nayar": "diffuse"}
-
-
-def _family(kind: str) -> str:
+def _concept_class(kind: str) -> type:
+    """The class whose :attr:`~clothlab.models.base.Model.parameter_concepts` speak for ``kind``: a composite's
+    (or a physics term's) specular part, followed to the single model it ends in."""
     cls = model_class(kind)
-    return FAMILIES.get(cls.options_class().kind, cls.kind)
+    while cls.options_class() is not cls:
+        cls = cls.options_class()
+    return cls
+
+
+def concepts() -> dict:
+    """Every registered kind's vocabulary (issue 28 item 1): concept -> the parameter names any model declares
+    for it (the models' :attr:`~clothlab.models.base.Model.parameter_concepts`)."""
+    from clothlab.models.registry import MODEL_KINDS
+
+    out: dict = {}
+    for kind in MODEL_KINDS:
+        for concept, names in _concept_class(kind).parameter_concepts.items():
+            out.setdefault(concept, set()).update(names)
+    return out
 
 
 def map_free(kind: str, free, options: dict | None = None) -> tuple[list, dict]:
     """(free, mapping): fabric.yaml's ``fit.free`` names (orientation aside) as parameters of ``kind``: a name
-    the kind declares is kept, another is replaced by its :data:`CONCEPTS` counterpart in the kind's family
+    the kind declares is kept, another is replaced by its concept's counterpart in the kind's model (the models'
+    declared ``im_counterparts``, then ``parameter_concepts``: :func:`concepts`)
     (``mapping`` records each replaced name and what it became, possibly nothing).  A name in no concept (or
     a concept the family has no entry for while the kind does not declare the name) raises ConfigError at
     ``fit.free``: never a silent drop."""
@@ -259,24 +244,26 @@ def map_free(kind: str, free, options: dict | None = None) -> tuple[list, dict]:
 
     cls = model_class(kind)
     table = cls.declared_parameters(options or {})
-    family = _family(kind)
+    own = _concept_class(kind)
+    vocabulary = None
     out, mapping = [], {}
     for name in free:
         if name == ORIENTATION:
             continue
         if name in table:
             targets = (name,)
-        elif name in IM_COUNTERPARTS.get(family, {}):
-            targets = tuple(t for t in IM_COUNTERPARTS[family][name] if t in table)
+        elif name in own.im_counterparts:
+            targets = tuple(t for t in own.im_counterparts[name] if t in table)
             mapping[name] = list(targets)
         else:
-            concept = next((c for c, fams in CONCEPTS.items() if any(name in v for v in fams.values())), None)
+            vocabulary = vocabulary or concepts()
+            concept = next((c for c, names in vocabulary.items() if name in names), None)
             if concept is None:
                 known = ", ".join(getattr(p, "name", p) for p in table)
                 raise ConfigError(f"fit.free names {name!r}, which model kind {kind!r} does not declare and which "
                                   f"has no counterpart in it (its parameters: {known}); remove it or "
                                   "leave that kind out of select.kinds", field="fit.free")
-            targets = tuple(t for t in CONCEPTS[concept].get(family, ()) if t in table)
+            targets = tuple(t for t in own.parameter_concepts.get(concept, ()) if t in table)
             mapping[name] = list(targets)
         out += [t for t in targets if t not in out]
     return out, mapping
@@ -649,7 +636,7 @@ def display_rows(rows) -> list[tuple[str, ...]]:
 
 
 def free_mapping_lines(free_by_kind: dict) -> list[str]:
-    """fit.free names a kind does not declare and what each became there (:data:`CONCEPTS`), as text lines."""
+    """fit.free names a kind does not declare and what each became there (:func:`concepts`), as text lines."""
     lines = []
     for kind, mapping in (free_by_kind or {}).items():
         if mapping:
@@ -718,7 +705,7 @@ def save_selection(selection: Selection, *, force: bool = False, fits_dir=None):
     return out
 
 
-__all__ = ["CONCEPTS", "IM_COUNTERPARTS", "map_free", "free_mapping",
+__all__ = ["concepts", "map_free", "free_mapping",
            "ALL_PRESETS", "Candidate", "CandidateResult", "CandidateTask", "SelectSettings", "Selection",
            "candidate_config",
            "candidates", "fit_candidate", "information_criteria", "rank", "save_selection",

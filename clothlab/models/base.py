@@ -53,6 +53,10 @@ member                   meaning
                          column; kind neural: its network), rather than by averaging its texture (capability)
 ``refine``               True when a fit polishes its optimum with the exact model it approximates (neural)
 ``quadrature``           the rule the model integrates with (None for a model that integrates nothing)
+``parameter_concepts``   what its parameters mean across model families: concept -> its parameters (the
+                         selection maps fabric.yaml's fit.free through it; empty: no counterparts)
+``im_counterparts``      name-level counterparts of the IM model's fit.free names (by role), tried first
+``tile_average_quadrature``  (rule, nodes) of a converged tile average (the surrogate's labels and R), or None
 =======================  =====================================================================================
 
 Orientation (one implementation for every model, here).  Every model accepts the parameter ``orientation``
@@ -222,10 +226,18 @@ class Model(abc.ABC):
     diffuse_class: ClassVar[type | None] = None
     #: True when the model answers footprint averages itself (kind neural), not by averaging its texture
     footprint_queries: ClassVar[bool] = False
+    #: what its parameters mean across model families (the selection's per-kind mapping of fabric.yaml's
+    #: fit.free, issue 28 item 1): concept -> this model's parameters of it; a concept it lacks has no counterpart
+    parameter_concepts: ClassVar[dict[str, tuple[str, ...]]] = {}
+    #: name-level counterparts of the IM model's fit.free names here, tried before the concepts (by role)
+    im_counterparts: ClassVar[dict[str, tuple[str, ...]]] = {}
     #: True when a fit polishes its optimum with the exact model this one approximates (kind neural)
     refine: bool = False
     #: the quadrature rule the model integrates with; None for a model that integrates nothing
     quadrature = None
+    #: (rule, nodes) whose tile average converges to the texture's own (the surrogate's labels and R, issue 23
+    #: item 5); None: the model as built already converges or integrates nothing
+    tile_average_quadrature: ClassVar[tuple[str, int] | None] = None
     params: ParamTable
 
     def __init_subclass__(cls, **kwargs):

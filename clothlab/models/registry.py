@@ -26,6 +26,8 @@ MODEL_KINDS.update({name: ("clothlab.models.composite.model", "composite_class")
 TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",) for t in ("sheen", "fresnel", "fresnel-smith")}
 MODEL_KINDS.update({name: ("clothlab.models.composite.terms", "term_class") for name in TERM_KINDS})
 DEFAULT_KIND = "irawan"
+#: the kinds ``clothlab select`` tries unless select.kinds says otherwise (docs/select.md)
+DEFAULT_SELECT_KINDS = (DEFAULT_KIND, "irawan+oren-nayar")
 #: kinds whose reflectance does not depend on the weave (fabric.yaml may leave ``model.weave`` out)
 WEAVE_FREE_KINDS = ("lambert", "oren-nayar")
 #: the weave recorded for a weave-free kind given none (the model ignores it; docs/fabric-yaml.md)

@@ -65,7 +65,7 @@ def pixel_values(fabric, network, choice: dict, centre, size, wi, wo, counter) -
             values = counter.run("texture", k * sel.size, mc, a, b, c, s)
             comps = {n: values[:, i] for i, n in enumerate(names)}
         elif kind == "surrogate":
-            comps = counter.run("neural", sel.size, network.query, c, s, a, b, fabric.params)
+            comps = counter.run(network.kind, sel.size, network.query, c, s, a, b, fabric.params)
         else:
             comps = counter.run("reflectance", sel.size, network.exact_model().components, a, b, fabric.params,
                                 need=fabric.need, warn=False)

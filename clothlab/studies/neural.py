@@ -103,8 +103,8 @@ SHIPPED_FABRIC = "silk-shantung"
 def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | None = None, weights=None) -> dict:
     """MSE and seconds per query of the shipped surrogate (or the ``weights`` .npz) and of k-sample MC, by
     footprint group; a residual network's time includes its reflectance-model evaluation."""
-    from clothlab.models.neural.model import SHIPPED, load_neural
-    from clothlab.models.registry import build_model
+    from clothlab.config.build import model_from_weave
+    from clothlab.models.neural.model import DEFAULT_TARGET_KIND, SHIPPED, load_neural
     from clothlab.studies.timing import best_time
     from clothlab.surrogate.data import DataSpec, heldout_queries
     from clothlab.surrogate.labels import ModelLabels, TextureMonteCarloLabels
@@ -115,7 +115,7 @@ def surrogate_vs_mc(quick: bool, fabric: str = SHIPPED_FABRIC, queries: int | No
         return {"skipped": f"no shipped surrogate for {fabric}"}
     surrogate, sidecar = load_neural(path)  # a residual network evaluates the reflectance model per query
     enc = sidecar["encoding"]
-    model = build_model("irawan", get_preset(enc["weave"]))
+    model = model_from_weave(get_preset(enc["weave"]), kind=enc.get("kind", DEFAULT_TARGET_KIND))
     params, texture = enc["params"], model.texture()
     q = heldout_queries(DataSpec(**enc.get("data_spec", {})), queries or (200 if quick else 1000), seed=11,
                         sizes=(0.12, 5.0))

@@ -240,7 +240,7 @@ def bin_figures(surrogate, materials, spec, lo: float, hi: float, *, per_bin: in
 def network_figures(name: str, path, quick: bool = False, sizes: dict | None = None, bins=BINS) -> dict:
     """Per group and bin :func:`bin_figures` of the network at ``path`` (``sizes``: overrides of
     :data:`FULL` / :data:`QUICK`)."""
-    from clothlab.models.neural.model import load_neural
+    from clothlab.models.neural.model import DEFAULT_TARGET_KIND, load_neural
     from clothlab.surrogate.data import DataSpec
 
     size = {**(QUICK if quick else FULL), **(sizes or {})}
@@ -255,7 +255,7 @@ def network_figures(name: str, path, quick: bool = False, sizes: dict | None = N
                                  samples=size["samples"], timing=size["timing"], repeats=size["repeats"],
                                  seed=QUERY_SEED + 1000 * i)
                      for i, (lo, hi) in enumerate(bins)]
-    return {"network": name, "path": str(path), "kind": enc.get("kind", "irawan"), "groups": groups,
+    return {"network": name, "path": str(path), "kind": enc.get("kind", DEFAULT_TARGET_KIND), "groups": groups,
             "settings": size, "cpu_s": time.process_time() - start}
 
 

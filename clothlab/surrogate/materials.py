@@ -8,7 +8,7 @@ tile average, which for the IM texture is f_c I_j / a_j with the yarn integral I
 (:mod:`clothlab.models.irawan.texture`).  The reflectance model integrates I_j with its quadrature, and the
 default trapezoid rule of 11 nodes is 0.9-1.2 % relative RMS (up to 3.4-3.7 % for single pairs) from the
 texture's own average.  Networks trained from session 13 on therefore use the kind's model with
-:data:`TILE_AVERAGE_QUADRATURE` (trapezoid, 41 nodes: 0.22-0.26 % from a 65,536-point texture average,
+its kind's ``tile_average_quadrature`` (IM: trapezoid, 41 nodes: 0.22-0.26 % from a 65,536-point texture average,
 within 2-3x of that reference's own noise; docs/neural.md "The tile average") for the whole-tile part of
 the labels, the residual base and the far view's R, and record it in the sidecar
 (``encoding.reference_quadrature``): it is the network's configured reflectance model, the one a query
@@ -30,9 +30,6 @@ from clothlab.untrusted import parse_number
 LABEL_CHOICES = ("mc", "sat", "model")
 """``--labels``: stratified MC of the texture with the whole tiles from the tile average, summed-area
 tables, or the reflectance model itself (footprint-independent)."""
-TILE_AVERAGE_QUADRATURE = {"irawan": ("trapezoid", 41)}
-"""Per target kind the quadrature (rule, nodes) of the converged tile average (module docstring); a kind
-not listed integrates nothing or converges with its defaults, and keeps its model as built."""
 MAX_VARY_STEPS = 64
 """Most values N of one ``--vary NAME=LO:HI:N``."""
 MAX_VARY_MATERIALS = 4096
@@ -40,16 +37,16 @@ MAX_VARY_MATERIALS = 4096
 
 
 def tile_average_model(model):
-    """``model`` integrating with its kind's :data:`TILE_AVERAGE_QUADRATURE` (itself when its kind has none):
-    the network's configured reflectance model (module docstring)."""
-    rule = TILE_AVERAGE_QUADRATURE.get(model.kind)
+    """``model`` integrating with its kind's declared ``tile_average_quadrature`` (itself when it declares
+    none: :class:`clothlab.models.base.Model`): the network's configured reflectance model (module docstring)."""
+    rule = model.tile_average_quadrature
     return model if rule is None else model.with_quadrature(*rule)
 
 
 def reference_quadrature(model) -> dict | None:
     """The sidecar's ``encoding.reference_quadrature`` of a configured model: {"rule", "nodes"}, or None
     for a model that integrates nothing."""
-    q = getattr(model, "quadrature", None)
+    q = model.quadrature  # declared on Model (None for a model that integrates nothing)
     return None if q is None else {"rule": str(q.rule), "nodes": int(q.nodes)}
 
 

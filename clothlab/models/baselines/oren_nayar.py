@@ -54,6 +54,7 @@ class OrenNayarModel(Model):
 
     kind = "oren-nayar"
     params = OREN_NAYAR_PARAMS
+    parameter_concepts = {"diffuse roughness (Oren & Nayar eq. 30)": ("sigma",)}
     component_names = ("diffuse",)
     coefficient_meaning = "kd: facet albedo (rho of Oren & Nayar 1994, eq. 30)"
     default_free = ("sigma",)

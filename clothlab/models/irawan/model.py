@@ -97,6 +97,18 @@ class IrawanModel(Model):
     coefficient_meaning = "kd: diffuse albedo; ks_<kind>: mean specular albedo of that segment type"
     default_free = ("warp.umax", "weft.umax", "warp.kappa", "weft.kappa", "alpha", "beta")
     has_texture = True
+    #: trapezoid 41: 0.22-0.26 % relative RMS from a 65,536-point texture tile average (trapezoid 11:
+    #: 0.9-1.2 %), 0.33 CPU-us per pair cold (docs/neural.md, "The tile average")
+    tile_average_quadrature = ("trapezoid", 41)
+    parameter_concepts = {
+        "yarn inclination (IM sec. 5.2; Kang eqs. 3-4 c_y)": ("warp.umax", "weft.umax"),
+        "fibre twist (IM sec. 5.2; Kang s_f)": ("warp.psi", "weft.psi"),
+        "fibre scattering lobe (IM eq. 7; SGGX roughness and height scale; Kang eq. 2 exponents)": ("alpha", "beta"),
+        "spine curvature (IM sec. 5.4)": ("warp.kappa", "weft.kappa"),
+        "filament smoothing (IM eq. 9)": ("delta",),
+        "highlight band width (IM eq. 12)": ("hwidth",),
+        "segment rectangle (IM sec. 5.3)": ("warp.w", "warp.l", "weft.w", "weft.l"),
+    }
 
     @classmethod
     def from_config(cls, weave: Weave, quadrature=None, **options) -> IrawanModel:

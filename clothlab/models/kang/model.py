@@ -90,6 +90,17 @@ class KangModel(Model):
     kind = "kang"
     params = KANG_PARAMS  # the class-level declarations (all options); an instance narrows them
     has_texture = True
+    parameter_concepts = {
+        "yarn inclination (IM sec. 5.2; Kang eqs. 3-4 c_y)": ("yarn_curvature",),
+        "fibre twist (IM sec. 5.2; Kang s_f)": ("fibre_slope",),
+        "fibre scattering lobe (IM eq. 7; SGGX roughness and height scale; Kang eq. 2 exponents)":
+            ("warp.nx", "warp.ny", "weft.nx", "weft.ny"),
+        "Kang fibre structure (eqs. 1-4)": ("fibre_curvature", "n_strands", "fresnel_f0", "noise"),
+    }
+    #: by role: the exponents n_x across / n_y along the yarn shape its highlight as IM's alpha / beta do
+    im_counterparts = {"warp.umax": ("yarn_curvature",), "weft.umax": ("yarn_curvature",),
+                       "warp.psi": ("fibre_slope",), "weft.psi": ("fibre_slope",), "alpha": ("warp.nx", "weft.nx"),
+                       "beta": ("warp.ny", "weft.ny")}
     texture_filters = True  # the point shader takes the pixel footprint (eq. 5, Algorithm 1)
     #: tile-averaged components (components(), what a fit solves coefficients for)
     component_names = ("diffuse", "specular_warp", "specular_weft")

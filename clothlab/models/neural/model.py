@@ -40,6 +40,7 @@ from clothlab.errors import ConfigError, InputError
 from clothlab.frames import to_weave_frame
 from clothlab.models.base import ORIENTATION, Model, ModelTexture, as_directions, split_orientation
 from clothlab.models.irawan.integrals import COMPONENTS
+from clothlab.models.irawan.model import IrawanModel
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS
 from clothlab.surrogate.encodings import normalised_parameters, pattern_descriptor
 from clothlab.surrogate.serialise import load_surrogate
@@ -48,6 +49,8 @@ SHIPPED = Path(__file__).parent / "data"
 """Shipped per-fabric weights, ``<preset>.npz`` + ``.json`` (docs/neural.md says how they were trained)."""
 FAR_SIZE = 4.5  # tiles
 TARGET_KINDS = ("irawan", "surface")
+DEFAULT_TARGET_KIND = TARGET_KINDS[0]
+"""A sidecar's ``encoding.kind`` when it has none (the shipped per-preset networks learn the IM texture)."""
 """Target kinds of a network that ``kind: neural`` takes (the sidecar's ``encoding.kind``)."""
 MIN_FOOTPRINT = 0.01  # tiles
 
@@ -66,7 +69,7 @@ def reference_model(sidecar: dict, weave=None, name: str | None = None):
         text = enc["weave_wv"] if name is None else enc["weaves_wv"][name]
         weave = parse_wv_text(text, source="surrogate sidecar")
     q = enc.get("reference_quadrature")  # the network's configured R (clothlab.surrogate.materials); else defaults
-    return build_model(enc.get("kind", "irawan"), weave, None if q is None else (q["rule"], q["nodes"]))
+    return build_model(enc.get("kind", DEFAULT_TARGET_KIND), weave, None if q is None else (q["rule"], q["nodes"]))
 
 
 def load_neural(path, weave=None):
@@ -104,6 +107,7 @@ class NeuralModel(Model):
     default_free = ("alpha", "beta")
     has_texture = True
     texture_filters = True
+    parameter_concepts = IrawanModel.parameter_concepts  # the class-level target kind's
     #: the texture's ``footprint`` is a box footprint's side (tiles) and its value the box average (eq. 3):
     #: ``clothlab eval`` with a footprint column asks the network instead of averaging its texture
     footprint_queries = True
@@ -361,7 +365,7 @@ def check_sidecar_names(sidecar: dict, path) -> None:
     from clothlab.errors import ParameterError
 
     enc = sidecar.get("encoding") or {}
-    kind = enc.get("kind", "irawan")
+    kind = enc.get("kind", DEFAULT_TARGET_KIND)
     if kind not in TARGET_KINDS:
         raise InputError(f"surrogate target kind {kind!r}: kind neural takes networks of {', '.join(TARGET_KINDS)}",
                          path=path, field="encoding.kind")
@@ -394,7 +398,7 @@ def target_class(sidecar: dict):
     """The model class the network learnt (the sidecar's ``encoding.kind``, irawan for older files)."""
     from clothlab.models.registry import model_class
 
-    kind = (sidecar.get("encoding") or {}).get("kind", "irawan")
+    kind = (sidecar.get("encoding") or {}).get("kind", DEFAULT_TARGET_KIND)
     if kind not in TARGET_KINDS:
         raise ConfigError(f"surrogate target kind {kind!r}: kind neural takes networks of {', '.join(TARGET_KINDS)}",
                           field="model.options.weights")

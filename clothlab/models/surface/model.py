@@ -135,6 +135,16 @@ class SurfaceModel(Model):
     kind = "surface"
     params = SURFACE_PARAMS
     has_texture = True
+    parameter_concepts = {
+        "yarn inclination (IM sec. 5.2; Kang eqs. 3-4 c_y)": ("warp.umax", "weft.umax"),
+        "fibre twist (IM sec. 5.2; Kang s_f)": ("warp.psi", "weft.psi"),
+        "fibre scattering lobe (IM eq. 7; SGGX roughness and height scale; Kang eq. 2 exponents)":
+            ("warp.alpha", "weft.alpha", "warp.beta", "weft.beta"),
+        "yarn gap (SGGX sec. 5.1)": ("gap",),
+        "diffuse blend (SGGX eq. 1)": ("blend",),
+    }
+    #: by role: the per-yarn SGGX roughness alpha and height scale beta shape the highlight as IM's do
+    im_counterparts = {"alpha": ("warp.alpha", "weft.alpha"), "beta": ("warp.beta", "weft.beta")}
     texture_filters = False  # a renderer blends the texture with the tile average (im-lod, surface-lod)
     component_names = ("diffuse_warp", "diffuse_weft", "specular_warp", "specular_weft")
     coefficient_meaning = (
