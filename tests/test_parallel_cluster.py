@@ -232,7 +232,7 @@ def test_model_selection_candidates_as_tasks_match_the_in_process_loop(tmp_path,
     cfg = apply_overrides(load_config(example), max_evals=80)
     cfg = replace(cfg, fit=replace(cfg.fit, posterior=None, cv_folds=0))
     settings = SelectSettings(weaves=("preset:wool-gabardine", "preset:cotton-denim"), kinds=("irawan",),
-                              orientation_starts=1, max_evals=60, cv_folds=0)
+                              orientation_starts=1, max_evals=60, cv_folds=0, losses=())
     here = select(cfg, settings, fits_dir=tmp_path / "a")
     there = select(cfg, settings, fits_dir=tmp_path / "b", runner=runner)
     assert [r.row["candidate"] for r in here.ranked] == [r.row["candidate"] for r in there.ranked]

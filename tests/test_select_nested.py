@@ -15,7 +15,7 @@ from clothlab.fit.select import CandidateTask, SelectSettings, candidates, fit_c
 
 EXAMPLE = Path(__file__).parent.parent / "measurements" / "scattered-twill" / "fabric.yaml"
 SETTINGS = SelectSettings(weaves=("preset:wool-gabardine", "preset:cotton-denim"), kinds=("irawan",),
-                          orientation_starts=1, max_evals=40, cv_folds=2, nested=3)
+                          orientation_starts=1, max_evals=40, cv_folds=2, nested=3, losses=())
 
 
 WINNER = {"candidate": "x", "cv_mean": 0.1, "cv_p50": 0.08, "cv_p80": 0.15}

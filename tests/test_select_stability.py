@@ -44,7 +44,7 @@ def test_stability_runs_inside_select_and_lands_in_the_summary(tmp_path):
     cfg = apply_overrides(load_config(EXAMPLE), max_evals=60)
     cfg = replace(cfg, fit=replace(cfg.fit, posterior=None, cv_folds=0))
     settings = SelectSettings(weaves=("preset:wool-gabardine", "preset:cotton-denim"), kinds=("irawan",),
-                              orientation_starts=1, max_evals=40, cv_folds=2, stability=3)
+                              orientation_starts=1, max_evals=40, cv_folds=2, stability=3, losses=())
     s = select(cfg, settings, fits_dir=tmp_path)
     stab = s.summary()["stability"]
     assert stab["repeats"] == 3 and stab["fits"] == 6 and len(stab["winners"]) == 3

@@ -39,11 +39,11 @@ def add_selection_options(p) -> None:
     p.add_argument("--candidate-cv", type=count_type(0, 2**31 - 1), metavar="K",
                    help="cross-validation folds per candidate (default select.cv_folds, 5; 0: rank by BIC)")
     p.add_argument("--losses", metavar="LIST",
-                   help="comma-separated candidate losses (squared, l1, huber, cauchy; default: fabric.yaml's fit.loss "
-                        "only); huber and cauchy are tried at each --loss-scales value, the CV ranking chooses")
+                   help="comma-separated candidate losses (squared, l1, huber, cauchy; default: select.losses, "
+                        "else huber at 0.1); huber and cauchy are tried at each --loss-scales value, the CV ranking chooses")
     p.add_argument("--loss-scales", metavar="LIST",
                    help="comma-separated scales of the huber / cauchy candidates, in the metric's units (0.1 = 10 %%; "
-                        "default fit.loss_scale)")
+                        "default select.loss_scales, else 0.1)")
     p.add_argument("--stability", type=count_type(0, 1000), metavar="B",
                    help="selection stability: the selection repeated on B seeded subsamples of 80 %% of the rows; "
                         "how often each weave, kind, loss and orientation range wins (about B more selections)")

@@ -144,8 +144,10 @@ class SelectConfig:
     max_evals: int = 600
     cv_folds: int = 5
     nested: int = 0  # outer folds of the nested cross-validation (clothlab.fit.nested); 0: none
-    losses: tuple = ()  # candidate losses (clothlab.fit.loss); empty: fabric.yaml's fit.loss only
-    loss_scales: tuple = ()  # scales tried for huber / cauchy (the CV ranking chooses); empty: fit.loss_scale
+    #: candidate losses (clothlab.fit.loss): huber at 0.1 (10 % relative residual) for real measurements
+    #: (docs/select.md); empty: fabric.yaml's fit.loss only (what a simulated table with Gaussian noise wants)
+    losses: tuple = ("huber",)
+    loss_scales: tuple = (0.1,)  # scales tried for huber / cauchy (the CV ranking chooses); empty: fit.loss_scale
     stability: int = 0  # subsamples of the selection-stability check (clothlab.fit.stability); 0: none
 
 
