@@ -115,13 +115,20 @@ def add_output(parser, help: str, *, deprecated: Sequence[str] = (), **kwargs) -
                             action=DeprecatedAlias, new="-o/--output")
 
 
+def _quadrature_nodes(text: str) -> int:
+    """``--nodes``: an integer in the range :class:`~clothlab.models.irawan.quadrature.Quadrature` accepts (its
+    NODES_RANGE, read when the option is given: the one validation of yaml and API)."""
+    low, high = import_module("clothlab.models.irawan.quadrature").NODES_RANGE
+    return count_type(low, high)(text)
+
+
 def add_quadrature_overrides(parser) -> None:
     """``--rule`` and ``--nodes``: the quadrature of the model, overriding fabric.yaml."""
     rules = names_of("clothlab.models.irawan.quadrature", "RULES")
     parser.add_argument("--rule", type=one_of(rules, "quadrature rule"),
                         help=LazyText(lambda: f"quadrature rule, one of {', '.join(rules())} "
                                               "(overrides fabric.yaml model.quadrature.rule)"))
-    parser.add_argument("--nodes", type=count_type(2, 1000),
+    parser.add_argument("--nodes", type=_quadrature_nodes,
                         help="quadrature nodes (per piece for the support and adaptive rules; "
                                                   "overrides fabric.yaml model.quadrature.nodes)")
 
