@@ -28,6 +28,7 @@ marked slow: ``--runslow``).
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -190,7 +191,9 @@ def run_tests(copy: Path, files: tuple[str, ...], timeout: float) -> tuple[str, 
     present = [f for f in files if (copy / f).exists()]
     if not present:
         return "error", 0.0, "no test file of this module at this ref"
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *present]
+    # one process: with pytest-xdist's -n auto (pyproject addopts) a -x stop is "interrupted", exit code 2
+    single = ["-n", "0"] if importlib.util.find_spec("xdist") else []
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *single, *present]
     started = time.perf_counter()
     try:
         proc = subprocess.run(cmd, cwd=copy, env=environment(copy), capture_output=True, text=True, timeout=timeout)
