@@ -40,7 +40,8 @@ def add_selection_options(p) -> None:
                    help="cross-validation folds per candidate (default select.cv_folds, 5; 0: rank by BIC)")
     p.add_argument("--losses", metavar="LIST",
                    help="comma-separated candidate losses (squared, l1, huber, cauchy; default: select.losses, "
-                        "else huber at 0.1); huber and cauchy are tried at each --loss-scales value, the CV ranking chooses")
+                        "else huber at 0.1); huber and cauchy are tried at each --loss-scales value, the CV "
+                        "ranking chooses")
     p.add_argument("--loss-scales", metavar="LIST",
                    help="comma-separated scales of the huber / cauchy candidates, in the metric's units (0.1 = 10 %%; "
                         "default select.loss_scales, else 0.1)")
