@@ -202,10 +202,7 @@ class _Validator:
                       for i, k in enumerate(as_list(s.get("kinds", list(d.kinds)), self.at(p + ("kinds",)))))
         if not kinds:
             raise self.at(p + ("kinds",)).error("expected at least one model kind, got []")
-        for key, items in (("weaves", weaves), ("kinds", kinds)):  # a candidate fitted twice ranks against itself
-            for i, item in enumerate(items):
-                if item in items[:i]:
-                    raise self.at(p + (key, i)).error(f"{item!r} is listed twice (as entry {items.index(item)})")
+        self._once_each(p, (("weaves", weaves), ("kinds", kinds)))  # a candidate fitted twice ranks against itself
         starts = as_int(s.get("orientation_starts", d.orientation_starts), self.at(p + ("orientation_starts",)), 1, 8)
         max_evals = as_int(s.get("max_evals", d.max_evals), self.at(p + ("max_evals",)), 1, MAX_EVALS)
         cv_folds = as_int(s.get("cv_folds", d.cv_folds), self.at(p + ("cv_folds",)), 0, MAX_CV_FOLDS)
@@ -217,20 +214,28 @@ class _Validator:
                                                  "folds, got 1")
         losses = tuple(as_choice(k, self.at(p + ("losses", i)), LOSSES)
                        for i, k in enumerate(as_list(s.get("losses", list(d.losses)), self.at(p + ("losses",)))))
-        scales = []
-        for i, x in enumerate(as_list(s.get("loss_scales", list(d.loss_scales)), self.at(p + ("loss_scales",)))):
-            at = self.at(p + ("loss_scales", i))
-            scale = as_number(x, at)
-            if not LOSS_SCALE_RANGE[0] <= scale <= LOSS_SCALE_RANGE[1]:
-                raise at.error(f"expected a scale in [{LOSS_SCALE_RANGE[0]:g}, {LOSS_SCALE_RANGE[1]:g}] (the "
-                               f"metric's units), got {scale!r}")
-            scales.append(scale)
-        for key, items in (("losses", losses), ("loss_scales", scales)):
+        scales = tuple(self._loss_scale(x, self.at(p + ("loss_scales", i))) for i, x in
+                       enumerate(as_list(s.get("loss_scales", list(d.loss_scales)), self.at(p + ("loss_scales",)))))
+        self._once_each(p, (("losses", losses), ("loss_scales", scales)))
+        stability = as_int(s.get("stability", d.stability), self.at(p + ("stability",)), 0, 1000)
+        return SelectConfig(weaves, kinds, starts, max_evals, cv_folds, nested, losses, scales, stability)
+
+    def _once_each(self, p: tuple, lists) -> None:
+        """ConfigError at the second entry of any (key, items) list that names an item twice."""
+        for key, items in lists:
             for i, item in enumerate(items):
                 if item in items[:i]:
                     raise self.at(p + (key, i)).error(f"{item!r} is listed twice (as entry {items.index(item)})")
-        stability = as_int(s.get("stability", d.stability), self.at(p + ("stability",)), 0, 1000)
-        return SelectConfig(weaves, kinds, starts, max_evals, cv_folds, nested, losses, tuple(scales), stability)
+
+    @staticmethod
+    def _loss_scale(value: Any, at) -> float:
+        """A huber / cauchy scale in :data:`LOSS_SCALE_RANGE` (the metric's units): ``fit.loss_scale`` and the
+        entries of ``select.loss_scales``."""
+        scale = as_number(value, at)
+        if not LOSS_SCALE_RANGE[0] <= scale <= LOSS_SCALE_RANGE[1]:
+            lo, hi = LOSS_SCALE_RANGE
+            raise at.error(f"expected a scale in [{lo:g}, {hi:g}] (the metric's units, e.g. 0.1 = 10 %), got {scale:g}")
+        return scale
 
     def measurement(self, value: Any) -> MeasurementConfig:
         p = ("measurement",)
@@ -409,12 +414,7 @@ class _Validator:
         cv_scheme = as_choice(f.get("cv_scheme", FitConfig.cv_scheme), self.at(p + ("cv_scheme",)), CV_SCHEMES)
         cv_refit = as_choice(f.get("cv_refit", FitConfig.cv_refit), self.at(p + ("cv_refit",)), CV_REFITS)
         loss = as_choice(f.get("loss", FitConfig.loss), self.at(p + ("loss",)), LOSSES)
-        scale_at = self.at(p + ("loss_scale",))
-        loss_scale = as_number(f.get("loss_scale", FitConfig.loss_scale), scale_at)
-        if not LOSS_SCALE_RANGE[0] <= loss_scale <= LOSS_SCALE_RANGE[1]:
-            lo, hi = LOSS_SCALE_RANGE
-            raise scale_at.error(f"expected a scale in [{lo:g}, {hi:g}] (the metric's units, e.g. 0.1 = 10 %), "
-                                 f"got {loss_scale:g}")
+        loss_scale = self._loss_scale(f.get("loss_scale", FitConfig.loss_scale), self.at(p + ("loss_scale",)))
         valid_geometry = f.get("valid_geometry", FitConfig.valid_geometry)
         if not isinstance(valid_geometry, bool):
             raise self.at(p + ("valid_geometry",)).error(f"expected true or false, got {shown(valid_geometry)}")

@@ -451,6 +451,16 @@ class Model(abc.ABC):
                           field="model.kind")
 
 
+class SetsTogetherModel(Model):
+    """A model that evaluates parameter sets together (the composites: each part evaluates all sets in one
+    call): it implements :meth:`Model._components_many`, and one set is that hook's first row."""
+
+    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
+                    warn: bool = True) -> dict[str, np.ndarray]:
+        many = self._components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
+        return {name: value[0] for name, value in many.items()}
+
+
 class Texture(abc.ABC):
     """Base class of the texture models (module docstring): :meth:`components` and :meth:`resolve` are
     template methods that refuse an ``orientation`` other than 0 (:func:`texture_parameters`: a texture

@@ -120,7 +120,7 @@ class Samples:
 class FabricModels:
     """The fabric of a scene as evaluable models: weave, reflectance and texture models (IM unless the fit is
     of another kind with a texture model) with parameters and coefficients (C,) per component name, channels;
-    the Kang shader is built on first use."""
+    the Kang shader, the fabric as another kind's models and the network are built on first use."""
 
     spec: Fabric
     weave: object
@@ -131,6 +131,8 @@ class FabricModels:
     channels: tuple
     need: tuple
     _kang: tuple | None = field(default=None, repr=False)
+    _as_kind: dict = field(default_factory=dict, repr=False)  # kind -> FabricModels (:func:`kind_models`)
+    _neural: object = field(default=None, repr=False)  # the network (:func:`neural_model`)
 
     @classmethod
     def build(cls, spec: Fabric) -> FabricModels:
@@ -163,12 +165,11 @@ class FabricModels:
         another kind, the network's), so that a timed render starts cold
         (:meth:`clothlab.models.base.Model.forget_directions`)."""
         self.reflectance.forget_directions()
-        for models in getattr(self, "_as_kind", {}).values():
+        for models in self._as_kind.values():
             if models is not self:
                 models.reflectance.forget_directions()
-        neural = getattr(self, "_neural", None)
-        if neural is not None:
-            neural.forget_directions()
+        if self._neural is not None:
+            self._neural.forget_directions()
 
     def kang(self, kind: str | None = None):
         """(texture model, params, coefficients) of the scene's self-filtering shader (``fabric.kang``): the
@@ -209,7 +210,7 @@ def kind_models(fabric: FabricModels, kind: str) -> FabricModels:
     (:func:`clothlab.models.registry.from_irawan`)."""
     from clothlab.models.registry import DEFAULT_KIND, from_irawan
 
-    cache = fabric.__dict__.setdefault("_as_kind", {})
+    cache = fabric._as_kind
     if kind not in cache:
         if kind in (DEFAULT_KIND, fabric.reflectance.kind):
             cache[kind] = fabric
@@ -394,7 +395,7 @@ def neural_model(fabric: FabricModels, kind: str | None = None):
     """The scene's weave as the network kind ``kind`` (default: the kind of the registry's ``neural-lod``
     shader; its shipped weights), built once; ConfigError if the fabric's components are not the network's (it
     learns the IM texture)."""
-    cached = getattr(fabric, "_neural", None)
+    cached = fabric._neural
     if cached is None:
         from clothlab.config.build import model_from_weave
 

@@ -21,7 +21,7 @@ from functools import cache
 from typing import ClassVar
 
 from clothlab.errors import ConfigError
-from clothlab.models.base import ORIENTATION, Model, common_period, with_orientation
+from clothlab.models.base import ORIENTATION, Model, SetsTogetherModel, common_period, with_orientation
 from clothlab.params import ParamTable
 
 
@@ -42,7 +42,7 @@ def union_table(specular_table, diffuse_table, kind: str) -> ParamTable:
     return ParamTable(specs)
 
 
-class CompositeModel(Model):
+class CompositeModel(SetsTogetherModel):
     """S's specular components + D's diffuse ones (module docstring); subclasses made by :func:`composite_class`
     fix ``specular_class`` and ``diffuse_class``."""
 
@@ -77,12 +77,6 @@ class CompositeModel(Model):
 
     def _default_parameters(self) -> dict[str, float]:
         return {**self.specular.default_parameters(), **self.diffuse.default_parameters()}
-
-    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                    warn: bool = True):
-        """S's specular components and D's components (1/sr, each (N,)) at fabric-frame directions."""
-        many = self.components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
-        return {name: value[0] for name, value in many.items()}
 
     def _components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True, warn: bool = True):
         """:meth:`components` for J parameter sets (each part evaluates its sets in one call)."""

@@ -22,7 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from clothlab.models.base import Model, with_orientation
+from clothlab.models.base import Model, SetsTogetherModel, with_orientation
 from clothlab.models.baselines.sheen import SHEEN_PARAMS, sheen_lobe
 from clothlab.models.composite.model import union_table
 from clothlab.models.grazing import FRESNEL_FREE, FRESNEL_SMITH_FREE, GRAZING_PARAMS, grazing_factor
@@ -41,7 +41,7 @@ def _specular(name: str) -> bool:
     return not name.startswith("diffuse") and name != "sheen"
 
 
-class TermModel(Model):
+class TermModel(SetsTogetherModel):
     """B with a term (module docstring); subclasses made by :func:`term_class` fix ``base_class`` and ``term``."""
 
     base_class: ClassVar[type]
@@ -72,12 +72,6 @@ class TermModel(Model):
 
     def _default_parameters(self) -> dict[str, float]:
         return {**self.base.default_parameters(), **{s.name: float(s.default) for s in TERMS[self.term][0]}}
-
-    def _components(self, wi, wo, params: dict | None = None, *, need=None, normalised: bool = True,
-                    warn: bool = True):
-        """B's components (with the term applied) and the term's own (1/sr, each (N,))."""
-        many = self.components_many(wi, wo, [params], need=need, normalised=normalised, warn=warn)
-        return {name: value[0] for name, value in many.items()}
 
     def _components_many(self, wi, wo, params_list, *, need=None, normalised: bool = True, warn: bool = True):
         """:meth:`components` for J parameter sets (B evaluates its sets in one call), each (J, N)."""
