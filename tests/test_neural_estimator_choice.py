@@ -93,8 +93,8 @@ def _scene(distance):
     return replace(scene, camera=scene.camera.at_distance(distance))
 
 
-def _samples_of(scene, fabric):
-    """The shading samples of a 1-spp render of ``scene`` (the renderer's own geometry, captured)."""
+def _samples_of(scene, fabric, shader="im-reflectance", spp=1, seed=None):
+    """The shading samples of a render of ``scene`` (the renderer's own geometry, captured)."""
     import importlib
 
     rendering = importlib.import_module("clothlab.render.render")  # the module (the package exports a function)
@@ -106,10 +106,80 @@ def _samples_of(scene, fabric):
         return original(shader, fabric_, samples, lod, counter)
     rendering.shade = grab
     try:
-        rendering.render(scene, shader="im-reflectance", spp=1, fabric=fabric)
+        rendering.render(scene, shader=shader, spp=spp, seed=seed, fabric=fabric)
     finally:
         rendering.shade = original
     return box["s"]
+
+
+def _centre_by_hand(scene):
+    """Per pixel of the receding plane (flat, z = 0, warp along world y): the surface point through the
+    pixel's centre, intersected here by hand - (u, v) tiles, wi, wo, and the footprint: the longer (u, v)
+    step to the rays through the centres one pixel right and one pixel down (geometry's definition)."""
+    from clothlab.render.camera import PinholeCamera
+
+    camera = PinholeCamera(scene.camera)
+    cols, rows = np.meshgrid(np.arange(camera.width) + 0.5, np.arange(camera.height) + 0.5)
+    tile = np.asarray(scene.patch.tile_mm)
+
+    def uv(px, py):
+        d = camera.directions(px.ravel(), py.ravel())
+        point = camera.eye + (-camera.eye[2] / d[:, 2])[:, None] * d
+        return point[:, :2] / tile, d
+
+    centre, d = uv(cols, rows)
+    size = np.maximum(np.linalg.norm(uv(cols + 1.0, rows)[0] - centre, axis=1),
+                      np.linalg.norm(uv(cols, rows + 1.0)[0] - centre, axis=1))
+    light = np.asarray(scene.light.direction) / np.linalg.norm(scene.light.direction)
+    return centre, size, np.broadcast_to(light, d.shape), -d
+
+
+@pytest.mark.parametrize("spp", [4, 9, 7])
+def test_neural_lod_shades_each_pixel_box_at_the_pixel_centre_whatever_the_jitter(spp):
+    """At spp > 1 a pixel's box (shade.pixel_boxes) is the pixel centre's surface point, footprint and
+    directions - not the mean of its jittered samples nor its first (corner) sample - checked against the
+    plane intersected by hand."""
+    from clothlab.render.shade import FabricModels, pixel_boxes
+
+    scene = _scene(20.0)
+    fabric = FabricModels.build(scene.fabric)
+    samples = _samples_of(scene, fabric, "neural-lod", spp)
+    first, back, centre, size, wi, wo = pixel_boxes(samples)
+    pixel = samples.pixel[first]
+    assert pixel.size == scene.camera.resolution[0] * scene.camera.resolution[1]  # every pixel sees the plane
+    want_centre, want_size, want_wi, want_wo = _centre_by_hand(scene)
+    assert np.allclose(centre, want_centre[pixel], rtol=0.0, atol=1e-9)
+    assert np.allclose(size, want_size[pixel], rtol=1e-9)
+    assert np.allclose(wi, want_wi[pixel], atol=1e-12) and np.allclose(wo, want_wo[pixel], atol=1e-12)
+    # the samples themselves are off the centre (so the check above is not vacuous)
+    count = np.bincount(back)
+    mean = np.column_stack([np.bincount(back, samples.u) / count, np.bincount(back, samples.v) / count])
+    assert np.abs(mean - want_centre[pixel]).max() > 1e-3 * np.median(want_size)
+    assert np.abs(samples.wo[first] - want_wo[pixel]).max() > 1e-6
+
+
+def test_a_filtered_pixel_does_not_depend_on_the_jitter(monkeypatch):
+    """With every pixel a box estimator (MC-2, the network, R) and a directional light on a plane (the same
+    irradiance and cosine at every sample), the neural-lod image is the same at 1 spp and at 4 or 9 spp from
+    any seed: more samples do not move the filtered value."""
+    import clothlab.render.neural_lod as policy
+    from clothlab.render.render import render
+    from clothlab.render.shade import FabricModels
+
+    scene = _scene(20.0)
+    fabric = FabricModels.build(scene.fabric)
+    f = _samples_of(scene, fabric).footprint
+    split = float(np.sqrt(f.min() * f.max()))
+    choice = _choice()
+    bins = choice["bins"]
+    choice["bins"] = [dict(bins[0], lo=0.0, hi=split * 0.95), dict(bins[1], lo=split * 0.95, hi=split * 1.05),
+                      dict(bins[2], lo=split * 1.05, hi=1e6)]
+    monkeypatch.setattr(policy, "estimator_choice", lambda weave: choice)
+    one = render(scene, shader="neural-lod", spp=1, fabric=fabric)
+    assert one.stats["neural_evaluations"] > 0 and one.stats["texture_evaluations"] > 0
+    for spp, seed in ((4, 1), (4, 123), (9, 5)):
+        many = render(scene, shader="neural-lod", spp=spp, seed=seed, fabric=fabric)
+        assert np.allclose(many.image, one.image, rtol=1e-12, atol=0.0)
 
 
 def test_neural_lod_shades_each_pixel_by_its_bins_estimator(monkeypatch):

@@ -1,7 +1,8 @@
 """neural-lod's per-pixel estimator (issue 23 item 4): each pixel's filtered value (a box footprint of the
-pixel's side f tiles at the mean (u, v) of its samples, its first sample's directions; Chen, Wang & Wang
-2024, eq. 3) from the cheapest estimator that meets the network's error target, by the crossovers measured
-for its weave and stored in its sidecar (:mod:`clothlab.surrogate.estimator_choice`):
+pixel's side f tiles at the pixel's centre, with the centre's directions,
+:func:`clothlab.render.shade.pixel_boxes`; Chen, Wang & Wang 2024, eq. 3) from the cheapest estimator that
+meets the network's error target, by the crossovers measured for its weave and stored in its sidecar
+(:mod:`clothlab.surrogate.estimator_choice`):
 
 * ``mc`` k: k stratified points of the scene's texture model over the pixel's box (noise as the scene's);
 * ``surrogate``: one query of the weave's shipped network (its own configured R as the residual base:

@@ -7,6 +7,8 @@ Radiance per sample (no global illumination, no shadows but back-facing):
 with wi, wo in the fabric frame of the hit (z normal, y warp, x weft); samples with wi_z <= 0 or wo_z <= 0
 are black.  A pixel is the mean over its ``spp`` samples (the pixel centre for spp = 1, stratified jitter
 for square spp, seeded by scene.seed); background pixels are 0.  Everything is vectorised over samples.
+For the shaders that shade a pixel's footprint as one box (``shade.CENTRE_POLICIES``: neural-lod) the
+pixel centres are traced too at spp > 1 (``Samples.centre``), so that the box does not move with the jitter.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from clothlab.render.camera import PinholeCamera
 from clothlab.render.geometry import make_surface
 from clothlab.render.scene import Scene, check_render_memory
 from clothlab.render.shade import (
+    CENTRE_POLICIES,
     COUNTERS,
     FOOTPRINT_POLICIES,
     SAMPLE_COUNTERS,
@@ -29,6 +32,7 @@ from clothlab.render.shade import (
     TEXTURE_POLICIES,
     Counter,
     FabricModels,
+    PixelCentres,
     Samples,
     lod_weight,
     network_samples,
@@ -82,18 +86,13 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
     px, py = camera.pixel_samples(spp, rng)
     h, w = camera.height, camera.width
     pixel = np.broadcast_to(np.arange(h * w).reshape(h, w, 1), px.shape).reshape(-1)
-    px, py = px.reshape(-1), py.reshape(-1)
-    directions = camera.directions(px, py)
-    hits = surface.intersect(camera.eye, directions)
-    idx = np.flatnonzero(hits.hit)
-    hits = type(hits)(**{k: getattr(hits, k)[idx] for k in hits.__dataclass_fields__})
-    footprint = hits.footprint(camera.eye, camera.directions(px[idx] + 1.0, py[idx]),
-                               camera.directions(px[idx], py[idx] + 1.0), surface.tile_mm)
-    to_light, irradiance = _light(scene.light, hits.position)
-    wi, wo = hits.to_fabric(to_light), hits.to_fabric(-directions[idx])
-    front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
+    idx, front, hits, footprint, wi, wo, irradiance = _trace(camera, surface, scene.light, px.reshape(-1),
+                                                             py.reshape(-1))
+    centre = None
+    if spp > 1 and shader_kind(shader)[1] in CENTRE_POLICIES:  # at 1 spp the samples are the centres
+        centre = _pixel_centres(camera, surface, scene.light)
     samples = Samples(hits.u[front], hits.v[front], wi[front], wo[front], footprint[front], pixel[idx][front],
-                      hits.distance[front])
+                      hits.distance[front], centre)
     t_geometry, cpu_geometry = time.perf_counter(), time.process_time()
 
     counter = Counter()
@@ -118,6 +117,35 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
                         metadata={"scene": scene.source or "", "shader": shader, "spp": int(spp),
                                   "lod_f0": scene.lod.f0, "lod_f1": scene.lod.f1,
                                   "camera_distance_mm": scene.camera.distance})
+
+
+def _trace(camera, surface, light, px, py):
+    """Rays through pixel positions px, py (M,): (idx: the rays that hit the patch; front: those of the hits
+    lit and seen from the front; per hit: the hits, pixel footprint (tiles), fabric-frame wi, wo, irradiance)."""
+    directions = camera.directions(px, py)
+    hits = surface.intersect(camera.eye, directions)
+    idx = np.flatnonzero(hits.hit)
+    hits = type(hits)(**{k: getattr(hits, k)[idx] for k in hits.__dataclass_fields__})
+    footprint = hits.footprint(camera.eye, camera.directions(px[idx] + 1.0, py[idx]),
+                               camera.directions(px[idx], py[idx] + 1.0), surface.tile_mm)
+    to_light, irradiance = _light(light, hits.position)
+    wi, wo = hits.to_fabric(to_light), hits.to_fabric(-directions[idx])
+    front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
+    return idx, front, hits, footprint, wi, wo, irradiance
+
+
+def _pixel_centres(camera, surface, light) -> PixelCentres:
+    """The surface point through each pixel's centre (the 1-spp sample of :meth:`PinholeCamera.pixel_samples`),
+    by pixel index."""
+    cx, cy = camera.pixel_samples(1, None)
+    idx, front, hits, footprint, wi, wo, _ = _trace(camera, surface, light, cx.reshape(-1), cy.reshape(-1))
+    n = camera.height * camera.width
+    out = PixelCentres(np.zeros(n), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n),
+                       np.zeros(n, dtype=bool))
+    at = idx[front]
+    out.u[at], out.v[at], out.wi[at], out.wo[at] = hits.u[front], hits.v[front], wi[front], wo[front]
+    out.footprint[at], out.valid[at] = footprint[front], True
+    return out
 
 
 def _light(light, position):

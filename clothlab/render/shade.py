@@ -42,8 +42,10 @@ Shaders (f_r in 1/sr per channel, for the fabric-frame directions of each sample
 - ``neural-lod``     im-lod, except where the pixel covers part of a tile: there the neural footprint
                      surrogate (Chen, Wang & Wang 2024, sec. 4.3; ``kind: neural``, the weave's shipped
                      weights) shades the pixel, queried once per pixel for a box footprint of side f (tiles) at
-                     the mean (u, v) of the pixel's samples with its first sample's directions: the query *is*
-                     the pixel's filtered value (eq. 3), so it needs no supersampling; the reflectance model at
+                     the pixel's centre with the centre's directions (:func:`pixel_boxes`): the query *is* the
+                     pixel's filtered value (eq. 3), so it needs no supersampling, and more samples per pixel
+                     do not move it (the jitter only enters through the per-sample irradiance and cosine);
+                     the reflectance model at
                      the same directions is the base of a residual network.  The network's share w =
                      :func:`network_weight` (f) rises over :data:`NEURAL_RISE` and falls over
                      :data:`NEURAL_FALL`; where 0 < w < 1 a pixel is the network's when its dither threshold
@@ -99,9 +101,25 @@ def lod_weight(footprint, f0: float, f1: float) -> np.ndarray:
 
 
 @dataclass
+class PixelCentres:
+    """The surface point seen through each pixel's centre, indexed by pixel (H W,): texture coordinates
+    (tiles), fabric-frame directions (H W, 3), footprint (tiles); ``valid``: the centre's ray hits the front
+    of the patch (elsewhere the other arrays are undefined)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    footprint: np.ndarray
+    valid: np.ndarray
+
+
+@dataclass
 class Samples:
     """Surface samples to shade: texture coordinates (tiles), fabric-frame directions (M, 3), pixel footprint
-    (tiles), pixel index, distance from the camera (mm)."""
+    (tiles), pixel index, distance from the camera (mm); ``centre``: the pixels' centres, for the shaders that
+    shade a pixel's footprint as one box (:func:`pixel_boxes`; None when every sample is its pixel's centre,
+    as at 1 spp, or no shader needs it)."""
 
     u: np.ndarray
     v: np.ndarray
@@ -110,10 +128,11 @@ class Samples:
     footprint: np.ndarray
     pixel: np.ndarray
     distance: np.ndarray
+    centre: PixelCentres | None = None
 
     def take(self, index) -> Samples:
         return Samples(*(np.take(getattr(self, k), index, axis=0)
-                         for k in ("u", "v", "wi", "wo", "footprint", "pixel", "distance")))
+                         for k in ("u", "v", "wi", "wo", "footprint", "pixel", "distance")), centre=self.centre)
 
 
 @dataclass
@@ -303,6 +322,27 @@ def pixel_runs(pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return order[starts], back
 
 
+def pixel_boxes(s: Samples):
+    """Each pixel's box footprint (Chen, Wang & Wang 2024, eq. 3) for the shaders that shade it as one query:
+    (first, back, centre (P, 2) tiles, side (P,) tiles, wi (P, 3), wo (P, 3)) with ``first``, ``back`` of
+    :func:`pixel_runs`.  The box is the pixel's centre - its surface point (u, v), footprint and directions
+    (``s.centre``; at 1 spp the sample is the centre) - so that it does not move with the jitter of the
+    pixel's samples.  A pixel whose centre misses the front of the patch (a partly covered pixel), or samples
+    without ``centre``, take the mean (u, v) of the pixel's samples and its first sample's footprint and
+    directions."""
+    first, back = pixel_runs(s.pixel)
+    count = np.bincount(back)
+    centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
+    size, wi, wo = s.footprint[first], s.wi[first], s.wo[first]
+    if s.centre is not None:
+        c, p = s.centre, s.pixel[first]
+        ok = c.valid[p]
+        q = p[ok]
+        centre[ok] = np.column_stack([c.u[q], c.v[q]])
+        size[ok], wi[ok], wo[ok] = c.footprint[q], c.wi[q], c.wo[q]
+    return first, back, centre, size, wi, wo
+
+
 def reflectance_values(fabric: FabricModels, s: Samples, counter: Counter, *, per_pixel: bool = True) -> np.ndarray:
     """IM reflectance model f_r (M, C); with ``per_pixel`` evaluated at the first sample of each pixel."""
     if not fabric.need or len(s.u) == 0:
@@ -386,9 +426,9 @@ def dither(pixel: np.ndarray) -> np.ndarray:
 
 def network_samples(s: Samples) -> np.ndarray:
     """Which samples neural-lod shades with the network (bool, M): all samples of the pixels whose dither
-    threshold lies below the network weight of the pixel's footprint (at its first sample)."""
-    first, back = pixel_runs(s.pixel)
-    return (dither(s.pixel[first]) < network_weight(s.footprint[first]))[back]
+    threshold lies below the network weight of the pixel's footprint (its box's, :func:`pixel_boxes`)."""
+    first, back, _, size, _, _ = pixel_boxes(s)
+    return (dither(s.pixel[first]) < network_weight(size))[back]
 
 
 def neural_model(fabric: FabricModels, kind: str | None = None):
@@ -408,21 +448,18 @@ def neural_model(fabric: FabricModels, kind: str | None = None):
 
 
 def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> np.ndarray:
-    """The network's f_r (M, C), one query per pixel shared by its samples: a box footprint of the pixel's
-    side at the mean (u, v) of its samples, its first sample's directions, and the reflectance model's
+    """The network's f_r (M, C), one query per pixel shared by its samples: the pixel's box footprint
+    (:func:`pixel_boxes`: at the pixel's centre, with its directions), and the reflectance model's
     components there as the base of a residual network (computed once per pixel)."""
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     model = neural_model(fabric)
-    first, back = pixel_runs(s.pixel)
-    count = np.bincount(back)
-    centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
-    wi, wo = s.wi[first], s.wo[first]
+    first, back, centre, size, wi, wo = pixel_boxes(s)
     comps = counter.run("reflectance", first.size, fabric.reflectance.components, wi, wo, fabric.params,
                         need=fabric.need, warn=False)
     reference = np.column_stack([comps[k] if k in comps else np.zeros(first.size)
                                  for k in fabric.reflectance.component_names])
-    net = counter.run(model.kind, first.size, model.query, centre, s.footprint[first], wi, wo, fabric.params,
+    net = counter.run(model.kind, first.size, model.query, centre, size, wi, wo, fabric.params,
                       reference=reference)
     return combine({k: net[k] for k in fabric.need}, fabric.coefficients)[back]
 
@@ -438,11 +475,8 @@ def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: L
     if choice is not None:
         if not fabric.need or len(s.u) == 0:
             return _zeros(fabric, len(s.u))
-        first, back = pixel_runs(s.pixel)
-        count = np.bincount(back)
-        centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
-        return pixel_values(fabric, neural_model(fabric), choice, centre, s.footprint[first], s.wi[first],
-                            s.wo[first], counter)[back]
+        _, back, centre, size, wi, wo = pixel_boxes(s)
+        return pixel_values(fabric, neural_model(fabric), choice, centre, size, wi, wo, counter)[back]
     chosen = network_samples(s) if np.any(network_weight(s.footprint) > 0.0) else None  # per pixel only if needed
     if chosen is None or not chosen.any():
         return im_lod_values(fabric, s, counter, lod)
@@ -487,6 +521,9 @@ POLICIES = {
 TEXTURE_POLICIES = ("texture", "filtered-lod", "filtered-texture")
 #: policies that choose per sample by the pixel footprint between the texture and the reflectance model
 FOOTPRINT_POLICIES = ("lod", "network-lod")
+#: policies that shade a pixel's footprint as one box at the pixel's centre (:func:`pixel_boxes`): the renderer
+#: traces the pixel centres for them (``Samples.centre``) when the samples are not the centres
+CENTRE_POLICIES = ("network-lod",)
 #: the reflectance and texture counters of the scene's fabric, then those of the kinds whose shaders count
 #: their own model (a self-filtering texture, a network): the ``<name>_evaluations`` of a render's stats
 COUNTERS = ("texture", "reflectance", *dict.fromkeys(
