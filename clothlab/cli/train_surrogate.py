@@ -73,6 +73,10 @@ def add_parser(sub):
                    help="give the decoder the noise-free texture at the N x N midpoints of each footprint (N = 1: its "
                         "centre) as an input, which locates the yarn highlights in small footprints; each query then "
                         "costs N^2 texture evaluations more (default 0: none, as the paper)")
+    p.add_argument("--reciprocal", action="store_true",
+                   help="train on each eligible row with wi and wo swapped half the time (Helmholtz reciprocity: the "
+                        "same label), never on a held-out direction pair; needs a reciprocal model (checked) "
+                        "(default: off, as the paper)")
     p.add_argument("--vary", action="append", default=[], metavar="NAME=LO:HI:N",
                    help="a multi-material network: N values of parameter NAME from LO to HI (geometric for "
                         "log-declared parameters), repeatable (the grid of all combinations); the midpoints "
@@ -259,6 +263,14 @@ def _run(args, held, lines: list[str]) -> int:
             raise ConfigError("the texture probe needs a model with a texture", field="--probe-points")
         textures = [m.texture(seed=args.seed) for _, m, _ in resolved]
         probes = [TextureProbe(textures[i], q, args.probe_points) for i, q in zip(owner, sets, strict=True)]
+    if args.reciprocal:  # before any labelling: the swap is only valid for a reciprocal model
+        from clothlab.surrogate.training import check_reciprocal
+
+        try:
+            check_reciprocal(references, "reflectance model")
+            check_reciprocal(probes, "texture probe")
+        except ValueError as exc:
+            raise ConfigError(str(exc), field="--reciprocal") from None
     weave, model, _ = resolved[0]
     p = model.resolve(resolved[0][2])
     names = [n for n in model.params.names() if n != ORIENTATION]  # a frame rotation, applied outside the network
@@ -297,7 +309,8 @@ def _run(args, held, lines: list[str]) -> int:
                               TrainSpec(width=args.width, spatial=args.spatial, seed=args.seed,
                                         yarn_bins=args.yarn_bins, residual=args.residual,
                                         residual_input=args.residual_input,
-                                        highlight_scale=args.highlight_scale, probe_points=args.probe_points),
+                                        highlight_scale=args.highlight_scale, probe_points=args.probe_points,
+                                        reciprocal=args.reciprocal),
                               budget_s=60.0 * args.budget, encoding=encoding, resume=args.resume,
                               heldout_materials=heldout, runner=runner, references=references,
                               heldout_pattern=held_pattern, probes=probes)

@@ -71,6 +71,21 @@ def heldout_cells(spec: DataSpec) -> np.ndarray:
     return np.random.default_rng([spec.seed, 7919]).random((d2, d2)) < spec.heldout_pairs
 
 
+def direction_cells(w: np.ndarray, directions: int) -> np.ndarray:
+    """(N,) index of the cell of the ``directions`` x ``directions`` grid over (x, y) in (-1, 1)^2 that holds
+    each direction of ``w`` (N, 3): the cell index of :func:`_stratified_directions` (x along the row)."""
+    ij = np.clip(np.floor((np.asarray(w)[:, :2] + 1.0) * (0.5 * directions)).astype(np.int64), 0, directions - 1)
+    return ij[:, 0] + directions * ij[:, 1]
+
+
+def swap_trained(rows: np.ndarray, spec: DataSpec) -> np.ndarray:
+    """(N,) bool: the rows whose swapped directions (wi <-> wo) fall in a trained (wi cell, wo cell) pair
+    (not in :func:`heldout_cells`), so that training on the swapped row never sees a held-out pair."""
+    held = heldout_cells(spec)
+    return ~held[direction_cells(np.asarray(rows)[:, 7:10], spec.directions),
+                 direction_cells(np.asarray(rows)[:, 4:7], spec.directions)]
+
+
 def _stratified_directions(rng: np.random.Generator, d: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """n directions with (x, y) jittered in random cells of the d x d grid over (-1, 1)^2, z >= MIN_Z."""
     out, cells = np.empty((0, 3)), np.empty(0, dtype=np.int64)

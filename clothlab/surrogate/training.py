@@ -12,6 +12,12 @@ A checkpoint (network, Adam moments, step, CPU time, loss curve) makes a run res
 ``residual`` (:mod:`.surrogate`): the loss of eqs. 9-11 compares T(R) + net with T(label); R is a constant
 of each row (computed once from ``references`` before the first step, its CPU time counted in the run), so
 the network's backward pass is unchanged (d loss / d net = d loss / d g).
+
+``reciprocal`` (not in the paper): Helmholtz reciprocity f(wi, wo) = f(wo, wi) holds for the IM texture and
+its tile average (checked on the run's references and probes before the first step), so a training row
+with wi and wo exchanged is another training row with the same label, T(R) and probe.  Each batch swaps a
+random half of the rows whose swapped pair is a trained (wi cell, wo cell) pair: the direction pairs seen
+double at no label cost, and the held-out pairs stay unseen.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy as np
 from clothlab.atomic import atomic_write_bytes
 from clothlab.errors import InputError
 from clothlab.progress import Progress, get_logger
-from clothlab.surrogate.data import COLUMNS
+from clothlab.surrogate.data import COLUMNS, DataSpec, swap_trained
 from clothlab.surrogate.encodings import BLOB_BINS, n_direction_features, n_yarn_features
 from clothlab.surrogate.losses import column_weights, encode_targets, highlight_weights, is_specular, loss_and_gradient
 from clothlab.surrogate.network import Architecture, SurrogateNetwork
@@ -56,6 +62,7 @@ class TrainSpec:
     residual_input: bool = False
     highlight_scale: float | None = None  # 1/sr: losses.highlight_weights (None: eqs. 9-11 as the paper)
     probe_points: int = 0  # texture probe points per side (surrogate module docstring; 0: none, as the paper)
+    reciprocal: bool = False  # swap wi and wo of half the eligible batch rows (reciprocal_rows; off: as the paper)
     batch: int = 4096
     lr: float = 3e-3
     weight_decay: float = 1e-6
@@ -108,7 +115,7 @@ def make_surrogate(spec: TrainSpec, materials: np.ndarray, names, encoding: dict
                      {**encoding, "half_vector": spec.half_vector, "position_bins": spec.position_bins,
                       "size_bins": spec.size_bins, "yarn_bins": spec.yarn_bins, "residual": spec.residual,
                       "residual_input": spec.residual_input, "highlight_scale": spec.highlight_scale,
-                      "probe_points": spec.probe_points},
+                      "probe_points": spec.probe_points, "reciprocal": spec.reciprocal},
                      references=list(references) if references else None, probes=list(probes) if probes else None)
 
 
@@ -135,6 +142,40 @@ def transformed_probes(surrogate: Surrogate, data: np.ndarray) -> np.ndarray | N
     if not surrogate.probe_points:
         return None
     return _per_row(surrogate.transformed_probe, data, len(surrogate.component_names) * surrogate.probe_points ** 2)
+
+
+def check_reciprocal(sources, what: str, pairs: int = 64, tolerance: float = 1e-9) -> None:
+    """ValueError unless every source (``source(wi, wo, centre, size)``: the references or probes of a run)
+    gives the same values for (wi, wo) and (wo, wi) on ``pairs`` seeded direction pairs, within ``tolerance``
+    relative to its largest value (Helmholtz reciprocity, which ``TrainSpec.reciprocal`` relies on)."""
+    rng = np.random.default_rng(7411)
+    xy = rng.uniform(-0.7, 0.7, (2, pairs, 2))
+    wi, wo = (np.column_stack([d, np.sqrt(1.0 - np.sum(d * d, axis=1))]) for d in xy)
+    centre, size = rng.random((pairs, 2)), rng.uniform(0.05, 2.0, pairs)
+    for m, source in enumerate(sources or ()):
+        a, b = np.asarray(source(wi, wo, centre, size)), np.asarray(source(wo, wi, centre, size))
+        gap = float(np.max(np.abs(a - b)))
+        if gap > tolerance * max(float(np.max(np.abs(a))), 1e-300):
+            raise ValueError(f"reciprocal training needs a reciprocal model, but the {what} of material {m} "
+                             f"changes by {gap:.3g} when wi and wo are swapped")
+
+
+def reciprocal_rows(data: np.ndarray, train_rows: np.ndarray, data_spec: DataSpec, block: int = 262_144) -> np.ndarray:
+    """(rows of ``data``,) bool: the training rows that may be swapped (wi <-> wo, the same label by Helmholtz
+    reciprocity f(wi, wo) = f(wo, wi)): those whose swapped pair is a trained cell pair of ``data_spec``
+    (:func:`clothlab.surrogate.data.swap_trained`), so the held-out pairs stay unseen."""
+    out = np.zeros(data.shape[0], dtype=bool)
+    for start in range(0, train_rows.size, block):
+        rows = np.sort(train_rows[start:start + block])
+        out[rows] = swap_trained(np.asarray(data[rows, :N_QUERY]), data_spec)
+    return out
+
+
+def swap_directions(rows: np.ndarray, flip: np.ndarray) -> np.ndarray:
+    """``rows`` (a copy) with wi and wo exchanged in the rows where ``flip`` is True."""
+    out = np.array(rows, copy=True)
+    out[flip, 4:7], out[flip, 7:10] = rows[flip, 7:10], rows[flip, 4:7]
+    return out
 
 
 def _batch(surrogate: Surrogate, rows: np.ndarray, specular: np.ndarray, t_reference=None, t_probe=None):
@@ -197,6 +238,13 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
     t_reference = transformed_references(surrogate, data)  # constants per row (inside the CPU budget)
     t_probe = transformed_probes(surrogate, data)
     surrogate.encoding["output_max"] = output_max(data, train_rows, specular)
+    swappable = None
+    if spec.reciprocal:
+        if "data_spec" not in surrogate.encoding:
+            raise ValueError("reciprocal training needs the data spec (encoding['data_spec']) for its held-out pairs")
+        check_reciprocal(references, "reflectance model")
+        check_reciprocal(probes, "texture probe")
+        swappable = reciprocal_rows(data, train_rows, DataSpec(**surrogate.encoding["data_spec"]))
 
     def fraction() -> float:
         parts = []
@@ -212,6 +260,8 @@ def train(data: np.ndarray, names, materials: np.ndarray, spec: TrainSpec, *, en
         while fraction() < 1.0:
             pick = np.sort(rng.choice(train_rows, size=min(spec.batch, train_rows.size), replace=False))
             rows = data[pick]
+            if swappable is not None:  # T(R) and the probe are reciprocal too: their rows stay as they are
+                rows = swap_directions(rows, swappable[pick] & (rng.random(pick.size) < 0.5))
             index, spatial, angular, targets = _batch(surrogate, rows, specular,
                                                       None if t_reference is None else t_reference[pick],
                                                       None if t_probe is None else t_probe[pick])
