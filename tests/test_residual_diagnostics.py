@@ -41,3 +41,42 @@ def test_pure_noise_has_no_concentrated_tail():
     d = diagnostics(TI, PI, TO, PO, measured, np.full(N, 0.3))
     strong = [b for f in d["features"].values() for b in f["bins"] if b["n"] >= 40 and b["enrichment"] > 1.5]
     assert strong == []
+
+
+def test_the_half_vector_azimuth_by_hand():
+    # (40, 30) -> (40, 30): h = wi, azimuth 30; (60, 0) -> (60, 180): h the normal (azimuth 0 by atan2(0, 0))
+    f = features([40.0, 20.0], [30.0, 200.0], [40.0, 20.0], [30.0, 200.0])
+    np.testing.assert_allclose(f["azimuth_h"], [30.0, 200.0], atol=1e-9)
+
+
+def test_half_turn_pairs_of_a_tilted_lambertian_give_the_floor_of_its_cosines():
+    """A Lambertian sample tilted by 3 deg toward +x, reduced with the nominal irradiance (clothlab.models.
+    baselines.tilt, eq. 1): f = rho / pi cos(theta_i') / cos(theta_i).  In-plane rows (a, 0; b, 0) and their
+    half-turned reciprocal (b, 180; a, 180) are found as pairs, and the floor |f1 - f2| / (f1 + f2) follows from
+    the cosines computed here by hand (cos theta' = cos(theta -+ tau) in the plane of the tilt)."""
+    from clothlab.fit.residuals import half_turn_pairs
+
+    tau = 3.0
+    polar = np.array([0.0, 11.25, 22.5, 33.75, 45.0, 56.25, 67.5, 78.75])
+    a, b = np.meshgrid(polar, polar, indexing="ij")
+    keep = a > b
+    a, b = a[keep], b[keep]
+    ti = np.concatenate([a, b])
+    pi_ = np.concatenate([np.zeros_like(a), np.full_like(b, 180.0)])
+    to = np.concatenate([b, a])
+    po = pi_.copy()
+
+    def lambert(theta_i, phi_i):  # the incident direction at azimuth 0 is tau closer to the tilted normal
+        true = theta_i - tau * np.where(phi_i == 0.0, 1.0, -1.0) * (theta_i > 0)
+        true = np.where(theta_i > 0, true, tau)
+        return 0.3 / np.pi * np.cos(np.radians(true)) / np.cos(np.radians(theta_i))
+
+    values = lambert(ti, pi_)
+    out = half_turn_pairs(ti, pi_, to, po, values)
+    assert out["pairs"] == len(a)
+    f1, f2 = lambert(a, np.zeros_like(a)), lambert(b, np.full_like(b, 180.0))
+    np.testing.assert_allclose(out["floor_median"], np.median(np.abs(f1 - f2) / (f1 + f2)), rtol=1e-12)
+    # the darker rows are those lit from azimuth 180 (tilted away): their half vectors lean toward 180 deg
+    assert abs(abs(out["darker_azimuth"]) - 180.0) < 1.0
+    # an untilted (symmetric) table: every pair agrees, the floor is 0
+    assert half_turn_pairs(ti, pi_, to, po, np.full(len(ti), 0.1))["floor_median"] == 0.0

@@ -8,17 +8,26 @@ term would follow:
 * ``phase``: the phase angle g = angle(w_i, w_o), which is also the distance to the **retro-reflection**
   direction (w_o = w_i; a fibre sheen or retro-reflection peak sits at small g);
 * ``theta_h``: polar angle of the half vector h = (w_i + w_o) / |w_i + w_o| (a microfacet lobe follows it);
-* ``specular``: the angle between w_o and the mirror direction of w_i, (-x, -y, z) (a surface glint sits at 0).
+* ``specular``: the angle between w_o and the mirror direction of w_i, (-x, -y, z) (a surface glint sits at 0);
+* ``azimuth_h``: the azimuth of the half vector in the table's frame, 0-360 (a model unchanged by a half turn
+  about the normal - every woven kind, period 180 deg, and the isotropic ones - has the same bias at phi_h and
+  phi_h + 180; opposite biases there are an asymmetry it cannot have: a tilted sample plane or a nap).
 
 Per bin: the rows, the median signed r (a bias: the model too dark < 0 or too bright > 0 there), the median |r|,
 and the share of the **p80 tail** (rows whose |r| exceeds the 80th percentile of all |r|) against the share of
 rows - the enrichment (> 1: the tail is concentrated there).  :func:`tail_rows` lists the worst directions.
 All angles in degrees (clothlab frame, docs/design.md principle 1).
+
+:func:`half_turn_pairs` (model-free): rows whose directions are another row's turned by a half turn about the
+normal - as they are, or swapped (Helmholtz reciprocity) - have the same value under any half-turn-symmetric
+model, so their measured ratio is an error such a model must make: it errs on one of the two by at least
+|a - b| / (a + b) (the best common value 2ab / (a + b) errs by that on both).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 BINS = {
     "theta_i": (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0),
@@ -26,10 +35,11 @@ BINS = {
     "phase": (0.0, 10.0, 20.0, 40.0, 60.0, 90.0, 180.0),
     "theta_h": (0.0, 10.0, 20.0, 30.0, 45.0, 60.0, 90.0),
     "specular": (0.0, 10.0, 20.0, 40.0, 60.0, 90.0, 180.0),
+    "azimuth_h": (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0, 360.0),
 }
 LABELS = {"theta_i": "incident polar angle", "theta_o": "exitant polar angle",
           "phase": "phase angle = distance to retro-reflection", "theta_h": "half-vector polar angle",
-          "specular": "distance to the mirror direction"}
+          "specular": "distance to the mirror direction", "azimuth_h": "half-vector azimuth (table frame)"}
 TAIL = 80.0
 ENRICHED = 1.5
 
@@ -52,7 +62,7 @@ def features(theta_i, phi_i, theta_o, phi_o) -> dict:
     mirror = wi * np.array([-1.0, -1.0, 1.0])
     return {"theta_i": np.asarray(theta_i, dtype=np.float64), "theta_o": np.asarray(theta_o, dtype=np.float64),
             "phase": _angle(wi, wo), "theta_h": np.degrees(np.arccos(np.clip(h[:, 2], -1.0, 1.0))),
-            "specular": _angle(wo, mirror)}
+            "specular": _angle(wo, mirror), "azimuth_h": np.mod(np.degrees(np.arctan2(h[:, 1], h[:, 0])), 360.0)}
 
 
 def relative_residuals(measured, model) -> np.ndarray:
@@ -67,7 +77,8 @@ def diagnostics(theta_i, phi_i, theta_o, phi_o, measured, model) -> dict:
     (channels pooled: each row's mean |r| over its channels decides the tail, each value counts in the bias).
 
     Returns ``{"features": {name: {"label", "bins": [{"lo", "hi", "n", "median_r", "median_abs_r",
-    "tail_share", "row_share", "enrichment"}]}}, "tail_threshold", "tail_rows", "enriched", "rule"}``."""
+    "tail_share", "row_share", "enrichment"}]}}, "tail_threshold", "tail_rows", "enriched", "rule", "half_turn",
+    "worst"}`` (``half_turn``: :func:`half_turn_pairs` of the measured values)."""
     y = np.asarray(measured, dtype=np.float64)
     y = y[:, None] if y.ndim == 1 else y
     m = np.asarray(model, dtype=np.float64).reshape(y.shape)
@@ -103,6 +114,7 @@ def diagnostics(theta_i, phi_i, theta_o, phi_o, measured, model) -> dict:
                                 f"{100 * entry['median_r']:+.1f} %)")
         out["features"][name] = {"label": LABELS[name], "bins": bins}
     out["enriched"] = enriched
+    out["half_turn"] = half_turn_pairs(theta_i, phi_i, theta_o, phi_o, y)
     out["worst"] = tail_rows(theta_i, phi_i, theta_o, phi_o, row_abs, np.nanmean(r, axis=1) if r.size else r)
     return out
 
@@ -114,15 +126,62 @@ def tail_rows(theta_i, phi_i, theta_o, phi_o, row_abs, row_r, count: int = 10) -
              "phi_o": float(phi_o[i]), "r": float(row_r[i])} for i in order]
 
 
+def half_turn_pairs(theta_i, phi_i, theta_o, phi_o, measured, tolerance: float = 1.0) -> dict:
+    """The pairs of rows related by a half turn about the normal, as they are or swapped (module docstring):
+    (N,) or (N, C) ``measured`` (channels averaged), ``tolerance`` (deg) on the distance of the direction pairs
+    (the chord distance of the 6-vectors (wi, wo), ~ sqrt(d_i^2 + d_o^2) for small angles).  Returns
+    ``{"pairs", "median_abs_log_ratio", "floor_median", "floor_p80", "darker_azimuth", "sentence", "list"}``:
+    the floor = |a - b| / (a + b) per pair (the least error a half-turn-symmetric model makes on one of its
+    rows); ``darker_azimuth`` (deg in (-180, 180], table frame): the mean half-vector azimuth of the darker rows
+    weighted by |ln(a / b)|, None without pairs."""
+    y = np.asarray(measured, dtype=np.float64)
+    y = y.mean(axis=1) if y.ndim == 2 else y
+    wi, wo = _unit(theta_i, phi_i), _unit(theta_o, phi_o)
+    turn = np.array([-1.0, -1.0, 1.0])
+    azimuth = features(theta_i, phi_i, theta_o, phi_o)["azimuth_h"]
+    tree = cKDTree(np.hstack([wi, wo]))
+    found = {}
+    for a, b in ((wi * turn, wo * turn), (wo * turn, wi * turn)):
+        distance, nearest = tree.query(np.hstack([a, b]), distance_upper_bound=np.radians(tolerance))
+        for k, (d, j) in enumerate(zip(distance, nearest, strict=True)):
+            if np.isfinite(d) and j != k:
+                found.setdefault((min(j, k), max(j, k)), float(d))
+    pairs = [(k, j) for k, j in found if y[k] > 0 and y[j] > 0 and np.isfinite(y[k]) and np.isfinite(y[j])]
+    if not pairs:
+        return {"pairs": 0, "median_abs_log_ratio": None, "floor_median": None, "floor_p80": None,
+                "darker_azimuth": None, "list": [], "sentence": "no rows related by a half turn about the normal"}
+    log_ratio = np.array([np.log(y[k] / y[j]) for k, j in pairs])
+    floor = np.array([abs(y[k] - y[j]) / (y[k] + y[j]) for k, j in pairs])
+    darker = np.array([k if y[k] < y[j] else j for k, j in pairs])
+    weight = np.abs(log_ratio)
+    vector = np.sum(weight[:, None] * _unit(np.full(len(pairs), 90.0), azimuth[darker])[:, :2], axis=0)
+    direction = float(np.degrees(np.arctan2(vector[1], vector[0]))) if weight.sum() > 0 else None
+    out = {"pairs": len(pairs), "median_abs_log_ratio": float(np.median(weight)),
+           "floor_median": float(np.median(floor)), "floor_p80": float(np.percentile(floor, 80)),
+           "darker_azimuth": direction,
+           "list": [{"rows": [int(k), int(j)], "values": [float(y[k]), float(y[j])]} for k, j in pairs]}
+    out["sentence"] = (f"{len(pairs)} pairs of rows related by a half turn about the normal differ by a median "
+                       f"{100 * np.median(floor):.1f} % (80th percentile {100 * out['floor_p80']:.1f} %) from their "
+                       "common best value: a half-turn-symmetric model errs by at least that on one row of each pair"
+                       + (f"; the darker rows' half vectors lean toward azimuth {direction:.0f} deg"
+                          if direction is not None else ""))
+    return out
+
+
 def summary_sentence(diag: dict) -> str:
     """Where the p80 tail concentrates, in one sentence."""
     if not diag or not diag.get("rows"):
         return "no residuals"
+    half = diag.get("half_turn") or {}
+    pairs = (f" ({half['pairs']} pairs of rows related by a half turn about the normal differ by a median "
+             f"{100 * half['floor_median']:.1f} % from their common value: a floor for half-turn-symmetric models)"
+             if half.get("pairs") else "")
     if not diag["enriched"]:
         return (f"the p80 tail (mean |r| > {100 * diag['tail_threshold']:.1f} %, {diag['tail_rows']} rows) is spread "
-                "over the geometry: no bin holds more than 1.5 x its share")
+                "over the geometry: no bin holds more than 1.5 x its share" + pairs)
     return (f"the p80 tail (mean |r| > {100 * diag['tail_threshold']:.1f} %, {diag['tail_rows']} rows) is "
-            "concentrated at: " + "; ".join(diag["enriched"]))
+            "concentrated at: " + "; ".join(diag["enriched"]) + pairs)
 
 
-__all__ = ["BINS", "diagnostics", "features", "relative_residuals", "summary_sentence", "tail_rows"]
+__all__ = ["BINS", "diagnostics", "features", "half_turn_pairs", "relative_residuals", "summary_sentence",
+           "tail_rows"]

@@ -8,9 +8,16 @@
   Smith-GGX, Walter et al. 2007 eq. 34), parameters ``fresnel.eta`` (1.55) and ``smith.alpha`` (0: no
   shadowing), neither freed by default:   f_r = sum_{k specular} c_k F G B_k + sum_{k diffuse} c_k B_k.
 * ``<B>+fresnel-smith``: the same with ``smith.alpha`` (the shadowing-masking roughness) freed.
+* ``<B>+tilt``: B seen on a sample whose normal is tilted from the table's z axis
+  (:mod:`clothlab.models.baselines.tilt`, its eq. 1), parameters ``tilt.x``, ``tilt.y`` (deg) freed:
+  f_r = (n . wi) / cos theta_i sum_k c_k B_k(T^-1 wi, T^-1 wo).  The tilt is applied in the weave's frame (after
+  the orientation), so the model is no longer symmetric under a half turn: its orientation period is a full turn
+  (and a warp/weft quarter turn is no symmetry); the tilt's table azimuth is atan2(tilt.y, tilt.x) +
+  orientation.
 
 The wrapper is B for everything else: its parameters are B's and the term's (no clash allowed), options and
-quadrature go to B, the orientation is applied once (both terms are isotropic, so the period is B's), and
+quadrature go to B, the orientation is applied once (the sheen and the grazing factor are isotropic, so the
+period is B's; the tilt's is a full turn), and
 ``specular_class`` / ``diffuse_class`` are B's (so the selection maps fit.free names by B's family).  Kinds
 registered in :data:`clothlab.models.registry.TERM_KINDS`; each class made once by :func:`term_class`.
 """
@@ -24,6 +31,7 @@ import numpy as np
 
 from clothlab.models.base import Model, SetsTogetherModel, with_orientation
 from clothlab.models.baselines.sheen import SHEEN_PARAMS, sheen_lobe
+from clothlab.models.baselines.tilt import TILT_FREE, TILT_PARAMS, to_sample_frame
 from clothlab.models.composite.model import union_table
 from clothlab.models.grazing import FRESNEL_FREE, FRESNEL_SMITH_FREE, GRAZING_PARAMS, grazing_factor
 
@@ -32,9 +40,14 @@ TERMS = {
     "sheen": (SHEEN_PARAMS, ("sheen.r",), ("sheen",)),
     "fresnel": (GRAZING_PARAMS, FRESNEL_FREE, ()),
     "fresnel-smith": (GRAZING_PARAMS, FRESNEL_SMITH_FREE, ()),
+    "tilt": (TILT_PARAMS, TILT_FREE, ()),
 }
 #: the terms that multiply the specular components by the grazing factor (the others add a component)
 FACTOR_TERMS = ("fresnel", "fresnel-smith")
+#: the terms that change the directions B is evaluated at (the tilted sample frame) and scale every component
+FRAME_TERMS = ("tilt",)
+#: a full turn: the orientation period of B with a term that is fixed in the weave's frame but not symmetric
+FULL_TURN = 360.0
 
 
 def _specular(name: str) -> bool:
@@ -81,6 +94,8 @@ class TermModel(SetsTogetherModel):
         parts = [self._split(self.resolve(p)) for p in params_list]
         wanted = [n for n in self.base.component_names if n in need]
         out = {}
+        if self.term in FRAME_TERMS:
+            return self._tilted_many(wi, wo, parts, wanted, normalised=normalised, warn=warn)
         if wanted:
             out.update(self.base.components_many(wi, wo, [b for b, _ in parts], need=wanted, normalised=normalised,
                                                  warn=warn))
@@ -89,6 +104,21 @@ class TermModel(SetsTogetherModel):
         elif self.term in FACTOR_TERMS and any(_specular(n) for n in out):
             factor = np.stack([grazing_factor(wi, wo, t["fresnel.eta"], t["smith.alpha"]) for _, t in parts])
             out = {n: v * factor if _specular(n) else v for n, v in out.items()}
+        return {name: out[name] for name in self.component_names if name in out}
+
+    def _tilted_many(self, wi, wo, parts, wanted, **kw) -> dict:
+        """B's components in the tilted sample's frame times the irradiance factor (tilt module, eq. 1), one call
+        of B per distinct tilt among the sets (the rows in the given order)."""
+        tilts = [(t["tilt.x"], t["tilt.y"]) for _, t in parts]
+        out: dict = {}
+        for tilt in dict.fromkeys(tilts):
+            rows = [j for j, t in enumerate(tilts) if t == tilt]
+            wi_s, wo_s, factor = to_sample_frame(wi, wo, *tilt)
+            part = self.base.components_many(wi_s, wo_s, [parts[j][0] for j in rows], need=wanted, **kw)
+            for name, value in part.items():
+                if name not in out:
+                    out[name] = np.zeros((len(tilts),) + value.shape[1:], dtype=value.dtype)
+                out[name][rows] = value * factor
         return {name: out[name] for name in self.component_names if name in out}
 
     def _geometry_warnings(self, params: dict) -> list[str]:
@@ -121,7 +151,9 @@ def term_class(kind: str, base_class: type, term: str) -> type:
     params, free, added = TERMS[term]
     meaning = {"sheen": "; sheen: scale of the fibre sheen lobe (Estevez & Kulla 2017)",
                "fresnel": "; specular coefficients at normal incidence (the Fresnel factor is 1 there)",
-               "fresnel-smith": "; specular coefficients at normal incidence (the grazing factor is 1 there)"}[term]
+               "fresnel-smith": "; specular coefficients at normal incidence (the grazing factor is 1 there)",
+               "tilt": "; of the tilted sample, in its own frame (tilt: the sample normal's tilt)"}[term]
+    frame = term in FRAME_TERMS
     return type(f"Term[{kind}]", (TermModel,), {
         "__module__": __name__,
         "__doc__": f"{base_class.kind} with the {term} term ({__name__}).",
@@ -134,6 +166,6 @@ def term_class(kind: str, base_class: type, term: str) -> type:
         "component_names": tuple(base_class.component_names) + added,
         "default_free": tuple(base_class.default_free) + tuple(f for f in free if f not in base_class.default_free),
         "coefficient_meaning": base_class.coefficient_meaning + meaning,
-        "orientation_period": base_class.orientation_period,
-        "quarter_turn_swaps": base_class.quarter_turn_swaps,
+        "orientation_period": FULL_TURN if frame else base_class.orientation_period,
+        "quarter_turn_swaps": False if frame else base_class.quarter_turn_swaps,
     })
