@@ -33,15 +33,22 @@ class PinholeCamera:
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def pixel_samples(self, spp: int, rng: np.random.Generator | None):
-        """Sample positions (H, W, spp) px, py: the pixel centre for spp = 1; stratified jitter (one uniform
-        point in each cell of an n x n grid) when spp = n^2; otherwise uniform points in the pixel (``rng``)."""
+        """Sample positions (H, W, spp) px, py: the pixel centre for spp = 1; otherwise
+        :func:`pixel_jitter` in each pixel (``rng``)."""
         h, w = self.height, self.width
         cols, rows = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
         if spp == 1:
             return (cols + 0.5)[..., None], (rows + 0.5)[..., None]
-        jitter = rng.random((2, h, w, spp))
-        n = int(round(np.sqrt(spp)))
-        if n * n == spp:
-            k = np.arange(spp)
-            jitter = (np.stack([k % n, k // n])[:, None, None, :] + jitter) / n
+        jitter = pixel_jitter((h, w), spp, rng)
         return cols[..., None] + jitter[0], rows[..., None] + jitter[1]
+
+
+def pixel_jitter(shape, spp: int, rng: np.random.Generator) -> np.ndarray:
+    """(2, *shape, spp) positions in the unit pixel [0, 1)^2 (x, y): stratified jitter (one uniform point in
+    each cell of an n x n grid, cell k at column k mod n, row k div n) when spp = n^2, otherwise uniform."""
+    jitter = rng.random((2, *shape, spp))
+    n = int(round(np.sqrt(spp)))
+    if n * n == spp:
+        k = np.arange(spp)
+        jitter = (np.stack([k % n, k // n]).reshape(2, *(1,) * len(shape), spp) + jitter) / n
+    return jitter

@@ -44,21 +44,31 @@ class Hits:
         return np.stack([np.einsum("ij,ij->i", w, self.weft), np.einsum("ij,ij->i", w, self.warp),
                          np.einsum("ij,ij->i", w, self.normal)], axis=1)
 
-    def footprint(self, origin, d_x: np.ndarray, d_y: np.ndarray, tile_mm) -> np.ndarray:
-        """Pixel footprint (M,) in weave tiles from the differential ray directions d_x, d_y (M, 3) (one pixel
-        step in x and y from the same origin), intersected with each hit's tangent plane."""
+    def differentials(self, origin, d_x: np.ndarray, d_y: np.ndarray, tile_mm) -> np.ndarray:
+        """(2, M, 2): the (du, dv) steps (tiles) of the differential rays d_x, d_y (M, 3) (one pixel step in x
+        and in y from the same origin) intersected with each hit's tangent plane; inf where a differential ray
+        is parallel to the plane or meets it behind the origin."""
         origin = np.asarray(origin, dtype=np.float64)
-        extent = []
+        steps = []
         for d in (d_x, d_y):
             along = np.einsum("ij,ij->i", d, self.normal)
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = np.einsum("ij,ij->i", self.position - origin, self.normal) / along
             step = origin + t[:, None] * d - self.position
-            du = np.einsum("ij,ij->i", step, self.weft) / tile_mm[0]
-            dv = np.einsum("ij,ij->i", step, self.warp) / tile_mm[1]
-            length = np.hypot(du, dv)
-            extent.append(np.where((np.abs(along) > 1e-12) & (t > 0.0) & np.isfinite(length), length, np.inf))
-        return np.maximum(extent[0], extent[1])
+            duv = np.column_stack([np.einsum("ij,ij->i", step, self.weft) / tile_mm[0],
+                                   np.einsum("ij,ij->i", step, self.warp) / tile_mm[1]])
+            ok = (np.abs(along) > 1e-12) & (t > 0.0) & np.isfinite(duv).all(axis=1)
+            steps.append(np.where(ok[:, None], duv, np.inf))
+        return np.stack(steps)
+
+    def footprint(self, origin, d_x: np.ndarray, d_y: np.ndarray, tile_mm) -> np.ndarray:
+        """Pixel footprint (M,) in weave tiles: :func:`footprint_of` the :meth:`differentials`."""
+        return footprint_of(self.differentials(origin, d_x, d_y, tile_mm))
+
+
+def footprint_of(steps: np.ndarray) -> np.ndarray:
+    """The pixel footprint (tiles) of its (du, dv) steps (2, ..., 2): the longer of the two."""
+    return np.hypot(steps[..., 0], steps[..., 1]).max(axis=0)
 
 
 class Surface(ABC):

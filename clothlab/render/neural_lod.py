@@ -45,10 +45,13 @@ def _choice(path: str, mtime: int) -> dict | None:
     return read_sidecar(Path(path)).get("estimator_choice")
 
 
-def pixel_values(fabric, network, choice: dict, centre, size, wi, wo, counter) -> np.ndarray:
+def pixel_values(fabric, network, choice: dict, centre, size, wi, wo, counter, steps=None) -> np.ndarray:
     """f_r (P, C) of P pixels (centre (P, 2), footprint side ``size`` (P,) tiles, directions (P, 3)), each
     from its bin's estimator of ``choice``; ``network`` is the weave's kind-neural model; the evaluations are
-    counted under ``texture``, ``neural`` and ``reflectance``."""
+    counted under ``texture``, ``neural`` and ``reflectance``.  ``steps`` (P, 2, 2): each pixel's (du, dv)
+    tile steps of one pixel in x and in y (:func:`clothlab.render.shade.pixel_boxes`): its ``mc`` points are
+    then spread over the pixel's own footprint (:func:`footprint_average`), elsewhere (steps None or not
+    finite) over the square box of side ``size`` that the network and the crossovers assume."""
     from clothlab.surrogate.estimator_choice import estimator_at
     from clothlab.surrogate.labels import TextureMonteCarloLabels
 
@@ -56,15 +59,21 @@ def pixel_values(fabric, network, choice: dict, centre, size, wi, wo, counter) -
     kinds = np.array([b["estimator"] for b in choice["bins"]])[index]
     out = np.zeros((len(size), len(fabric.channels)))
     names = fabric.texture.component_names
+    known = np.zeros(len(size), dtype=bool) if steps is None else np.isfinite(steps).all(axis=(1, 2))
     for kind, k in sorted({(str(e), int(n)) for e, n in zip(kinds, samples, strict=True)}):
         sel = np.flatnonzero((kinds == kind) & (samples == k))
         # a footprint beyond the data's range (grazing differentials: up to inf) is answered at its largest
         c, s, a, b = centre[sel], np.clip(size[sel], MIN_SIZE, MAX_SIZE), wi[sel], wo[sel]
         if kind == "mc":
-            mc = TextureMonteCarloLabels(fabric.texture, fabric.params, samples=k, seed=MC_SEED + k,
-                                         noise=fabric.spec.noise)
-            values = counter.run("texture", k * sel.size, mc, a, b, c, s)
-            comps = {n: values[:, i] for i, n in enumerate(names)}
+            comps, own = {}, known[sel]
+            if own.any():
+                comps = counter.run("texture", k * own.sum(), footprint_average, fabric, c[own], steps[sel][own],
+                                    a[own], b[own], k)
+            if not own.all():
+                box = TextureMonteCarloLabels(fabric.texture, fabric.params, samples=k, seed=MC_SEED + k,
+                                              noise=fabric.spec.noise)
+                values = counter.run("texture", k * (~own).sum(), box, a[~own], b[~own], c[~own], s[~own])
+                comps = {n: _merge(own, comps.get(n), values[:, i]) for i, n in enumerate(names)}
         elif kind == "surrogate":
             comps = counter.run(network.kind, sel.size, network.query, c, s, a, b, fabric.params)
         else:
@@ -72,3 +81,29 @@ def pixel_values(fabric, network, choice: dict, centre, size, wi, wo, counter) -
                                 need=fabric.need, warn=False)
         out[sel] = combine({n: comps[n] for n in fabric.need}, fabric.coefficients)
     return out
+
+
+def _merge(own, first, second) -> np.ndarray:
+    """Values of the rows where ``own`` (from ``first``) and of the others (from ``second``) in row order."""
+    out = np.zeros(own.size)
+    if first is not None:
+        out[own] = first
+    out[~own] = second
+    return out
+
+
+def footprint_average(fabric, centre, steps, wi, wo, k: int) -> dict:
+    """The texture components averaged over each pixel's own footprint: k stratified points of the unit
+    pixel (:func:`clothlab.render.camera.pixel_jitter`, seeded by k) mapped to centre + (x - 1/2) step_x +
+    (y - 1/2) step_y (the first-order image of the pixel on the surface, eq. 3's footprint integral over the
+    pixel rather than over a square box), at the pixel centre's directions.  Returns {component: (P,)}."""
+    from clothlab.render.camera import pixel_jitter
+
+    n = len(centre)
+    jitter = pixel_jitter((n,), k, np.random.default_rng(MC_SEED + k)) - 0.5  # (2, n, k)
+    points = (centre[:, None, :] + jitter[0][..., None] * steps[:, None, 0, :]
+              + jitter[1][..., None] * steps[:, None, 1, :])
+    rows = np.repeat(np.arange(n), k)
+    comps = fabric.texture.components(points[..., 0].reshape(-1), points[..., 1].reshape(-1), wi[rows], wo[rows],
+                                      fabric.params, need=fabric.need, noise=fabric.spec.noise, warn=False)
+    return {name: value.reshape(n, k).mean(axis=1) for name, value in comps.items()}

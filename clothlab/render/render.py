@@ -21,7 +21,7 @@ import numpy as np
 
 from clothlab.errors import ConfigError, ResultExistsError
 from clothlab.render.camera import PinholeCamera
-from clothlab.render.geometry import make_surface
+from clothlab.render.geometry import footprint_of, make_surface
 from clothlab.render.scene import Scene, check_render_memory
 from clothlab.render.shade import (
     CENTRE_POLICIES,
@@ -86,11 +86,12 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
     px, py = camera.pixel_samples(spp, rng)
     h, w = camera.height, camera.width
     pixel = np.broadcast_to(np.arange(h * w).reshape(h, w, 1), px.shape).reshape(-1)
-    idx, front, hits, footprint, wi, wo, irradiance = _trace(camera, surface, scene.light, px.reshape(-1),
-                                                             py.reshape(-1))
+    idx, front, hits, steps, wi, wo, irradiance = _trace(camera, surface, scene.light, px.reshape(-1),
+                                                         py.reshape(-1))
+    footprint = footprint_of(steps)
     centre = None
-    if spp > 1 and shader_kind(shader)[1] in CENTRE_POLICIES:  # at 1 spp the samples are the centres
-        centre = _pixel_centres(camera, surface, scene.light)
+    if shader_kind(shader)[1] in CENTRE_POLICIES:  # at 1 spp the samples are the centres
+        centre = _pixel_centres(camera, surface, scene.light, (idx, front, hits, steps, wi, wo) if spp == 1 else None)
     samples = Samples(hits.u[front], hits.v[front], wi[front], wo[front], footprint[front], pixel[idx][front],
                       hits.distance[front], centre)
     t_geometry, cpu_geometry = time.perf_counter(), time.process_time()
@@ -121,30 +122,34 @@ def render(scene: Scene, *, shader: str = "im-lod", spp: int | None = None, seed
 
 def _trace(camera, surface, light, px, py):
     """Rays through pixel positions px, py (M,): (idx: the rays that hit the patch; front: those of the hits
-    lit and seen from the front; per hit: the hits, pixel footprint (tiles), fabric-frame wi, wo, irradiance)."""
+    lit and seen from the front; per hit: the hits, the (du, dv) tile steps of a one-pixel step in x and in y
+    (2, hits, 2; :meth:`~clothlab.render.geometry.Hits.differentials`), fabric-frame wi, wo, irradiance)."""
     directions = camera.directions(px, py)
     hits = surface.intersect(camera.eye, directions)
     idx = np.flatnonzero(hits.hit)
     hits = type(hits)(**{k: getattr(hits, k)[idx] for k in hits.__dataclass_fields__})
-    footprint = hits.footprint(camera.eye, camera.directions(px[idx] + 1.0, py[idx]),
+    steps = hits.differentials(camera.eye, camera.directions(px[idx] + 1.0, py[idx]),
                                camera.directions(px[idx], py[idx] + 1.0), surface.tile_mm)
     to_light, irradiance = _light(light, hits.position)
     wi, wo = hits.to_fabric(to_light), hits.to_fabric(-directions[idx])
     front = np.flatnonzero((wi[:, 2] > 0.0) & (wo[:, 2] > 0.0))
-    return idx, front, hits, footprint, wi, wo, irradiance
+    return idx, front, hits, steps, wi, wo, irradiance
 
 
-def _pixel_centres(camera, surface, light) -> PixelCentres:
+def _pixel_centres(camera, surface, light, traced=None) -> PixelCentres:
     """The surface point through each pixel's centre (the 1-spp sample of :meth:`PinholeCamera.pixel_samples`),
-    by pixel index."""
-    cx, cy = camera.pixel_samples(1, None)
-    idx, front, hits, footprint, wi, wo, _ = _trace(camera, surface, light, cx.reshape(-1), cy.reshape(-1))
+    by pixel index; ``traced``: the :func:`_trace` of the centres (at 1 spp the samples), else traced here."""
+    if traced is None:
+        cx, cy = camera.pixel_samples(1, None)
+        traced = _trace(camera, surface, light, cx.reshape(-1), cy.reshape(-1))[:6]
+    idx, front, hits, steps, wi, wo = traced
     n = camera.height * camera.width
     out = PixelCentres(np.zeros(n), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n),
-                       np.zeros(n, dtype=bool))
+                       np.full((n, 2, 2), np.inf), np.zeros(n, dtype=bool))
     at = idx[front]
     out.u[at], out.v[at], out.wi[at], out.wo[at] = hits.u[front], hits.v[front], wi[front], wo[front]
-    out.footprint[at], out.valid[at] = footprint[front], True
+    out.steps[at] = steps[:, front].transpose(1, 0, 2)
+    out.footprint[at], out.valid[at] = footprint_of(steps[:, front]), True
     return out
 
 
@@ -256,6 +261,34 @@ def relative_error(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | 
     return float(np.abs(image - reference).sum() / denominator) if denominator > 0 else float("nan")
 
 
+def timed_render(scene: Scene, shader: str, spp: int, fabric: FabricModels, repeats: int = 1,
+                 budget_s: float = float("inf"), seed: int | None = None) -> tuple[RenderResult, int]:
+    """(the render with the least shading CPU time of up to ``repeats``, the number run): each render cold
+    (the models' direction memos dropped first: a repeat must not reuse its predecessor's reflectance work
+    at the same directions); no further repeat once ``budget_s`` wall seconds are spent."""
+    best, spent, runs = None, 0.0, 0
+    while runs < max(1, repeats) and (runs == 0 or spent < budget_s):
+        fabric.forget_directions()
+        result = render(scene, shader=shader, spp=spp, fabric=fabric, seed=seed)
+        spent, runs = spent + result.timings["total"], runs + 1
+        if best is None or result.timings["shading_cpu"] < best.timings["shading_cpu"]:
+            best = result
+    return best, runs
+
+
+def render_figures(result: RenderResult, reference: np.ndarray, mask: np.ndarray, runs: int = 1) -> dict:
+    """A render's figures against ``reference`` (an image) over ``mask``: total and shading seconds (wall),
+    shading CPU seconds, runs, relative L1 error, texture / blend pixel fractions, model evaluations per
+    model and in all, seconds per sample-evaluated model."""
+    st, t = result.stats, result.timings
+    return {"seconds": t["total"], "shading_seconds": t["shading"], "shading_cpu_seconds": t["shading_cpu"],
+            "runs": runs, "relative_error": relative_error(result.image, reference, mask),
+            "texture_pixel_fraction": st["texture_pixel_fraction"], "blend_pixel_fraction": st["blend_pixel_fraction"],
+            **{f"{m}_evaluations": st[f"{m}_evaluations"] for m in COUNTERS},
+            "model_evaluations": sum(st[f"{m}_evaluations"] for m in COUNTERS),
+            **{f"{m}_{k}": t.get(f"{m}_{k}", 0.0) for m in SAMPLE_COUNTERS for k in ("seconds", "cpu_seconds")}}
+
+
 def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), spp: int = 4,
                 reference_spp: int = 64, repeats: int = 1, repeat_budget_s: float = float("inf"),
                 warmup: bool = True, fabric: FabricModels | None = None, reference_check: bool = False) -> list[dict]:
@@ -296,23 +329,9 @@ def compare_lod(scene: Scene, distances, *, shaders=("im-lod", "im-texture"), sp
             if reference_check and f"{family}_reference_error" not in row:
                 second = render(s, shader=name, spp=reference_spp, fabric=fabric, seed=s.seed + 1)
                 row[f"{family}_reference_error"] = relative_error(second.image, reference.image, mask)
-            best, spent, runs = None, 0.0, 0
-            while runs < max(1, repeats) and (runs == 0 or spent < repeat_budget_s):
-                fabric.forget_directions()  # each render cold: repeats must not reuse the last one's memo
-                result = render(s, shader=shader, spp=spp, fabric=fabric)
-                spent, runs = spent + result.timings["total"], runs + 1
-                if best is None or result.timings["shading_cpu"] < best.timings["shading_cpu"]:
-                    best = result
+            best, runs = timed_render(s, shader, spp, fabric, repeats, repeat_budget_s)
             st = best.stats
-            row[shader] = {"seconds": best.timings["total"], "shading_seconds": best.timings["shading"],
-                           "shading_cpu_seconds": best.timings["shading_cpu"],
-                           "runs": runs, "relative_error": relative_error(best.image, reference.image, mask),
-                           "texture_pixel_fraction": st["texture_pixel_fraction"],
-                           "blend_pixel_fraction": st["blend_pixel_fraction"],
-                           **{f"{m}_evaluations": st[f"{m}_evaluations"] for m in COUNTERS},
-                           "model_evaluations": sum(st[f"{m}_evaluations"] for m in COUNTERS),
-                           **{f"{m}_{k}": best.timings.get(f"{m}_{k}", 0.0)
-                              for m in SAMPLE_COUNTERS for k in ("seconds", "cpu_seconds")}}
+            row[shader] = render_figures(best, reference.image, mask, runs)
             row.setdefault("pixels", int(mask.sum()))
             row.setdefault("footprint_min_tiles", st["footprint_min_tiles"])
             row.setdefault("footprint_median_tiles", st["footprint_median_tiles"])

@@ -103,14 +103,17 @@ def lod_weight(footprint, f0: float, f1: float) -> np.ndarray:
 @dataclass
 class PixelCentres:
     """The surface point seen through each pixel's centre, indexed by pixel (H W,): texture coordinates
-    (tiles), fabric-frame directions (H W, 3), footprint (tiles); ``valid``: the centre's ray hits the front
-    of the patch (elsewhere the other arrays are undefined)."""
+    (tiles), fabric-frame directions (H W, 3), footprint (tiles), the (du, dv) tile steps of a one-pixel step
+    in x and in y (H W, 2, 2: the pixel's footprint is, to first order, the parallelogram they span about the
+    centre; inf where unknown); ``valid``: the centre's ray hits the front of the patch (elsewhere the other
+    arrays are undefined)."""
 
     u: np.ndarray
     v: np.ndarray
     wi: np.ndarray
     wo: np.ndarray
     footprint: np.ndarray
+    steps: np.ndarray
     valid: np.ndarray
 
 
@@ -118,8 +121,7 @@ class PixelCentres:
 class Samples:
     """Surface samples to shade: texture coordinates (tiles), fabric-frame directions (M, 3), pixel footprint
     (tiles), pixel index, distance from the camera (mm); ``centre``: the pixels' centres, for the shaders that
-    shade a pixel's footprint as one box (:func:`pixel_boxes`; None when every sample is its pixel's centre,
-    as at 1 spp, or no shader needs it)."""
+    shade a pixel's footprint as one box (:func:`pixel_boxes`; None when the shader does not need them)."""
 
     u: np.ndarray
     v: np.ndarray
@@ -323,24 +325,26 @@ def pixel_runs(pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def pixel_boxes(s: Samples):
-    """Each pixel's box footprint (Chen, Wang & Wang 2024, eq. 3) for the shaders that shade it as one query:
-    (first, back, centre (P, 2) tiles, side (P,) tiles, wi (P, 3), wo (P, 3)) with ``first``, ``back`` of
-    :func:`pixel_runs`.  The box is the pixel's centre - its surface point (u, v), footprint and directions
-    (``s.centre``; at 1 spp the sample is the centre) - so that it does not move with the jitter of the
-    pixel's samples.  A pixel whose centre misses the front of the patch (a partly covered pixel), or samples
-    without ``centre``, take the mean (u, v) of the pixel's samples and its first sample's footprint and
-    directions."""
+    """Each pixel's footprint (Chen, Wang & Wang 2024, eq. 3) for the shaders that shade it as one query:
+    (first, back, centre (P, 2) tiles, side (P,) tiles, wi (P, 3), wo (P, 3), steps (P, 2, 2)) with
+    ``first``, ``back`` of :func:`pixel_runs`.  The footprint is the pixel's centre - its surface point
+    (u, v), footprint and directions (``s.centre``) - so that it does not move with the jitter of the pixel's
+    samples; ``steps``: the (du, dv) of a one-pixel step in x and in y there (:class:`PixelCentres`).  A
+    pixel whose centre misses the front of the patch (a partly covered pixel), or samples without
+    ``centre``, take the mean (u, v) of the pixel's samples, its first sample's footprint and directions,
+    and steps inf (unknown)."""
     first, back = pixel_runs(s.pixel)
     count = np.bincount(back)
     centre = np.column_stack([np.bincount(back, s.u) / count, np.bincount(back, s.v) / count])
     size, wi, wo = s.footprint[first], s.wi[first], s.wo[first]
+    steps = np.full((first.size, 2, 2), np.inf)
     if s.centre is not None:
         c, p = s.centre, s.pixel[first]
         ok = c.valid[p]
         q = p[ok]
         centre[ok] = np.column_stack([c.u[q], c.v[q]])
-        size[ok], wi[ok], wo[ok] = c.footprint[q], c.wi[q], c.wo[q]
-    return first, back, centre, size, wi, wo
+        size[ok], wi[ok], wo[ok], steps[ok] = c.footprint[q], c.wi[q], c.wo[q], c.steps[q]
+    return first, back, centre, size, wi, wo, steps
 
 
 def reflectance_values(fabric: FabricModels, s: Samples, counter: Counter, *, per_pixel: bool = True) -> np.ndarray:
@@ -427,7 +431,7 @@ def dither(pixel: np.ndarray) -> np.ndarray:
 def network_samples(s: Samples) -> np.ndarray:
     """Which samples neural-lod shades with the network (bool, M): all samples of the pixels whose dither
     threshold lies below the network weight of the pixel's footprint (its box's, :func:`pixel_boxes`)."""
-    first, back, _, size, _, _ = pixel_boxes(s)
+    first, back, _, size, _, _, _ = pixel_boxes(s)
     return (dither(s.pixel[first]) < network_weight(size))[back]
 
 
@@ -454,7 +458,7 @@ def network_pixel_values(fabric: FabricModels, s: Samples, counter: Counter) -> 
     if not fabric.need or len(s.u) == 0:
         return _zeros(fabric, len(s.u))
     model = neural_model(fabric)
-    first, back, centre, size, wi, wo = pixel_boxes(s)
+    first, back, centre, size, wi, wo, _ = pixel_boxes(s)
     comps = counter.run("reflectance", first.size, fabric.reflectance.components, wi, wo, fabric.params,
                         need=fabric.need, warn=False)
     reference = np.column_stack([comps[k] if k in comps else np.zeros(first.size)
@@ -475,8 +479,8 @@ def neural_lod_values(fabric: FabricModels, s: Samples, counter: Counter, lod: L
     if choice is not None:
         if not fabric.need or len(s.u) == 0:
             return _zeros(fabric, len(s.u))
-        _, back, centre, size, wi, wo = pixel_boxes(s)
-        return pixel_values(fabric, neural_model(fabric), choice, centre, size, wi, wo, counter)[back]
+        _, back, centre, size, wi, wo, steps = pixel_boxes(s)
+        return pixel_values(fabric, neural_model(fabric), choice, centre, size, wi, wo, counter, steps)[back]
     chosen = network_samples(s) if np.any(network_weight(s.footprint) > 0.0) else None  # per pixel only if needed
     if chosen is None or not chosen.any():
         return im_lod_values(fabric, s, counter, lod)

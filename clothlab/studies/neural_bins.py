@@ -408,23 +408,24 @@ def choice_lines(name: str, choice: dict) -> list[str]:
 #: the close-up render of :func:`closeup_comparison`: receding-plane views whose pixel footprints span
 #: 0.03-1 tile together (each view about a factor 1.8 of footprints)
 CLOSEUP_DISTANCES = (3.0, 5.0, 8.0, 12.0, 20.0, 30.0, 45.0, 70.0)
-CLOSEUP_IM_LOD_SPP = (1, 2, 4, 8, 16, 32)
 
 
 def closeup_comparison(weave: str = "cotton-denim", *, distances=CLOSEUP_DISTANCES, resolution=(64, 48),
-                       reference_spp: int = 256, neural_spp=(1, 4), im_lod_spp=CLOSEUP_IM_LOD_SPP,
-                       repeats: int = 3) -> dict:
+                       reference_spp: int = 256, neural_spp=(1, 4), im_lod_spp=None, repeats: int = 3) -> dict:
     """neural-lod against im-lod at equal shading CPU time on a close-up render (issue 23 item 4): the
     receding plane (:func:`clothlab.studies.render_lod.receding_plane_scene`, noise off: the networks learn
     the noise-free texture) of ``weave`` at ``distances``, against im-texture at ``reference_spp`` stratified
-    samples.  Per shader and spp: relative L1 error over the fully covered pixels of all views together,
-    and the least shading CPU seconds (``process_time``, in-process, each render cold) of ``repeats``, summed
-    over the views; im-lod's error at neural-lod's CPU is interpolated log-log between its spp rows."""
+    samples.  Per shader and spp: relative L1 error over the fully covered pixels of all views together (and
+    per view), and the least shading CPU seconds (``process_time``, in-process, each render cold) of
+    ``repeats``, summed over the views.  im-lod runs at the square spp counts of ``im_lod_spp`` (default
+    :data:`clothlab.studies.render_lod.EQUAL_CPU_SPP`) until it costs more than neural-lod's dearest row;
+    its error at neural-lod's CPU is interpolated log-log over its rows
+    (:func:`clothlab.studies.render_lod.error_at_cpu`), for all views and per view."""
     from dataclasses import replace
 
-    from clothlab.render.render import render
+    from clothlab.render.render import render, timed_render
     from clothlab.render.shade import FabricModels
-    from clothlab.studies.render_lod import receding_plane_scene
+    from clothlab.studies.render_lod import EQUAL_CPU_SPP, equal_cpu_sweep, error_at_cpu, receding_plane_scene
 
     scene = receding_plane_scene(tuple(resolution))
     scene = replace(scene, fabric=replace(scene.fabric, noise=False, weave=f"preset:{weave}"))
@@ -441,12 +442,7 @@ def closeup_comparison(weave: str = "cotton-denim", *, distances=CLOSEUP_DISTANC
     def run(shader, spp):
         err, den, cpu, per_view = 0.0, 0.0, 0.0, []
         for v, ref, mask in zip(views, refs, masks, strict=True):
-            best = None
-            for _ in range(max(1, repeats)):
-                fabric.forget_directions()
-                res = render(v, shader=shader, spp=spp, fabric=fabric)
-                if best is None or res.timings["shading_cpu"] < best.timings["shading_cpu"]:
-                    best = res
+            best, _ = timed_render(v, shader, spp, fabric, repeats)
             e = float(np.abs(best.image[mask] - ref.image[mask]).sum())
             d = float(np.abs(ref.image[mask]).sum())
             err, den, cpu = err + e, den + d, cpu + best.timings["shading_cpu"]
@@ -455,19 +451,16 @@ def closeup_comparison(weave: str = "cotton-denim", *, distances=CLOSEUP_DISTANC
                              "texture_evaluations": best.stats.get("texture_evaluations", 0)})
         return {"shader": shader, "spp": spp, "relative_l1": err / den, "shading_cpu_s": cpu, "views": per_view}
 
-    im_lod = [run("im-lod", k) for k in im_lod_spp]
     neural = [run("neural-lod", k) for k in neural_spp]
-    times = np.array([r["shading_cpu_s"] for r in im_lod])
-    order = np.argsort(times)
+    im_lod = equal_cpu_sweep(lambda k: run("im-lod", k), max(r["shading_cpu_s"] for r in neural),
+                             EQUAL_CPU_SPP if im_lod_spp is None else im_lod_spp)
     for r in neural:
-        t = r["shading_cpu_s"]
-        lt, le = np.log(times[order]), np.log([im_lod[i]["relative_l1"] for i in order])
-        if t <= times[order[0]]:
-            r["im_lod_equal_time"], r["im_lod_equal_time_note"] = float(np.exp(le[0])), "im-lod's cheapest (costs more)"
-        elif t >= times[order[-1]]:
-            r["im_lod_equal_time"], r["im_lod_equal_time_note"] = float(np.exp(le[-1])), "im-lod's dearest (costs less)"
-        else:
-            r["im_lod_equal_time"], r["im_lod_equal_time_note"] = float(np.exp(np.interp(np.log(t), lt, le))), ""
+        r["im_lod_equal_time"], r["im_lod_equal_time_note"] = error_at_cpu(
+            [i["shading_cpu_s"] for i in im_lod], [i["relative_l1"] for i in im_lod], r["shading_cpu_s"])
+        for j, view in enumerate(r["views"]):
+            view["im_lod_equal_time"], view["im_lod_equal_time_note"] = error_at_cpu(
+                [i["views"][j]["shading_cpu_s"] for i in im_lod], [i["views"][j]["error"] for i in im_lod],
+                view["shading_cpu_s"])
     return {"weave": weave, "distances": list(distances), "footprints": footprints, "resolution": list(resolution),
             "reference_spp": reference_spp, "im_lod": im_lod, "neural_lod": neural,
             "cpu_s": time.process_time() - start}
@@ -488,4 +481,13 @@ def closeup_lines(result: dict) -> list[str]:
         note = f" ({r['im_lod_equal_time_note']})" if r["im_lod_equal_time_note"] else ""
         out.append(f"| neural-lod | {r['spp']} | {r['shading_cpu_s']:.3f} | {r['relative_l1']:.4f} | "
                    f"{r['im_lod_equal_time']:.4f}{note} |")
+    spps = [r["spp"] for r in result["neural_lod"]]
+    out += ["", "per view: neural-lod rel. L1 / im-lod's at equal shading CPU (that view's)", "",
+            "| mm | footprint (tiles) | " + " | ".join(f"{k} spp" for k in spps) + " |",
+            "|---|---|" + "---|" * len(spps)]
+    for j, (d, (lo, hi)) in enumerate(zip(result["distances"], result["footprints"], strict=True)):
+        cells = [f"{r['views'][j]['error']:.4f} / {r['views'][j]['im_lod_equal_time']:.4f}"
+                 + ("*" if r["views"][j]["im_lod_equal_time_note"] else "") for r in result["neural_lod"]]
+        out.append(f"| {d:g} | {lo:.3f}-{hi:.3f} | " + " | ".join(cells) + " |")
+    out.append("(* im-lod's tried spp do not bracket neural-lod's CPU in that view: its nearest row)")
     return out

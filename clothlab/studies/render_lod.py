@@ -37,6 +37,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from clothlab.render.render import compare_lod
 from clothlab.render.scene import scene_from_dict
 from clothlab.render.shade import SAMPLE_COUNTERS, FabricModels
@@ -240,19 +242,53 @@ def plot_render_benchmark(result: dict, path) -> Path:
 
 
 NEURAL_SHADERS = ("im-lod", "neural-lod")
-#: distances of the neural-lod comparison: denser where the network's footprint range (0.1-0.5 tile) lies
+#: distances of the neural-lod comparison: 0.05-0.09 tile (5 mm) to 6-12 tiles (640 mm), denser over
+#: 0.1-1 tile, where the estimators differ
 NEURAL_DISTANCES = (5.0, 10.0, 14.0, 20.0, 28.0, 40.0, 56.0, 80.0, 160.0, 640.0)
 QUICK_NEURAL_DISTANCES = (5.0, 20.0, 40.0, 160.0)
+#: im-lod's samples per pixel in the equal-CPU comparisons with neural-lod: square counts only (stratified
+#: jitter; other counts are uniform random points in the pixel, a worse estimator that would flatter
+#: neural-lod), tried in order until im-lod's shading CPU reaches neural-lod's
+EQUAL_CPU_SPP = (1, 4, 9, 16, 25, 36, 64, 100, 144)
+
+
+def equal_cpu_sweep(run, seconds: float, spps=EQUAL_CPU_SPP, include=()) -> list[dict]:
+    """Rows ``run(spp)`` (dicts with ``shading_cpu_s``) over ``spps`` in order until one costs at least
+    ``seconds`` (all of them if none does); the spp counts of ``include`` are run whatever their cost."""
+    rows = []
+    for k in sorted({*spps, *include}):
+        if rows and rows[-1]["shading_cpu_s"] >= seconds and all(k > i for i in include):
+            break
+        rows.append(run(k))
+    return rows
+
+
+def error_at_cpu(times, errors, seconds: float) -> tuple[float, str]:
+    """im-lod's error at shading CPU ``seconds`` from its rows (CPU s, error): the lower envelope in CPU (a
+    larger budget can always buy a cheaper spp: the running minimum of the error in CPU order), interpolated
+    log-log between the rows; outside their range the cheapest row's (it costs more: note
+    ``"im-lod's cheapest costs more"``) or the dearest's (``"im-lod's dearest costs less"``); note "" inside."""
+    order = np.argsort(times)
+    t = np.log(np.maximum(np.asarray(times, dtype=np.float64)[order], 1e-12))  # a tiny render may time as 0
+    e = np.log(np.maximum(np.minimum.accumulate(np.asarray(errors, dtype=np.float64)[order]), 1e-300))
+    if seconds <= np.exp(t[0]):
+        return float(np.exp(e[0])), "im-lod's cheapest costs more"
+    if seconds > np.exp(t[-1]):
+        return float(np.exp(e[-1])), "im-lod's dearest costs less"
+    return float(np.exp(np.interp(np.log(seconds), t, e))), ""
 
 
 def neural_lod_benchmark(quick: bool = False, *, figures_dir=None, resolution=None, distances=None, spp: int = 4,
-                         reference_spp: int | None = None, repeats: int | None = None, noise: bool = False) -> dict:
-    """The receding plane with im-lod and neural-lod (:mod:`clothlab.render.shade`) side by side: per distance
-    the relative L1 error of each against the same im-texture reference (``reference_spp`` stratified samples;
-    the reference's own error from a second seed beside it) and its least shading CPU time of up to
-    ``repeats`` renders.  ``verdict`` per distance: ``better`` (lower error at equal or lower shading time,
-    within ``TIME_SLACK``), ``same`` (no pixel used the network: both shaders are the same model there, the
-    texture model near or the reflectance model far, and their errors agree) or ``worse``.
+                         reference_spp: int = 256, repeats: int | None = None, noise: bool = False) -> dict:
+    """neural-lod against im-lod at equal shading CPU (issue 23 item 4) on the receding plane (cotton denim),
+    per view: the relative L1 error of each against im-texture at ``reference_spp`` stratified samples (the
+    reference's own error from a second seed beside it), neural-lod at ``spp`` and im-lod at the square spp
+    counts of :data:`EQUAL_CPU_SPP` up to neural-lod's shading CPU (``process_time`` of this process, the
+    least of ``repeats`` cold renders each), and im-lod's error at neural-lod's CPU interpolated over those
+    rows (:func:`error_at_cpu`).  ``verdict`` per view: ``same`` (the two images agree: both shaders are
+    the same model there, e.g. the reflectance model far away), else ``better`` or ``worse`` (neural-lod's
+    error below / not below im-lod's at equal CPU).  neural-lod runs the weave's shipped network with the
+    crossovers of its sidecar when it has them, else its documented default (:mod:`clothlab.render.shade`).
 
     ``noise`` (default off): the scene's texture noise (sec. 7.2.1).  The networks learn the noise-free
     texture (their labels have noise off), so with noise the reference has per-segment intensity variation
@@ -262,73 +298,73 @@ def neural_lod_benchmark(quick: bool = False, *, figures_dir=None, resolution=No
     from dataclasses import replace
 
     from clothlab.models.neural.model import SHIPPED
+    from clothlab.render.render import relative_error, render, render_figures, timed_render
 
     scene = receding_plane_scene(tuple(resolution or ((32, 24) if quick else (64, 48))))
     scene = replace(scene, fabric=replace(scene.fabric, noise=noise))
     weave = RECEDING_PLANE["fabric"]["weave"].removeprefix("preset:")
     if not (SHIPPED / f"{weave}.npz").exists():
         return {"skipped": f"no shipped network for {weave}"}
-    reference_spp = reference_spp or (64 if quick else 256)
     repeats = repeats or (3 if quick else 5)
     distances = tuple(distances or (QUICK_NEURAL_DISTANCES if quick else NEURAL_DISTANCES))
     fabric = FabricModels.build(scene.fabric)  # one set of models (and one network load) for every render
-    nested = compare_lod(scene, distances, shaders=NEURAL_SHADERS, spp=spp, reference_spp=reference_spp,
-                         repeats=repeats, repeat_budget_s=1.5, reference_check=True, fabric=fabric)
-    rows = flat_rows(nested, NEURAL_SHADERS)
-    for r in rows:
-        err_n, err_i = r["neural_lod_relative_error"], r["im_lod_relative_error"]
-        t_n, t_i = r["neural_lod_shading_cpu_seconds"], r["im_lod_shading_cpu_seconds"]
-        r["neural_time_ratio"] = t_n / t_i if t_i > 0 else float("nan")
-        r.update(equal_time_im_lod(scene, r["distance_mm"], t_n, spp, reference_spp, repeats, fabric)
-                 if r["neural_lod_neural_evaluations"] and t_n > (1.0 + TIME_SLACK) * t_i else
-                 {"equal_time_spp": spp, "equal_time_relative_error": err_i, "equal_time_shading_cpu_seconds": t_i})
-        if r["neural_lod_neural_evaluations"] == 0 and abs(err_n - err_i) <= 1e-9 * max(err_i, 1e-300):
-            r["verdict"] = "same"
-        else:
-            r["verdict"] = ("better" if err_n < r["equal_time_relative_error"]
-                            and t_n <= (1.0 + TIME_SLACK) * r["equal_time_shading_cpu_seconds"] else "worse")
-    used = [r for r in rows if r["neural_lod_neural_evaluations"] > 0]
+    small = replace(scene, camera=replace(scene.camera, resolution=(4, 3)))
+    for shader in (*NEURAL_SHADERS, "im-texture"):  # compilation out of the timings
+        render(small, shader=shader, spp=1, fabric=fabric)
+    rows = []
+    for distance in distances:
+        view = replace(scene, camera=scene.camera.at_distance(distance))
+        reference = render(view, shader="im-texture", spp=reference_spp, fabric=fabric)
+        mask = reference.coverage >= 1.0
+        second = render(view, shader="im-texture", spp=reference_spp, fabric=fabric, seed=view.seed + 1)
+        neural, runs = timed_render(view, "neural-lod", spp, fabric, repeats)
+        t_n = neural.timings["shading_cpu"]
+        images = {}
+
+        def im_lod(k, view=view, reference=reference, mask=mask, images=images):
+            result, n = timed_render(view, "im-lod", k, fabric, repeats)
+            images[k] = result
+            return {"spp": k, "shading_cpu_s": result.timings["shading_cpu"],
+                    "relative_error": relative_error(result.image, reference.image, mask), "runs": n}
+
+        sweep = equal_cpu_sweep(im_lod, t_n, include=(spp,))
+        st = neural.stats
+        row = {"distance_mm": float(distance), "pixels": int(mask.sum()),
+               "footprint_min_tiles": st["footprint_min_tiles"], "footprint_median_tiles": st["footprint_median_tiles"],
+               "footprint_max_tiles": st["footprint_max_tiles"],
+               "im_reference_error": relative_error(second.image, reference.image, mask)}
+        for shader, result, n in (("im-lod", images[spp], next(r["runs"] for r in sweep if r["spp"] == spp)),
+                                  ("neural-lod", neural, runs)):
+            figures = render_figures(result, reference.image, mask, n)
+            row.update({f"{_key(shader)}_{name}": figures[name] for name in SHADER_FIGURES})
+        err_n = row["neural_lod_relative_error"]
+        row["neural_time_ratio"] = t_n / row["im_lod_shading_cpu_seconds"]
+        row["im_lod_sweep"] = [{k: r[k] for k in ("spp", "shading_cpu_s", "relative_error")} for r in sweep]
+        error, note = error_at_cpu([r["shading_cpu_s"] for r in sweep], [r["relative_error"] for r in sweep], t_n)
+        row["equal_time_relative_error"], row["equal_time_note"] = error, note
+        row["equal_time_max_spp"] = sweep[-1]["spp"]
+        same = np.allclose(neural.image, images[spp].image, rtol=1e-9, atol=0.0)
+        row["verdict"] = "same" if same else ("better" if err_n < error else "worse")
+        rows.append(row)
+    differs = [r for r in rows if r["verdict"] != "same"]
     result = {"settings": {"scene": "receding plane, cotton denim, tile 1 x 2 mm, 45 deg elevation",
                            "noise": noise, "width_px": scene.camera.resolution[0],
                            "height_px": scene.camera.resolution[1], "spp": spp, "reference_spp": reference_spp,
-                           "repeats": repeats, "time_slack": TIME_SLACK},
-              "rows": rows, "network_used_mm": [r["distance_mm"] for r in used],
-              "neural_better_where_used": bool(used) and all(r["verdict"] == "better" for r in used),
+                           "repeats": repeats, "im_lod_spp": list(EQUAL_CPU_SPP),
+                           "estimator_choice": _has_choice(fabric)},
+              "rows": rows, "network_used_mm": [r["distance_mm"] for r in rows if r["neural_lod_neural_evaluations"]],
+              "differs_mm": [r["distance_mm"] for r in differs],
+              "neural_better_where_it_differs": bool(differs) and all(r["verdict"] == "better" for r in differs),
               "never_worse": all(r["verdict"] != "worse" for r in rows)}
     if figures_dir is not None:
         result["figure"] = str(plot_neural_lod(result, Path(figures_dir) / "neural_lod.png"))
     return result
 
 
-#: shading-time tolerance of "equal or lower time" (the CPU times of two renders wander by ~10 %)
-TIME_SLACK = 0.1
-#: samples per pixel tried for im-lod at equal time (square counts are stratified, others jittered at random)
-EQUAL_TIME_SPP = (5, 6, 8, 9, 12, 16, 25, 36, 49, 64)
+def _has_choice(fabric) -> bool:
+    from clothlab.render.neural_lod import estimator_choice
 
-
-def equal_time_im_lod(scene, distance: float, seconds: float, spp: int, reference_spp: int, repeats: int,
-                      fabric) -> dict:
-    """im-lod given the shading time ``seconds`` of neural-lod at ``distance``: the fewest samples per pixel of
-    :data:`EQUAL_TIME_SPP` (above ``spp``) whose least shading CPU of ``repeats`` renders reaches it (the
-    largest tried if none does), its relative L1 error against the benchmark's reference (the same render)."""
-    from dataclasses import replace
-
-    from clothlab.render.render import relative_error, render
-
-    s = replace(scene, camera=scene.camera.at_distance(distance))
-    reference = render(s, shader="im-texture", spp=reference_spp, fabric=fabric)
-    mask = reference.coverage >= 1.0
-    best = None
-    def cold(k):
-        fabric.forget_directions()
-        return render(s, shader="im-lod", spp=k, fabric=fabric)
-
-    for k in (n for n in EQUAL_TIME_SPP if n > spp):
-        best = min((cold(k) for _ in range(max(1, repeats))), key=lambda res: res.timings["shading_cpu"])
-        if best.timings["shading_cpu"] >= seconds:
-            break
-    return {"equal_time_spp": best.spp, "equal_time_shading_cpu_seconds": best.timings["shading_cpu"],
-            "equal_time_relative_error": relative_error(best.image, reference.image, mask)}
+    return estimator_choice(fabric.weave) is not None
 
 
 def neural_lod_lines(result: dict) -> list[str]:
@@ -336,24 +372,29 @@ def neural_lod_lines(result: dict) -> list[str]:
     if "skipped" in result:
         return [f"  neural-lod render: skipped ({result['skipped']})"]
     s = result["settings"]
-    out = [f"  neural-lod vs im-lod, receding plane {s['width_px']} x {s['height_px']} px, {s['spp']} spp, texture "
-           f"noise {'on' if s['noise'] else 'off'}; error: relative L1 vs im-texture at {s['reference_spp']} spp "
-           f"(ref: a second reference's difference); ms: least shading CPU of up to {s['repeats']}",
+    policy = ("the crossovers of its sidecar" if s["estimator_choice"]
+              else "its documented default (the sidecar has no crossovers)")
+    out = [f"  neural-lod ({policy}) vs im-lod at equal shading CPU, receding plane {s['width_px']} x "
+           f"{s['height_px']} px, texture noise {'on' if s['noise'] else 'off'}; error: relative L1 vs im-texture "
+           f"at {s['reference_spp']} spp (ref: a second reference's difference); ms: least shading CPU "
+           f"(process_time) of {s['repeats']} cold renders; im-lod at equal CPU: interpolated log-log over its "
+           f"renders at {', '.join(map(str, s['im_lod_spp']))} spp (stratified) up to neural-lod's CPU",
            f"  {'dist mm':>7} {'footprint':>13} | {'ref':>6} {'err im-lod':>10} {'err neural':>10} | "
-           f"{'ms im-lod':>9} {'ms neural':>9} {'ratio':>6} {'queries':>7} | {'im-lod at equal time':>26} | verdict",
-           f"  {'':>7} {'':>13} | {'':>6} {'':>10} {'':>10} | {'':>9} {'':>9} {'':>6} {'':>7} | "
-           f"{'spp':>4} {'err':>7} {'ms':>7}      |"]
+           f"{'ms im-lod':>9} {'ms neural':>9} {'ratio':>6} {'queries':>7} | {'im-lod at equal CPU':>24} | verdict",
+           f"  {'':>7} {'':>13} | {'':>6} {str(s['spp']) + ' spp':>10} {'':>10} | "
+           f"{'':>9} {'':>9} {'':>6} {'':>7} | {'err':>7} {'up to spp':>9} {'':>6} |"]
     for r in result["rows"]:
+        note = f" ({r['equal_time_note']})" if r["equal_time_note"] else ""
         out.append(f"  {r['distance_mm']:7g} {r['footprint_min_tiles']:6.3f}-{r['footprint_max_tiles']:<6.3g} | "
                    f"{r['im_reference_error']:6.3f} {r['im_lod_relative_error']:10.3f} "
                    f"{r['neural_lod_relative_error']:10.3f} | {1e3 * r['im_lod_shading_cpu_seconds']:9.1f} "
                    f"{1e3 * r['neural_lod_shading_cpu_seconds']:9.1f} {r['neural_time_ratio']:6.2f} "
-                   f"{r['neural_lod_neural_evaluations']:7d} | {r['equal_time_spp']:4d} "
-                   f"{r['equal_time_relative_error']:7.3f} {1e3 * r['equal_time_shading_cpu_seconds']:7.1f}      | "
-                   f"{r['verdict']}")
-    out.append(f"  where the network is used ({', '.join(f'{d:g}' for d in result['network_used_mm']) or 'nowhere'} mm)"
-               f" neural-lod has the lower error at equal or lower shading time (+{100 * s['time_slack']:.0f} %): "
-               f"{result['neural_better_where_used']}; never worse: {result['never_worse']}")
+                   f"{r['neural_lod_neural_evaluations']:7d} | {r['equal_time_relative_error']:7.3f} "
+                   f"{r['equal_time_max_spp']:9d} {'':>6} | {r['verdict']}{note}")
+    where = ", ".join(f"{d:g}" for d in result["differs_mm"]) or "nowhere"
+    out.append(f"  where neural-lod differs from im-lod ({where} mm) it has the lower error at equal shading CPU: "
+               f"{result['neural_better_where_it_differs']}; "
+               f"never worse: {result['never_worse']}")
     if "figure" in result:
         out.append(f"  plot: {result['figure']}")
     return out
@@ -376,16 +417,15 @@ def plot_neural_lod(result: dict, path) -> Path:
         for shader, colour in (("im-lod", "C0"), ("neural-lod", "C2")):
             ax.plot(d, [scale * r[f"{_key(shader)}_{name}"] for r in rows], "-o", color=colour, ms=3.5,
                     label=f"{shader}, {result['settings']['spp']} spp")
-        ax.plot(d, [scale * r[f"equal_time_{name}"] for r in rows], "--s", color="C0", ms=3, alpha=0.7,
-                label="im-lod at neural-lod's time")
-        for r in rows:
-            if r["equal_time_spp"] != result["settings"]["spp"]:
-                ax.annotate(f"{r['equal_time_spp']}", (r["distance_mm"], scale * r[f"equal_time_{name}"]),
-                            fontsize=6, color="C0", xytext=(2, 3), textcoords="offset points")
         ax.set_xscale("log")
         ax.set_xlabel("camera distance (mm)")
         ax.set_title(label, fontsize=10)
         ax.grid(True, alpha=0.3)
+    axes[0].plot(d, [r["equal_time_relative_error"] for r in rows], "--s", color="C0", ms=3, alpha=0.7,
+                 label="im-lod at neural-lod's shading CPU")
+    for r in rows:
+        axes[0].annotate(f"{r['equal_time_max_spp']}", (r["distance_mm"], r["equal_time_relative_error"]),
+                         fontsize=6, color="C0", xytext=(2, 3), textcoords="offset points")
     axes[0].plot(d, [r["im_reference_error"] for r in rows], ":", color="grey", label="two references differ by")
     axes[0].set_ylim(bottom=0.0)
     axes[1].set_yscale("log")
@@ -393,7 +433,7 @@ def plot_neural_lod(result: dict, path) -> Path:
     s = result["settings"]
     figure.suptitle(f"Receding plane (cotton denim, texture noise {'on' if s['noise'] else 'off'}): neural-lod vs "
                     f"im-lod, {s['width_px']} x {s['height_px']} px\nreference im-texture {s['reference_spp']} spp; "
-                    "numbers: im-lod's spp at equal time", fontsize=9)
+                    "numbers: im-lod's largest spp tried (up to neural-lod's CPU)", fontsize=9)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=100)
     path = Path(path)
