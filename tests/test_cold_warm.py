@@ -123,10 +123,10 @@ def test_moments_take_the_yarn_frame_themselves(rule):
     """The filament moments of fabric-frame directions with the weft flag equal those of the directions rotated
     into the weft frame by clothlab.frames.to_yarn_frame (bit for bit), and the warp's are the fabric frame's."""
     from clothlab.models.irawan import kernels
-    from clothlab.models.irawan.integrals import _filament_nodes
+    from clothlab.models.irawan.integrals import filament_rule
 
     wi, wo = _pairs(400, np.random.default_rng(6))
-    nodes = _filament_nodes(Quadrature(*rule))
+    nodes = filament_rule(Quadrature(*rule))
     for kind in ("warp", "weft"):
         lw, lo = np.ascontiguousarray(to_yarn_frame(wi, kind)), np.ascontiguousarray(to_yarn_frame(wo, kind))
         ok, moments = kernels.filament_moments(wi, wo, *nodes, kind == "weft")
@@ -140,15 +140,17 @@ def test_direction_set_kernels_match_numpy():
     """-wi . wo and the front mask of the compiled direction-set pass equal numpy's (einsum, the previous form);
     the compiled comparison of direction sets is numpy's array_equal (shape, values, NaN never equal)."""
     from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.integrals import filament_rule
 
     wi, wo = _pairs(500, np.random.default_rng(8))
-    cos_x, front, kept_wi, kept_wo = kernels.phase_cosines(wi, wo)
-    np.testing.assert_array_equal(kept_wi, wi)
-    np.testing.assert_array_equal(kept_wo, wo)
-    assert not np.shares_memory(kept_wi, wi) and not np.shares_memory(kept_wo, wo)
-    np.testing.assert_array_equal(cos_x, -np.einsum("...k,...k->...", wi, wo))
-    np.testing.assert_array_equal(front, (wi[:, 2] > 0) & (wo[:, 2] > 0))
-    assert not front.all() and front.any()
+    for kinds in ((False, False), (True, True)):
+        cos_x, front, kept, _, _ = kernels.direction_set(wi, wo, *filament_rule(Quadrature()), *kinds)
+        np.testing.assert_array_equal(kept[0], wi)
+        np.testing.assert_array_equal(kept[1], wo)
+        assert not np.shares_memory(kept, wi) and not np.shares_memory(kept, wo)
+        np.testing.assert_array_equal(cos_x, -np.einsum("...k,...k->...", wi, wo))
+        np.testing.assert_array_equal(front, (wi[:, 2] > 0) & (wo[:, 2] > 0))
+        assert not front.all() and front.any()
     assert kernels.same_pairs(wi, wo, wi.copy(), wo.copy())
     changed = wo.copy()
     changed[-1, 2] = np.nextafter(changed[-1, 2], 2.0)
@@ -157,6 +159,51 @@ def test_direction_set_kernels_match_numpy():
     nan = wi.copy()
     nan[0, 0] = np.nan
     assert not kernels.same_pairs(nan, wo, nan, wo)
+
+
+@pytest.mark.parametrize("rule", [("trapezoid", 11), ("gauss", 8), ("support", 4)])
+def test_direction_set_moments_are_each_yarn_frames(rule):
+    """The filament moments the direction-set pass makes for both yarn types from one read of the directions
+    (the weft's from the warp's columns swapped, its x negated through sin v) equal, bit for bit, the moments
+    of the directions rotated into each yarn frame by clothlab.frames.to_yarn_frame; a yarn type not asked
+    for is not made (the model then computes it when first needed)."""
+    from clothlab.models.irawan import kernels
+    from clothlab.models.irawan.integrals import filament_rule
+
+    wi, wo = _pairs(400, np.random.default_rng(12))
+    wi[5, 0] = wo[5, 0] = 0.0  # x' = -0.0 in the weft frame: the sign of the product of a zero
+    nodes = filament_rule(Quadrature(*rule))
+    for asked in ((True, True), (True, False), (False, True)):
+        _, _, _, ok, moments = kernels.direction_set(wi, wo, *nodes, *asked)
+        for j, kind in enumerate(("warp", "weft")):
+            if not asked[j]:
+                continue
+            lw, lo = np.ascontiguousarray(to_yarn_frame(wi, kind)), np.ascontiguousarray(to_yarn_frame(wo, kind))
+            ok_yarn, moments_yarn = kernels.filament_moments(lw, lo, *nodes, False)
+            np.testing.assert_array_equal(ok[j], ok_yarn)
+            np.testing.assert_array_equal(moments[j], moments_yarn)
+            assert np.count_nonzero(moments[j][2]) > 200  # s0: the comparison can fail
+
+
+def test_filament_fit_makes_its_moments_with_the_directions():
+    """A filament parameter set's new directions come with both yarn types' moments (one compiled call); a
+    staple set's with none, and its moments are made when a later set takes the filament path."""
+    wi, wo = _pairs(60, np.random.default_rng(13))
+    model = IrawanModel(get_preset("silk-shantung"))
+    p = model.default_parameters()
+    model.components(wi, wo, p, normalised=False, warn=False)
+    assert set(model._at(wi, wo)["filament"]) == {"warp", "weft"}
+    only_warp = model.components(wi, wo, p, need=("specular_warp",), normalised=False, warn=False)
+    model.forget_directions()
+    model.components(wi, wo, p, need=("specular_warp",), normalised=False, warn=False)
+    assert set(model._at(wi, wo)["filament"]) == {"warp"}
+    weft = model.components(wi, wo, p, normalised=False, warn=False)["specular_weft"]  # weft's made lazily
+    np.testing.assert_array_equal(weft, IrawanModel(get_preset("silk-shantung")).components(
+        wi, wo, p, normalised=False, warn=False)["specular_weft"])
+    assert np.count_nonzero(only_warp["specular_warp"]) > 10
+    staple = IrawanModel(get_preset("silk-shantung"))
+    staple.components(wi, wo, {**p, "warp.psi": 20.0, "weft.psi": 20.0}, normalised=False, warn=False)
+    assert staple._at(wi, wo)["filament"] == {}
 
 
 def test_irawan_directions_changed_in_place_are_seen():

@@ -36,7 +36,7 @@ def evaluate():
     c = IrawanModel(get_preset("polyester-lining")).components(wi, wo, normalised=False, warn=False)
     coef, _ = nnls_sets(c["specular_warp"][None, :, None] + np.abs(rng.standard_normal((2, 60, 2))),
                         np.abs(rng.standard_normal((60, 3))) + 0.1)
-    used = [im.filament_moments, im.filament_from_moments, nnls_kernels.normal_equations_nnls]
+    used = [im.direction_set, im.filament_from_moments, nnls_kernels.normal_equations_nnls]
     assert kang.peak_tile_average  # imported (decorated) too; compiled only when called
     return {"im": (c["specular_warp"] + c["specular_weft"]).tolist(), "nnls": coef.ravel().tolist(),
             "hits": sum(sum(f.stats.cache_hits.values()) for f in used),

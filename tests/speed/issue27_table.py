@@ -12,8 +12,13 @@ fastest of many calls after a warm-up (compilation excluded):
   start (the memo is dropped between points by the new point itself);
 - IM whole model per preset: ``IrawanModel.components`` (trapezoid-11, preset defaults) on the paper's 1,575
   directions, *warm* (the results memo cleared, the direction set kept) and *cold* (new directions every call:
-  the set rotated by a fresh tiny angle so nothing cached applies);
-- Kang tile average per preset, cold: ``KangModel.components(need=specular)`` on new directions every call.
+  the set rotated by a fresh tiny angle so nothing cached applies; the rotation, two numpy (1575, 3) @ (3, 3)
+  products, ~16 us, is inside the timed call) and *cold, pre-made* (new directions every call as well, taken in
+  turn from 64 sets rotated before the timing, so the timed call is the model's alone; the model keeps only the
+  last set, so each is new to it);
+- Kang tile average per preset, cold: ``KangModel.components(need=specular)`` on new directions every call, at
+  the preset's defaults and, where ``fits/<preset>-kang`` exists, at that fit's parameters (e.g. wool-gabardine's
+  fitted lobe, nx 18.7, ny 0.71).
 
 The main job (``clothlab -q fit fabric.yaml --force --report`` in a copy of measurements/polyester-lining):
 first run on an empty ``NUMBA_CACHE_DIR``, then the second run; wall (perf_counter around the subprocess) and
@@ -54,8 +59,10 @@ def forget(model):
     elif hasattr(model, "_memo"):
         model._memo.clear()
 
+from pathlib import Path
 from clothlab.config import load_config
 from clothlab.fit.problem import build_problem
+from clothlab.fit.store import load_fitted
 from clothlab.models.irawan.model import IrawanModel
 from clothlab.models.kang.model import KangModel
 from clothlab.simulate.gonio import paper_sampling
@@ -93,6 +100,12 @@ for name in PRESET_NAMES:
         a, b = rotated(next(angles))
         forget(im)
         im.components(a, b, p)
+    pool = [rotated(next(angles)) for _ in range(64)]
+    turn = [0]
+    def cold_premade():
+        turn[0] = (turn[0] + 1) % len(pool)
+        forget(im)
+        im.components(*pool[turn[0]], p)
     kang = KangModel(weave)
     q = kang.resolve({})
     need = ("specular_warp", "specular_weft")
@@ -100,7 +113,17 @@ for name in PRESET_NAMES:
         a, b = rotated(next(angles))
         forget(kang)
         kang.components(a, b, q, need=need)
-    out[name] = {"im_warm": best(warm), "im_cold": best(cold), "kang_cold": best(kang_cold)}
+    out[name] = {"im_warm": best(warm), "im_cold": best(cold), "im_cold_premade": best(cold_premade),
+                 "kang_cold": best(kang_cold)}
+    fit_dir = Path(f"fits/{name}-kang")
+    if (fit_dir / "fit.json").exists():
+        fitted, params, _, _ = load_fitted(fit_dir)
+        q_fit = fitted.resolve({k: v for k, v in params.items() if k in fitted.params})
+        def kang_fitted():
+            a, b = rotated(next(angles))
+            forget(fitted)
+            fitted.components(a, b, q_fit, need=need)
+        out[name]["kang_cold_fitted"] = best(kang_fitted)
 out["pairs"] = len(wi)
 print(json.dumps(out))
 '''
@@ -149,6 +172,7 @@ def main() -> None:
     parser.add_argument("after", type=Path)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--skip-main-job", action="store_true")
+    parser.add_argument("--cpu", action="store_true", help="per-preset tables from CPU time (a loaded machine)")
     a = parser.parse_args()
     print(f"load average at start: {os.getloadavg()}")
     checkouts = {"before": a.before.resolve(), "after": a.after.resolve()}
@@ -184,17 +208,34 @@ def main() -> None:
     print(f"| objective (fastest wall / CPU) | {b['objective']['wall_s'] * 1e3:.3f} / "
           f"{b['objective']['cpu_s'] * 1e3:.3f} ms | {f['objective']['wall_s'] * 1e3:.3f} / "
           f"{f['objective']['cpu_s'] * 1e3:.3f} ms |")
+    clock = "cpu_s" if a.cpu else "wall_s"
     n = b["pairs"]
     print("\n| preset | IM warm / cold ms, ratio (before) | IM warm / cold ms, ratio (after) | "
-          "Kang cold M pairs/s before | after |\n|---|---|---|---|---|")
+          "IM cold pre-made ms, ratio (before) | (after) |\n|---|---|---|---|---|")
     for name, v in b.items():
         if not (isinstance(v, dict) and "im_warm" in v):
             continue
         w = f[name]
-        print(f"| {name} | {v['im_warm']['wall_s'] * 1e3:.3f} / {v['im_cold']['wall_s'] * 1e3:.3f}, "
-              f"{v['im_cold']['wall_s'] / v['im_warm']['wall_s']:.2f}x | {w['im_warm']['wall_s'] * 1e3:.3f} / "
-              f"{w['im_cold']['wall_s'] * 1e3:.3f}, {w['im_cold']['wall_s'] / w['im_warm']['wall_s']:.2f}x | "
-              f"{n / v['kang_cold']['wall_s'] / 1e6:.2f} | {n / w['kang_cold']['wall_s'] / 1e6:.2f} |")
+        cells = []
+        for r in (v, w):
+            cells.append(f"{r['im_warm'][clock] * 1e3:.3f} / {r['im_cold'][clock] * 1e3:.3f}, "
+                         f"{r['im_cold'][clock] / r['im_warm'][clock]:.2f}x")
+        for r in (v, w):
+            cells.append(f"{r['im_cold_premade'][clock] * 1e3:.3f}, "
+                         f"{r['im_cold_premade'][clock] / r['im_warm'][clock]:.2f}x" if "im_cold_premade" in r
+                         else "-")
+        print(f"| {name} | " + " | ".join(cells) + " |")
+    print("\n| preset | Kang cold M pairs/s, defaults: before | after | fitted (fits/<preset>-kang): before | "
+          "after |\n|---|---|---|---|---|")
+    for name, v in b.items():
+        if not (isinstance(v, dict) and "kang_cold" in v):
+            continue
+        w = f[name]
+        fitted = [f"{n / r['kang_cold_fitted'][clock] / 1e6:.2f}" if "kang_cold_fitted" in r else "-"
+                  for r in (v, w)]
+        print(f"| {name} | {n / v['kang_cold'][clock] / 1e6:.2f} | {n / w['kang_cold'][clock] / 1e6:.2f} | "
+              f"{fitted[0]} | {fitted[1]} |")
+    print(f"\n({clock} of each checkout's fastest call; the JSON above has both clocks)")
 
 
 if __name__ == "__main__":

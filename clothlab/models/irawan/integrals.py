@@ -202,7 +202,9 @@ _FILAMENT_NODES: dict = {}
 """Quadrature -> (nodes (1, K), weights (1, K), on_arc) of the filament moments (made once per rule)."""
 
 
-def _filament_nodes(quadrature: Quadrature) -> tuple | None:
+def filament_rule(quadrature: Quadrature) -> tuple | None:
+    """(nodes (1, K), weights (1, K), on_arc) of the filament moments under ``quadrature``
+    (:func:`clothlab.models.irawan.kernels.filament_moments`); None for ``adaptive`` (no moments)."""
     hit = _FILAMENT_NODES.get(quadrature)
     if hit is None:
         rule, n = quadrature.rule, int(quadrature.nodes)
@@ -223,7 +225,7 @@ def _filament_moments(wi, wo, kind: str, quadrature: Quadrature | None) -> tuple
     the trapezoid-11 default)."""
     from clothlab.models.irawan import kernels
 
-    rule = _filament_nodes(quadrature or Quadrature())
+    rule = filament_rule(quadrature or Quadrature())
     if rule is None:
         return None
     if kind not in YARN_KINDS:
@@ -231,12 +233,24 @@ def _filament_moments(wi, wo, kind: str, quadrature: Quadrature | None) -> tuple
     return kernels.filament_moments(wi, wo, *rule, kind == "weft")
 
 
-def yarn_terms(wi, wo, kind: str, quadrature: Quadrature) -> YarnTerms:
+def yarn_terms(wi, wo, kind: str, quadrature: Quadrature, filament: tuple | None = None) -> YarnTerms:
     """The parameter-free part of I_j at fabric-frame directions (N, 3), each part made when first used
     (:class:`YarnTerms`); ``wi``, ``wo`` are kept as they are if C-contiguous float64 (so pass copies the
-    caller will not change), else copied."""
+    caller will not change), else copied.  ``filament``: the filament moments of these directions under
+    ``quadrature`` if already made (:attr:`YarnTerms.filament`; e.g. by
+    :func:`clothlab.models.irawan.kernels.direction_set`)."""
     return YarnTerms(kind, np.ascontiguousarray(wi, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64),
-                     quadrature)
+                     quadrature, _lazy={} if filament is None else {"filament": filament})
+
+
+def uses_filament_moments(params: dict, kind: str, quadrature: Quadrature) -> bool:
+    """Whether :func:`yarn_integrals` takes segment type ``kind``'s I_j under resolved ``params`` from the
+    filament moments: the filament path (:func:`clothlab.models.irawan.yarn.staple_path`) with a rule other
+    than ``adaptive``."""
+    rule, n = quadrature.rule, int(quadrature.nodes)
+    return rule != "adaptive" and not staple_path(math.radians(params[f"{kind}.psi"]),
+                                                  math.radians(params[f"{kind}.umax"]), rule, n,
+                                                  PSI_FILAMENT_THRESHOLD)
 
 
 _TO_RADIANS = np.array([[math.pi / 180.0], [math.pi / 180.0], [1.0], [1.0], [1.0], [1.0]])

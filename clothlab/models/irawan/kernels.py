@@ -808,24 +808,48 @@ def filament_points(wi, wo, v, umax, kappa, w, l, delta, shortened):
 # A direction set's parameter-free terms (:meth:`clothlab.models.irawan.model.IrawanModel._at`).
 
 
-@njit(cache=True)
-def phase_cosines(wi, wo):
-    """(-wi . wo (N,), front (N,), copies of wi and wo) of (N, 3) fabric-frame pairs in one pass: the argument of
-    eq. 7's lobe, whether both directions are above the surface (wi_z > 0 and wo_z > 0), and the direction set a
-    model keeps to recognise it (:func:`same_pairs`)."""
+@njit(cache=True, error_model="numpy")
+def direction_set(wi, wo, nodes, weights, on_arc, warp, weft):
+    """A new direction set's parameter-free terms in one compiled call (:meth:`clothlab.models.irawan.model.
+    IrawanModel._at`): (cos_x (N,), front (N,), kept (2, N, 3), ok (2, N), moments (2, 6, N)) of (N, 3)
+    fabric-frame pairs: -wi . wo, the argument of eq. 7's lobe; whether both directions are above the surface
+    (wi_z > 0 and wo_z > 0); copies of wi and wo, the direction set a model keeps to recognise it
+    (:func:`same_pairs`); and, for the segment types asked for (``warp``, ``weft``; the other's rows are left
+    unset), the filament moments of :func:`filament_moments` (row 0 the warp's, row 1 the weft's).  The input
+    is read once and both yarn types' moments come from the same columns (the weft frame (-y, x, z) is the
+    warp's with the columns swapped and x negated), so a filament parameter set's new directions cost one
+    call instead of three (issue 27)."""
     n_dir = wi.shape[0]
     cos_x = np.empty(n_dir)
     front = np.empty(n_dir, dtype=np.bool_)
-    kept_wi = np.empty((n_dir, 3))
-    kept_wo = np.empty((n_dir, 3))
+    kept = np.empty((2, n_dir, 3))
+    ok = np.empty((2, n_dir), dtype=np.bool_)
+    moments = np.empty((2, 6, n_dir))
+    if not (warp or weft):
+        for n in range(n_dir):
+            ix, iy, iz, ox, oy, oz = wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2]
+            kept[0, n, 0], kept[0, n, 1], kept[0, n, 2] = ix, iy, iz
+            kept[1, n, 0], kept[1, n, 1], kept[1, n, 2] = ox, oy, oz
+            # eq. 7: -wi . wo, summed x, z, then y: the order of numpy's einsum, the previous form (same values)
+            cos_x[n] = -((ix * ox + iz * oz) + iy * oy)
+            front[n] = iz > 0.0 and oz > 0.0
+        return cos_x, front, kept, ok, moments
+    columns = np.empty((8, n_dir))  # wi x, y, z, wo x, y, z, then w . n(u, 0) of wi and wo (filament_moments)
+    xi, yi, zi, xo, yo, zo = columns[0], columns[1], columns[2], columns[3], columns[4], columns[5]
     for n in range(n_dir):
         ix, iy, iz, ox, oy, oz = wi[n, 0], wi[n, 1], wi[n, 2], wo[n, 0], wo[n, 1], wo[n, 2]
-        kept_wi[n, 0], kept_wi[n, 1], kept_wi[n, 2] = ix, iy, iz
-        kept_wo[n, 0], kept_wo[n, 1], kept_wo[n, 2] = ox, oy, oz
-        # eq. 7: -wi . wo, summed x, z, then y: the order of numpy's einsum, the previous form (same values)
-        cos_x[n] = -((ix * ox + iz * oz) + iy * oy)
+        kept[0, n, 0], kept[0, n, 1], kept[0, n, 2] = ix, iy, iz
+        kept[1, n, 0], kept[1, n, 1], kept[1, n, 2] = ox, oy, oz
+        cos_x[n] = -((ix * ox + iz * oz) + iy * oy)  # eq. 7, as above
         front[n] = iz > 0.0 and oz > 0.0
-    return cos_x, front, kept_wi, kept_wo
+        xi[n], yi[n], zi[n], xo[n], yo[n], zo[n] = ix, iy, iz, ox, oy, oz
+    if warp:
+        _filament_moments_of(xi, yi, zi, xo, yo, zo, 1.0, nodes, weights, on_arc, ok[0], moments[0], columns[6],
+                             columns[7])
+    if weft:  # weft frame: x' = -y, y' = x (clothlab.frames.to_yarn_frame)
+        _filament_moments_of(yi, xi, zi, yo, xo, zo, -1.0, nodes, weights, on_arc, ok[1], moments[1], columns[6],
+                             columns[7])
+    return cos_x, front, kept, ok, moments
 
 
 @njit(cache=True)
@@ -864,24 +888,32 @@ def filament_moments(wi, wo, nodes, weights, on_arc, weft):
     ``nodes`` / ``weights`` (1, K) as in :func:`filament_quadrature` (``on_arc``: unit nodes on the lit arc).
     Without ``on_arc`` (the fixed rules) the nodes are the same for every direction: sin v, cos v are computed
     once per node and the loop over the directions is innermost and branch-free (the checks of eq. 8 applied
-    as a select), so it vectorises; each direction's sum runs over the nodes in order.  Two allocations for
-    the results and one scratch block (issue 27: the seven arrays and six column copies of the previous form
-    cost a third of the kernel's time)."""
+    as a select), so it vectorises; each direction's sum runs over the nodes in order.  The same loops serve
+    :func:`direction_set` (both yarn types from one read of the directions): :func:`_filament_moments_of`."""
     n_dir = wi.shape[0]
-    n_nodes = nodes.shape[1]
     ok = np.empty(n_dir, dtype=np.bool_)
     out = np.empty((6, n_dir))
-    u_out, inv, s0, s1, cu_out, su_out = out[0], out[1], out[2], out[3], out[4], out[5]
-    work = np.empty((8, n_dir))  # the yarn-frame columns, then w . n(u, 0) of wi and wo
-    wix, wiy_, wiz_, wox, woy_, woz_, ci0, cr0 = work[0], work[1], work[2], work[3], work[4], work[5], work[6], \
-        work[7]
+    columns = np.empty((8, n_dir))  # the yarn-frame columns, then w . n(u, 0) of wi and wo
     ix, iy = (1, 0) if weft else (0, 1)
-    sign = -1.0 if weft else 1.0  # weft: x' = -y, y' = x (clothlab.frames.to_yarn_frame)
-    for n in range(n_dir):
-        wix[n], wiy_[n], wiz_[n] = sign * wi[n, ix], wi[n, iy], wi[n, 2]
-        wox[n], woy_[n], woz_[n] = sign * wo[n, ix], wo[n, iy], wo[n, 2]
+    for n in range(n_dir):  # the x' column un-negated: the weft's sign is applied to sin v (_filament_moments_of)
+        columns[0, n], columns[1, n], columns[2, n] = wi[n, ix], wi[n, iy], wi[n, 2]
+        columns[3, n], columns[4, n], columns[5, n] = wo[n, ix], wo[n, iy], wo[n, 2]
+    _filament_moments_of(columns[0], columns[1], columns[2], columns[3], columns[4], columns[5],
+                         -1.0 if weft else 1.0, nodes, weights, on_arc, ok, out, columns[6], columns[7])
+    return ok, out
+
+
+@njit(cache=True, inline="always")
+def _filament_moments_of(xi, yi, zi, xo, yo, zo, sign, nodes, weights, on_arc, ok, out, ci0, cr0):
+    """The loops of :func:`filament_moments` on yarn-frame columns whose x' is ``sign`` times ``xi`` / ``xo``
+    (the weft's x' = -y): writes ``ok`` (N,) and ``out`` (6, N), using ``ci0``, ``cr0`` (N,) as scratch.  The
+    sign is applied to sin v and in the per-direction arc as sign x: (sign x) sin v = x (sign sin v) exactly, so
+    the values are those of the negated column."""
+    n_dir = ok.shape[0]
+    n_nodes = nodes.shape[1]
+    u_out, inv, s0, s1, cu_out, su_out = out[0], out[1], out[2], out[3], out[4], out[5]
     for n in range(n_dir):  # branch-free (selects) on contiguous columns, so it vectorises
-        wiy, wiz, woy, woz = wiy_[n], wiz_[n], woy_[n], woz_[n]
+        wiy, wiz, woy, woz = yi[n], zi[n], yo[n], zo[n]
         # h = s / |s| with s = wi + wo (sec. 6.2); |(t x h)_x| = sqrt(h_y^2 + h_z^2) (eq. 6), so
         # |wi + wo| |(t x h)_x| = r = sqrt(s_y^2 + s_z^2), and u, cos u, sin u follow from s_y, s_z alone
         sy, sz = wiy + woy, wiz + woz
@@ -907,20 +939,21 @@ def filament_moments(wi, wo, nodes, weights, on_arc, weft):
                 continue
             v = nodes[0, k]
             cv = math.cos(v)
-            sv = math.sin(v)
+            sv = sign * math.sin(v)  # sec. 5.2's x' sin v with x' = sign x
             for n in range(n_dir):
-                ci = normal_cosine(wix[n], ci0[n], sv, cv)
-                cr = normal_cosine(wox[n], cr0[n], sv, cv)
+                ci = normal_cosine(xi[n], ci0[n], sv, cv)
+                cr = normal_cosine(xo[n], cr0[n], sv, cv)
                 g = wk * seeliger(ci, cr)  # eq. 8
                 lit = ok[n] and ci > 0.0 and cr > 0.0
                 s0[n] += g if lit else 0.0
                 s1[n] += g * cv if lit else 0.0
-        return ok, out
+        return
     for n in range(n_dir):
         if not ok[n]:
             continue
-        lo_i, hi_i = lit_arc(wix[n], ci0[n])
-        lo_o, hi_o = lit_arc(wox[n], cr0[n])
+        wix, wox = sign * xi[n], sign * xo[n]
+        lo_i, hi_i = lit_arc(wix, ci0[n])
+        lo_o, hi_o = lit_arc(wox, cr0[n])
         lo = max(lo_i, lo_o)
         span = min(hi_i, hi_o) - lo
         acc0 = 0.0
@@ -932,8 +965,8 @@ def filament_moments(wi, wo, nodes, weights, on_arc, weft):
             v = lo + span * nodes[0, k]
             cv = math.cos(v)
             sv = math.sin(v)
-            ci = normal_cosine(wix[n], ci0[n], sv, cv)
-            cr = normal_cosine(wox[n], cr0[n], sv, cv)
+            ci = normal_cosine(wix, ci0[n], sv, cv)
+            cr = normal_cosine(wox, cr0[n], sv, cv)
             if ci <= 0.0 or cr <= 0.0:
                 continue
             g = wk * seeliger(ci, cr)  # eq. 8
@@ -941,7 +974,6 @@ def filament_moments(wi, wo, nodes, weights, on_arc, weft):
             acc1 += g * cv
         s0[n] = acc0 * span
         s1[n] = acc1 * span
-    return ok, out
 
 
 @njit(cache=True, error_model="numpy")

@@ -75,8 +75,10 @@ from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the 
     _specular_albedo_cached,
     arc_matters,
     check_filament_arc,
+    filament_rule,
     geometry_warnings,
     specular_albedo,
+    uses_filament_moments,
     yarn_geometry_key,
     yarn_integral_fabric,
     yarn_integrals,
@@ -86,6 +88,9 @@ from clothlab.models.irawan.integrals import (  # noqa: F401  (re-exported: the 
 from clothlab.models.irawan.parameters import IRAWAN_PARAMS, apply_parameters, weave_parameters
 from clothlab.models.irawan.phase import von_mises
 from clothlab.weave.model import YARN_KINDS, Weave
+
+_NO_RULE = (np.zeros((1, 1)), np.zeros((1, 1)), False)
+"""The nodes, weights and on_arc of :func:`.kernels.direction_set` when it makes no filament moments."""
 
 
 class IrawanModel(Model):
@@ -189,20 +194,28 @@ class IrawanModel(Model):
         self._directions = None
         self._memo.clear()
 
-    def _at(self, wi, wo) -> dict:
+    def _at(self, wi, wo, resolved=(), need=COMPONENTS) -> dict:
         """What does not depend on the parameters at (wi, wo): -wi.wo (eq. 7), the front-facing mask and, per
         segment type, :class:`.integrals.YarnTerms` (made when first needed); kept for the last direction set.
         It is used only if the directions' *contents* equal the copies it keeps (not their identity), so
         directions changed in place, or new arrays at a reused address, never return stale values (nor a
-        stale memo)."""
+        stale memo).  A new set's filament moments are made in the same compiled call for the segment types
+        that one of ``resolved`` (the call's parameter sets) takes on the filament path, with ``need``
+        (:func:`.integrals.uses_filament_moments`); the others' when first needed."""
         import clothlab.models.irawan.kernels as kernels  # (numba: imported with the first evaluation)
 
         d = self._directions
         if d is not None and kernels.same_pairs(d["wi"], d["wo"], wi, wo):  # one compiled pass
             return d
         self._memo.clear()
-        cos_x, front, kept_wi, kept_wo = kernels.phase_cosines(wi, wo)
-        self._directions = {"wi": kept_wi, "wo": kept_wo, "cos_x": cos_x, "front": front, "terms": {}}
+        kinds = [kind for kind in YARN_KINDS if f"specular_{kind}" in need and
+                 any(uses_filament_moments(p, kind, self.quadrature) for p in resolved)]
+        rule = filament_rule(self.quadrature) if kinds else None
+        cos_x, front, kept, ok, moments = kernels.direction_set(wi, wo, *(rule or _NO_RULE), "warp" in kinds,
+                                                                "weft" in kinds)
+        self._directions = {"wi": kept[0], "wo": kept[1], "cos_x": cos_x, "front": front, "terms": {},
+                            "filament": {kind: (ok[j], moments[j]) for j, kind in enumerate(YARN_KINDS)
+                                         if kind in kinds}}
         return self._directions
 
     def _yarn_terms(self, wi, wo, kind, at: dict | None = None) -> YarnTerms:
@@ -211,7 +224,7 @@ class IrawanModel(Model):
         at = self._at(wi, wo) if at is None else at
         terms = at["terms"]
         if kind not in terms:  # from the kept copies: the terms' lazy parts are computed later
-            terms[kind] = yarn_terms(at["wi"], at["wo"], kind, self.quadrature)
+            terms[kind] = yarn_terms(at["wi"], at["wo"], kind, self.quadrature, at["filament"].get(kind))
         return terms[kind]
 
     def _integrals(self, wi, wo, resolved: list[dict], kind, at: dict | None = None) -> np.ndarray:
@@ -279,7 +292,7 @@ class IrawanModel(Model):
                 for message in geometry_warnings(p, self.weave.name, self.filament_arc):
                     warnings.warn(message, GeometryWarning, stacklevel=3)
         out = {}
-        at = self._at(wi, wo)
+        at = self._at(wi, wo, resolved, need)
         if "diffuse" in need:
             out["diffuse"] = np.repeat(np.where(at["front"], 1.0 / np.pi, 0.0)[None, :], len(resolved), axis=0)
         phase = None
