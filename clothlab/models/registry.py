@@ -23,9 +23,11 @@ MODEL_KINDS = {
 COMPOSITE_KINDS = {f"{s}+{d}": (s, d) for s in ("irawan", "kang") for d in ("lambert", "oren-nayar")}
 MODEL_KINDS.update({name: ("clothlab.models.composite.model", "composite_class") for name in COMPOSITE_KINDS})
 #: Physics options (clothlab.models.composite.terms, issue 28): name -> (base kind, term).
-TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",) for t in ("sheen", "fresnel", "fresnel-smith", "tilt")}
-#: terms over a term kind (issue 28 session 14): the sheen with the grazing Fresnel factor, and with the tilt
-TERM_KINDS.update({f"irawan+oren-nayar+sheen+{t}": ("irawan+oren-nayar+sheen", t) for t in ("fresnel", "tilt")})
+TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",)
+              for t in ("sheen", "fresnel", "fresnel-smith", "tilt", "retro")}
+#: terms over a term kind (issue 28 session 14): the sheen with the grazing Fresnel factor, the tilt, the retro
+TERM_KINDS.update({f"irawan+oren-nayar+sheen+{t}": ("irawan+oren-nayar+sheen", t)
+                   for t in ("fresnel", "tilt", "retro")})
 MODEL_KINDS.update({name: ("clothlab.models.composite.terms", "term_class") for name in TERM_KINDS})
 DEFAULT_KIND = "irawan"
 #: the kinds ``clothlab select`` tries unless select.kinds says otherwise: the IM yarn highlights over an

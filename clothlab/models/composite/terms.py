@@ -8,6 +8,9 @@
   Smith-GGX, Walter et al. 2007 eq. 34), parameters ``fresnel.eta`` (1.55) and ``smith.alpha`` (0: no
   shadowing), neither freed by default:   f_r = sum_{k specular} c_k F G B_k + sum_{k diffuse} c_k B_k.
 * ``<B>+fresnel-smith``: the same with ``smith.alpha`` (the shadowing-masking roughness) freed.
+* ``<B>+retro``: B's components plus the opposition (retro-reflection) surge of a fibre layer
+  (:mod:`clothlab.models.baselines.retro`), an extra linear component ``retro`` = B(g) / pi with its width
+  ``retro.h`` freed:   f_r = sum_k c_k B_k + c_retro B(g; h) / pi.
 * ``<B>+tilt``: B seen on a sample whose normal is tilted from the table's z axis
   (:mod:`clothlab.models.baselines.tilt`, its eq. 1), parameters ``tilt.x``, ``tilt.y`` (deg) freed:
   f_r = (n . wi) / cos theta_i sum_k c_k B_k(T^-1 wi, T^-1 wo).  The tilt is applied in the weave's frame (after
@@ -30,6 +33,7 @@ from typing import ClassVar
 import numpy as np
 
 from clothlab.models.base import Model, SetsTogetherModel, with_orientation
+from clothlab.models.baselines.retro import RETRO_FREE, RETRO_PARAMS, retro_lobe
 from clothlab.models.baselines.sheen import SHEEN_PARAMS, sheen_lobe
 from clothlab.models.baselines.tilt import TILT_FREE, TILT_PARAMS, to_sample_frame
 from clothlab.models.composite.model import union_table
@@ -41,6 +45,7 @@ TERMS = {
     "fresnel": (GRAZING_PARAMS, FRESNEL_FREE, ()),
     "fresnel-smith": (GRAZING_PARAMS, FRESNEL_SMITH_FREE, ()),
     "tilt": (TILT_PARAMS, TILT_FREE, ()),
+    "retro": (RETRO_PARAMS, RETRO_FREE, ("retro",)),
 }
 #: the terms that multiply the specular components by the grazing factor (the others add a component)
 FACTOR_TERMS = ("fresnel", "fresnel-smith")
@@ -50,8 +55,12 @@ FRAME_TERMS = ("tilt",)
 FULL_TURN = 360.0
 
 
+#: the components the terms add (none of them specular: the grazing factor leaves them alone)
+ADDED = frozenset(name for _, _, added in TERMS.values() for name in added)
+
+
 def _specular(name: str) -> bool:
-    return not name.startswith("diffuse") and name != "sheen"
+    return not name.startswith("diffuse") and name not in ADDED
 
 
 class TermModel(SetsTogetherModel):
@@ -101,6 +110,8 @@ class TermModel(SetsTogetherModel):
                                                  warn=warn))
         if self.term == "sheen" and "sheen" in need:
             out["sheen"] = np.stack([sheen_lobe(wi, wo, t["sheen.r"]) for _, t in parts])
+        elif self.term == "retro" and "retro" in need:
+            out["retro"] = np.stack([retro_lobe(wi, wo, t["retro.h"]) for _, t in parts])
         elif self.term in FACTOR_TERMS and any(_specular(n) for n in out):
             factor = np.stack([grazing_factor(wi, wo, t["fresnel.eta"], t["smith.alpha"]) for _, t in parts])
             out = {n: v * factor if _specular(n) else v for n, v in out.items()}
@@ -152,7 +163,8 @@ def term_class(kind: str, base_class: type, term: str) -> type:
     meaning = {"sheen": "; sheen: scale of the fibre sheen lobe (Estevez & Kulla 2017)",
                "fresnel": "; specular coefficients at normal incidence (the Fresnel factor is 1 there)",
                "fresnel-smith": "; specular coefficients at normal incidence (the grazing factor is 1 there)",
-               "tilt": "; of the tilted sample, in its own frame (tilt: the sample normal's tilt)"}[term]
+               "tilt": "; of the tilted sample, in its own frame (tilt: the sample normal's tilt)",
+               "retro": "; retro: scale of the opposition surge B(g) / pi (Hapke 1986)"}[term]
     frame = term in FRAME_TERMS
     return type(f"Term[{kind}]", (TermModel,), {
         "__module__": __name__,
