@@ -306,3 +306,21 @@ def test_kang_half_vector_groups_match_the_numpy_form():
         np.testing.assert_array_equal(reps, blocks[first])
         np.testing.assert_array_equal(got_inverse, inverse)
         assert len(reps) < len(blocks)  # the repeats were grouped
+
+
+@pytest.mark.parametrize("lobe", [(18.689868705498743, 0.7060601781416875, 0.6089381031985782, 0.45360949857258265),
+                                  (1.0, 30.0, 0.5, 0.3), (300.0, 2.0, 0.2, 0.6), (5.0, 5.0, 0.0, 0.4)])
+def test_kang_tile_average_loop_over_all_along_nodes_is_the_scalar_rule(lobe):
+    """The peak rule's compiled kernel, whose loop over a direction's along nodes runs vectorised (issue 27),
+    equals the same rule evaluated node by node in plain Python floats (its py_func), bit for bit: at
+    wool-gabardine's fitted lobe, the defaults, a sharp lobe and one without yarn curvature."""
+    from clothlab.models.kang import kernels
+    from clothlab.models.kang.model import PEAK_NODES, _gauss_legendre_table
+
+    wi, wo = _pairs(40, np.random.default_rng(14))
+    h, _, _ = kernels.direction_terms(wi, wo)
+    x_gl, w_gl = _gauss_legendre_table(PEAK_NODES)
+    args = (h, *lobe, x_gl, w_gl, PEAK_NODES)
+    compiled = kernels.peak_tile_average(*args)
+    np.testing.assert_array_equal(compiled, kernels.peak_tile_average.py_func(*args))
+    assert np.count_nonzero(compiled) > 30

@@ -56,9 +56,9 @@ NODES_BASE = 2
 NODES_PER_WIDTH_ALONG = 1.5
 NODES_PER_ALONG_SHIFT = 0.5
 NODES_PER_WIDTH_ACROSS = 2.0
-#: map of each axis (:func:`_mapped_rule`): tan (True) or sin
+#: map of the across axis (:func:`_mapped_rule`): tan (True) or sin; the along axis takes the sin map
+#: (:func:`_sin_map_nodes`, finished in :func:`peak_tile_average`'s loop over all along nodes)
 TAN_ACROSS = True
-TAN_ALONG = False
 #: the previous rule's constants (:func:`previous_peak_tile_average`): 2 + ceil(NODES_PER_WIDTH r +
 #: NODES_PER_CURVATURE c) per axis in dl / da.
 NODES_PER_WIDTH = 1.5
@@ -230,6 +230,30 @@ def _lit_across(hx, hy, hz, hyz, c_f):
     return (k * hx + hz * math.sqrt(a2 * r2 - k * k)) / a2
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _sin_map_nodes(centre, lam, lo, hi, count, gl_x, gl_w, node, f):
+    """:func:`_mapped_rule`'s sin map (``tan_map`` False, not ``plain``: the along axis) in two halves: here the
+    parts that do not need a square root per node - v = mid + half x_k and gl_w_k 2 half lam, with the piece's
+    centre, lam, lo, hi - written to columns f, ..., f + count - 1 of ``node`` (rows 0-5); the loop of
+    :func:`peak_tile_average` then forms x = clip(centre + lam v q, lo, hi) and the weight (gl_w 2 half lam) q^3,
+    q = 1 / sqrt(1 - v^2), for all along nodes of a direction at once.  Returns f + count."""
+    pa = lo - centre
+    pb = hi - centre
+    va = pa / math.sqrt(lam * lam + pa * pa)
+    vb = pb / math.sqrt(lam * lam + pb * pb)
+    half = 0.5 * (vb - va)
+    mid = 0.5 * (vb + va)
+    scale = 2.0 * half * lam
+    for k in range(count):
+        node[0, f + k] = mid + half * gl_x[count, k]
+        node[1, f + k] = gl_w[count, k] * scale
+        node[2, f + k] = centre
+        node[3, f + k] = lam
+        node[4, f + k] = lo
+        node[5, f + k] = hi
+    return f + count
+
+
 @njit(cache=True, error_model="numpy")
 def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
     """A(h) (N,) of the module docstring (1/sr, with the eq. 2 constant sqrt((nx+1)(ny+1)) / (2 pi)) for unit
@@ -245,8 +269,12 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
     wa = np.zeros(4 * most)
     xp = np.zeros(most)
     wp = np.zeros(most)
-    xl = np.zeros(2 * most)
-    wl = np.zeros(2 * most)
+    mode = np.zeros(4 * most, dtype=np.int64)  # per across node: 0 nothing lit, 1 one node (single), 2 along nodes
+    start = np.zeros(4 * most, dtype=np.int64)  # its along nodes in the flat block: [start, stop)
+    stop = np.zeros(4 * most, dtype=np.int64)
+    single = np.zeros(4 * most)
+    node = np.zeros((11, 8 * most * most))  # per along node: v, weight scale, centre, lam, lo, hi, s, h_x da, ...
+    res = np.zeros((3, 8 * most * most))  # per along node: the weight times ao d(dl) / dt (0: not lit), e, h.n_p
     root_nx = math.sqrt(max(nx, 1e-12))
     root_ny = math.sqrt(max(ny, 1e-12))
     delta = 0.0
@@ -303,8 +331,12 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                 _mapped_rule(mu_a, LAM_WIDTHS * sigma_a, lo_a, c_y, count_a, True, TAN_ACROSS, gl_x, gl_w, xa, wa)
                 for a in range(count_a):
                     wa[a] /= 2.0 * c_y  # mean over [-c_y, c_y]
-        acc = 0.0
+        # --- per across node: the along range and its nodes (the parts without a square root per node), into
+        # the flat block `node`; then one branch-free loop over all of the direction's along nodes (it
+        # vectorises: the square root and three divisions per node), then exp / log in the order of the nodes
+        n_flat = 0
         for a in range(count_a):
+            mode[a] = 0
             da = xa[a]
             s = math.sqrt(1.0 - da * da)
             hxda = hx * da
@@ -317,7 +349,8 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                     tx = hxs - das * cz  # h.t
                     sin2 = tx * tx + hy * hy  # h.b = h_y
                     e = (nx * tx * tx + ny * hy * hy) / sin2 if sin2 > 1e-300 else 0.0
-                    acc += wa[a] * s * math.exp(e * math.log(cz))  # eq. 2: (h.n)^e, times ao (sec. 4.2.2)
+                    mode[a] = 1
+                    single[a] = wa[a] * s * math.exp(e * math.log(cz))  # eq. 2: (h.n)^e, times ao (sec. 4.2.2)
                 continue
             # --- along: n_p = (da, s sin beta, s cos beta), beta = beta0 + psi, t = tan(psi / 2) (rational
             # sin psi, cos psi); dl = s sin beta in [-c_f, c_f] and h.n_p = h_x da + s hyz cos psi > 0
@@ -346,16 +379,12 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                     if sin_x > 0.0 and math.asin(sin_x) > LAM_WIDTHS * sigma_x and sigma_x < sigma_t:
                         t_x = sin_x / (1.0 + cos_x)  # tan(psi_x / 2)
                         sigma_x *= 1.0 + t_x * t_x  # dt = (1 + t^2) / 2 d(psi)
+            first = n_flat
             if t_x > 0.0 and t_lo < 0.0 < t_hi:
-                count_l = 0
                 for piece in range(2):
                     p0, p1, centre = (t_lo, 0.0, -t_x) if piece == 0 else (0.0, t_hi, t_x)
                     count = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * 0.5 * (p1 - p0) / sigma_x)))
-                    _mapped_rule(centre, LAM_WIDTHS * sigma_x, p0, p1, count, False, TAN_ALONG, gl_x, gl_w, xp, wp)
-                    for k in range(count):
-                        xl[count_l + k] = xp[k]
-                        wl[count_l + k] = wp[k]
-                    count_l += count
+                    n_flat = _sin_map_nodes(centre, LAM_WIDTHS * sigma_x, p0, p1, count, gl_x, gl_w, node, n_flat)
             else:
                 # h.t = h_x s - da hyz cos psi varies along too: by da hyz (1 - cos psi) over the range, which
                 # the across exponent nx turns into sqrt(nx) x that lobe widths (nx >> ny: the lobe's shape)
@@ -363,26 +392,51 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                 sweep = root_nx * abs(da) * hyz * 2.0 * t_m * t_m / (1.0 + t_m * t_m)
                 count_l = min(most, NODES_BASE + int(math.ceil(NODES_PER_WIDTH_ALONG * (0.5 * (t_hi - t_lo)
                                                                                         / sigma_t + sweep))))
-                _mapped_rule(0.0, min(LAM_WIDTHS * sigma_t, 1.0), t_lo, t_hi, count_l, False, TAN_ALONG, gl_x, gl_w,
-                             xl, wl)
+                n_flat = _sin_map_nodes(0.0, min(LAM_WIDTHS * sigma_t, 1.0), t_lo, t_hi, count_l, gl_x, gl_w, node,
+                                        n_flat)
             hyz_s = hyz * s
-            inner = 0.0
-            for b in range(count_l):
-                t = xl[b]
-                u = 1.0 / (1.0 + t * t)
-                cos_p = (1.0 - t * t) * u
-                sin_p = 2.0 * t * u
-                nz = s * (cb * cos_p - sb * sin_p)  # n_p.z = s cos beta = ao (sec. 4.2.2)
-                cz = hxda + hyz_s * cos_p  # h.n_p
-                if cz <= 0.0 or nz <= 0.0:
-                    continue
-                tx = hxs - das * cz  # h.t
-                ty = hyz * sin_p  # |h.b|
-                sin2 = tx * tx + ty * ty
-                e = (nx * tx * tx + ny * ty * ty) / sin2 if sin2 > 1e-300 else 0.0  # eq. 2 exponent
-                # ao p d(dl) = nz * (h.n_p)^e * nz d(psi), d(psi) = 2 u dt
-                inner += wl[b] * nz * nz * 2.0 * u * math.exp(e * math.log(cz))
-            acc += wa[a] * inner / (2.0 * c_f)  # mean over [-c_f, c_f]
+            for f in range(first, n_flat):  # the across node's terms, for the loop over the flat block
+                node[6, f] = s
+                node[7, f] = hxda
+                node[8, f] = hyz_s
+                node[9, f] = hxs
+                node[10, f] = das
+            mode[a] = 2
+            start[a] = first
+            stop[a] = n_flat
+        v_, ws_, cen_, lam_, lo_, hi_ = node[0], node[1], node[2], node[3], node[4], node[5]
+        s_, hxda_, hyzs_, hxs_, das_ = node[6], node[7], node[8], node[9], node[10]
+        pre_, e_, cz_ = res[0], res[1], res[2]
+        for f in range(n_flat):  # branch-free (selects), so it vectorises; each node's arithmetic as before
+            v = v_[f]
+            q = 1.0 / math.sqrt(1.0 - v * v)
+            t = min(max(cen_[f] + lam_[f] * v * q, lo_[f]), hi_[f])  # _mapped_rule's sin map: the node
+            w = ws_[f] * q * q * q  # and its weight, dx = lam q^3 dv
+            u = 1.0 / (1.0 + t * t)
+            cos_p = (1.0 - t * t) * u
+            sin_p = 2.0 * t * u
+            nz = s_[f] * (cb * cos_p - sb * sin_p)  # n_p.z = s cos beta = ao (sec. 4.2.2)
+            cz = hxda_[f] + hyzs_[f] * cos_p  # h.n_p
+            tx = hxs_[f] - das_[f] * cz  # h.t
+            ty = hyz * sin_p  # |h.b|
+            sin2 = tx * tx + ty * ty
+            e = (nx * tx * tx + ny * ty * ty) / sin2
+            e_[f] = e if sin2 > 1e-300 else 0.0  # eq. 2 exponent
+            cz_[f] = cz
+            # ao p d(dl) = nz * (h.n_p)^e * nz d(psi), d(psi) = 2 u dt; 0 marks a node that is not lit (a lit
+            # node's factor is > 0, and adding 0.0 would not change a sum of positive terms anyway)
+            pre = w * nz * nz * 2.0 * u
+            pre_[f] = 0.0 if (cz <= 0.0 or nz <= 0.0) else pre
+        acc = 0.0
+        for a in range(count_a):  # the across nodes' sums in their order, each over its along nodes in order
+            if mode[a] == 1:
+                acc += single[a]
+            elif mode[a] == 2:
+                inner = 0.0
+                for f in range(start[a], stop[a]):
+                    if pre_[f] != 0.0:
+                        inner += pre_[f] * math.exp(e_[f] * math.log(cz_[f]))  # eq. 2: (h.n)^e
+                acc += wa[a] * inner / (2.0 * c_f)  # mean over [-c_f, c_f]
         out[i] = scale * acc
     return out
 
@@ -433,21 +487,32 @@ def direction_terms(wi, wo):
     (|h_y|, |h_x|, h_z)), and k.h, k1.n, k2.n do not change under that rotation, so m5 and inv_denom are the
     same for both yarn types."""
     n = wi.shape[0]
-    h = np.zeros((n, 3))
-    m5 = np.zeros(n)
-    inv_denom = np.zeros(n)
+    h = np.empty((n, 3))
+    m5 = np.empty(n)
+    inv_denom = np.empty(n)
+    columns = np.empty((9, n))  # wi, wo and |h| by component: the loop on contiguous columns vectorises
     for i in range(n):
-        sx, sy, sz = wi[i, 0] + wo[i, 0], wi[i, 1] + wo[i, 1], wi[i, 2] + wo[i, 2]
+        columns[0, i], columns[1, i], columns[2, i] = wi[i, 0], wi[i, 1], wi[i, 2]
+        columns[3, i], columns[4, i], columns[5, i] = wo[i, 0], wo[i, 1], wo[i, 2]
+    ix, iy, iz, ox, oy, oz, ax, ay, az = (columns[0], columns[1], columns[2], columns[3], columns[4], columns[5],
+                                          columns[6], columns[7], columns[8])
+    for i in range(n):  # branch-free (selects)
+        sx, sy, sz = ix[i] + ox[i], iy[i] + oy[i], iz[i] + oz[i]
         norm = math.sqrt(sx * sx + sy * sy + sz * sz)
-        hx, hy, hz = (sx / norm, sy / norm, sz / norm) if norm > 0.0 else (0.0, 0.0, 0.0)
-        h[i, 0], h[i, 1], h[i, 2] = abs(hx), abs(hy), abs(hz)
-        cos_kh = wi[i, 0] * hx + wi[i, 1] * hy + wi[i, 2] * hz
+        positive = norm > 0.0
+        hx = sx / norm if positive else 0.0
+        hy = sy / norm if positive else 0.0
+        hz = sz / norm if positive else 0.0
+        ax[i], ay[i], az[i] = abs(hx), abs(hy), abs(hz)
+        cos_kh = ix[i] * hx + iy[i] * hy + iz[i] * hz
         c = min(max(cos_kh, 0.0), 1.0)
         m = 1.0 - c
         m5[i] = m * m * m * m * m  # Schlick's (1 - k.h)^5
-        denom = 4.0 * cos_kh * max(wi[i, 2], wo[i, 2])
-        lit = wi[i, 2] > 0.0 and wo[i, 2] > 0.0 and cos_kh > 0.0 and denom > 0.0
+        denom = 4.0 * cos_kh * max(iz[i], oz[i])
+        lit = (iz[i] > 0.0) & (oz[i] > 0.0) & (cos_kh > 0.0) & (denom > 0.0)
         inv_denom[i] = 1.0 / denom if lit else 0.0
+    for i in range(n):
+        h[i, 0], h[i, 1], h[i, 2] = ax[i], ay[i], az[i]
     return h, m5, inv_denom
 
 
