@@ -55,13 +55,14 @@ def pixel_values(fabric, network, choice: dict, centre, size, wi, wo, counter, s
     from clothlab.surrogate.estimator_choice import estimator_at
     from clothlab.surrogate.labels import TextureMonteCarloLabels
 
-    index, samples = estimator_at(choice, size)
-    kinds = np.array([b["estimator"] for b in choice["bins"]])[index]
+    index, _ = estimator_at(choice, size)
+    keys = [(b["estimator"], int(b.get("samples") or 0)) for b in choice["bins"]]  # per bin (estimator, k)
+    used = np.unique(index)
     out = np.zeros((len(size), len(fabric.channels)))
     names = fabric.texture.component_names
     known = np.zeros(len(size), dtype=bool) if steps is None else np.isfinite(steps).all(axis=(1, 2))
-    for kind, k in sorted({(str(e), int(n)) for e, n in zip(kinds, samples, strict=True)}):
-        sel = np.flatnonzero((kinds == kind) & (samples == k))
+    for kind, k in sorted({keys[i] for i in used}):
+        sel = np.flatnonzero(np.isin(index, [i for i in used if keys[i] == (kind, k)]))
         # a footprint beyond the data's range (grazing differentials: up to inf) is answered at its largest
         c, s, a, b = centre[sel], np.clip(size[sel], MIN_SIZE, MAX_SIZE), wi[sel], wo[sel]
         if kind == "mc":
