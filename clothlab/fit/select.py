@@ -319,6 +319,8 @@ def candidate_config(config, candidate: Candidate, *, max_evals: int, cv_folds: 
         free.append(ORIENTATION)
         half = 0.5 * table[ORIENTATION].period
         params[ORIENTATION] = float(orientation)
+        if params[ORIENTATION] + half > table[ORIENTATION].valid[1]:  # a full-turn kind's scan start above 180
+            params[ORIENTATION] -= 2.0 * half  # one period down: the same orientation, its box inside [-360, 360]
         bounds[ORIENTATION] = (params[ORIENTATION] - half, params[ORIENTATION] + half)
     if start:
         params.update({k: float(v) for k, v in start.items() if k in free})

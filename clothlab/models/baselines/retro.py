@@ -21,7 +21,7 @@ surge).  The equation number is not given: the paper is not in /work/shared/pape
 ==========  ====  ===========  =======  ==========================================================
 parameter   unit  range        default  meaning
 ==========  ====  ===========  =======  ==========================================================
-retro.h     1     [0.005, 5]   0.2      angular width h of the opposition surge (fit bounds 0.01-2)
+retro.h     1     [0.001, 10]  0.2      angular width h of the opposition surge (fit bounds 0.01-2)
 ==========  ====  ===========  =======  ==========================================================
 """
 
@@ -33,7 +33,7 @@ from clothlab.models.base import front_facing
 from clothlab.params import ParamSpec, ParamTable
 
 RETRO_PARAMS = ParamTable([
-    ParamSpec("retro.h", "1", (0.005, 5.0), (0.01, 2.0), 0.2, "log",
+    ParamSpec("retro.h", "1", (0.001, 10.0), (0.01, 2.0), 0.2, "log",
               "angular width h of the shadow-hiding opposition surge B(g) = 1 / (1 + tan(g/2) / h) (Hapke 1986)"),
 ])
 RETRO_FREE = ("retro.h",)
