@@ -200,7 +200,7 @@ class IrawanModel(Model):
         It is used only if the directions' *contents* equal the copies it keeps (not their identity), so
         directions changed in place, or new arrays at a reused address, never return stale values (nor a
         stale memo).  A new set's filament moments are made in the same compiled call for the segment types
-        that one of ``resolved`` (the call's parameter sets) takes on the filament path, with ``need``
+        in ``need`` that the first of ``resolved`` (the call's parameter sets) takes on the filament path
         (:func:`.integrals.uses_filament_moments`); the others' when first needed."""
         import clothlab.models.irawan.kernels as kernels  # (numba: imported with the first evaluation)
 
@@ -208,14 +208,22 @@ class IrawanModel(Model):
         if d is not None and kernels.same_pairs(d["wi"], d["wo"], wi, wo):  # one compiled pass
             return d
         self._memo.clear()
-        kinds = [kind for kind in YARN_KINDS if f"specular_{kind}" in need and
-                 any(uses_filament_moments(p, kind, self.quadrature) for p in resolved)]
-        rule = filament_rule(self.quadrature) if kinds else None
-        cos_x, front, kept, ok, moments = kernels.direction_set(wi, wo, *(rule or _NO_RULE), "warp" in kinds,
-                                                                "weft" in kinds)
+        first = resolved[0] if resolved else None  # (a batch's sets share their paths, as a rule)
+        warp = first is not None and "specular_warp" in need and uses_filament_moments(first, "warp",
+                                                                                        self.quadrature)
+        weft = first is not None and "specular_weft" in need and uses_filament_moments(first, "weft",
+                                                                                        self.quadrature)
+        rule = filament_rule(self.quadrature) if warp or weft else None
+        if rule is None:
+            warp = weft = False
+        cos_x, front, kept, ok, moments = kernels.direction_set(wi, wo, *(rule or _NO_RULE), warp, weft)
+        filament = {}
+        if warp:
+            filament["warp"] = (ok[0], moments[0])
+        if weft:
+            filament["weft"] = (ok[1], moments[1])
         self._directions = {"wi": kept[0], "wo": kept[1], "cos_x": cos_x, "front": front, "terms": {},
-                            "filament": {kind: (ok[j], moments[j]) for j, kind in enumerate(YARN_KINDS)
-                                         if kind in kinds}}
+                            "filament": filament}
         return self._directions
 
     def _yarn_terms(self, wi, wo, kind, at: dict | None = None) -> YarnTerms:
