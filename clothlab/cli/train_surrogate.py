@@ -73,6 +73,9 @@ def add_parser(sub):
                    help="give the decoder the noise-free texture at the N x N midpoints of each footprint (N = 1: its "
                         "centre) as an input, which locates the yarn highlights in small footprints; each query then "
                         "costs N^2 texture evaluations more (default 0: none, as the paper)")
+    p.add_argument("--mirror-share", type=number_type(0.0, 0.95), default=0.0, metavar="F",
+                   help="draw wo near the mirror direction of wi (within 0.3 in x, y) for this share of the labelled "
+                        "rows, where the yarn highlights are; evaluation pairs stay uniform (default 0: Table 2)")
     p.add_argument("--reciprocal", action="store_true",
                    help="train on each eligible row with wi and wo swapped half the time (Helmholtz reciprocity: the "
                         "same label), never on a held-out direction pair; needs a reciprocal model (checked) "
@@ -301,7 +304,8 @@ def _run(args, held, lines: list[str]) -> int:
                           field="--resume")
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(record, described.encode())
-    data_spec = DataSpec(pairs=args.pairs, seed=args.seed, small_sizes=args.small_sizes, row_centres=args.row_centres)
+    data_spec = DataSpec(pairs=args.pairs, seed=args.seed, small_sizes=args.small_sizes, row_centres=args.row_centres,
+                         mirror_share=args.mirror_share)
     from clothlab.cli.options import parallel_requested, runner_of
 
     with runner_of(args) if parallel_requested(args) else contextlib.nullcontext() as runner:
