@@ -322,5 +322,7 @@ def test_kang_tile_average_loop_over_all_along_nodes_is_the_scalar_rule(lobe):
     x_gl, w_gl = _gauss_legendre_table(PEAK_NODES)
     args = (h, *lobe, x_gl, w_gl, PEAK_NODES)
     compiled = kernels.peak_tile_average(*args)
-    np.testing.assert_array_equal(compiled, kernels.peak_tile_average.py_func(*args))
+    with np.errstate(all="ignore"):  # the kernel's numpy error model: IEEE results where a lane is not used
+        scalar = kernels.peak_tile_average.py_func(*args)
+    np.testing.assert_array_equal(compiled, scalar)
     assert np.count_nonzero(compiled) > 30
