@@ -231,6 +231,29 @@ def _lit_across(hx, hy, hz, hyz, c_f):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _across_terms(da, hx, hyz, cb, sb, c_f, root_nx):
+    """The terms of :func:`peak_tile_average` at across node da that need square roots and divisions, without
+    branches: (s, h_x da, h_x / s, da / s, t_hi, t_lo, kappa, tan(acos kappa / 2), cos psi_x, sin psi_x,
+    sigma_x); the rule uses each only where it applies (the clamps change nothing there)."""
+    s = math.sqrt(1.0 - da * da)
+    hxda = hx * da
+    # along: n_p = (da, s sin beta, s cos beta), beta = beta0 + psi, t = tan(psi / 2) (rational sin psi, cos psi);
+    # dl = s sin beta in [-c_f, c_f] and h.n_p = h_x da + s hyz cos psi > 0
+    sin_b = c_f / s
+    cos_b = math.sqrt(1.0 - sin_b * sin_b)
+    t_hi = (sin_b * cb - cos_b * sb) / (1.0 + cos_b * cb + sin_b * sb)  # tan((B - beta0) / 2)
+    t_lo = -(sin_b * cb + cos_b * sb) / (1.0 + cos_b * cb - sin_b * sb)  # tan((-B - beta0) / 2)
+    kappa = -hxda / (s * hyz)  # cos psi > kappa is the lit part
+    t_lit = math.sqrt(max(1.0 - kappa * kappa, 0.0)) / (1.0 + kappa)  # tan(acos(kappa) / 2), for |kappa| < 1
+    # h.t = 0 where h.n_p = h_x / da (da > 0): with nx > ny the lobe peaks there, at psi = +-psi_x,
+    # cos psi_x = h_x s / (da hyz) - two peaks, width 1 / (sqrt(nx) da hyz sin psi_x) (for 0 <= cos psi_x < 1)
+    cos_x = hx * s / (da * hyz)
+    sin_x = math.sqrt(max(1.0 - cos_x * cos_x, 0.0))
+    sigma_x = 0.5 / (root_nx * da * hyz * sin_x)  # in psi / 2
+    return s, hxda, hx / s, da / s, t_hi, t_lo, kappa, t_lit, cos_x, sin_x, sigma_x
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _sin_map_nodes(centre, lam, lo, hi, count, gl_x, gl_w, node, f):
     """:func:`_mapped_rule`'s sin map (``tan_map`` False, not ``plain``: the along axis) in two halves: here the
     parts that do not need a square root per node - v = mid + half x_k and gl_w_k 2 half lam, with the piece's
@@ -269,15 +292,15 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
     wa = np.zeros(4 * most)
     xp = np.zeros(most)
     wp = np.zeros(most)
-    mode = np.zeros(4 * most, dtype=np.int64)  # per across node: 0 nothing lit, 1 one node (single), 2 along nodes
-    start = np.zeros(4 * most, dtype=np.int64)  # its along nodes in the flat block: [start, stop)
-    stop = np.zeros(4 * most, dtype=np.int64)
-    single = np.zeros(4 * most)
-    across = np.zeros((11, 4 * most))  # per across node: s, h_x da, h_x / s, da / s, the along range's ends, ...
+    mode = np.empty(4 * most, dtype=np.int64)  # per across node: 0 nothing lit, 1 one node (single), 2 along nodes
+    start = np.empty(4 * most, dtype=np.int64)  # its along nodes in the flat block: [start, stop)
+    stop = np.empty(4 * most, dtype=np.int64)
+    single = np.empty(4 * most)
+    across = np.empty((11, 4 * most))  # per across node: s, h_x da, h_x / s, da / s, the along range's ends, ...
     a_s, a_hxda, a_hxs, a_das, a_thi, a_tlo = across[0], across[1], across[2], across[3], across[4], across[5]
     a_kappa, a_tlit, a_cosx, a_sinx, a_sigx = across[6], across[7], across[8], across[9], across[10]
-    node = np.zeros((11, 8 * most * most))  # per along node: v, weight scale, centre, lam, lo, hi, s, h_x da, ...
-    res = np.zeros((3, 8 * most * most))  # per along node: the weight times ao d(dl) / dt (0: not lit), e, h.n_p
+    node = np.empty((11, 8 * most * most))  # per along node: v, weight scale, centre, lam, lo, hi, s, h_x da, ...
+    res = np.empty((3, 8 * most * most))  # per along node: the weight times ao d(dl) / dt (0: not lit), e, h.n_p
     root_nx = math.sqrt(max(nx, 1e-12))
     root_ny = math.sqrt(max(ny, 1e-12))
     delta = 0.0
@@ -337,39 +360,37 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
         # --- per across node: the along range and its nodes (the parts without a square root per node), into
         # the flat block `node`; then one branch-free loop over all of the direction's along nodes (it
         # vectorises: the square root and three divisions per node), then exp / log in the order of the nodes
-        for a in range(count_a):  # branch-free: the across nodes' square roots and divisions, vectorised
-            da = xa[a]
-            s = math.sqrt(1.0 - da * da)
-            hxda = hx * da
-            sin_b = c_f / s
-            cos_b = math.sqrt(1.0 - sin_b * sin_b)
-            kappa = -hxda / (s * hyz)  # cos psi > kappa is the lit part
-            cos_x = hx * s / (da * hyz)
-            sin_x = math.sqrt(max(1.0 - cos_x * cos_x, 0.0))  # used where 0 <= cos_x < 1
-            a_s[a] = s
-            a_hxda[a] = hxda
-            a_hxs[a] = hx / s
-            a_das[a] = da / s
-            # along: n_p = (da, s sin beta, s cos beta), beta = beta0 + psi, t = tan(psi / 2) (rational sin psi,
-            # cos psi); dl = s sin beta in [-c_f, c_f] and h.n_p = h_x da + s hyz cos psi > 0
-            a_thi[a] = (sin_b * cb - cos_b * sb) / (1.0 + cos_b * cb + sin_b * sb)  # tan((B - beta0) / 2)
-            a_tlo[a] = -(sin_b * cb + cos_b * sb) / (1.0 + cos_b * cb - sin_b * sb)  # tan((-B - beta0) / 2)
-            a_kappa[a] = kappa
-            # tan(acos(kappa) / 2), used where |kappa| < 1 (there the clamp changes nothing)
-            a_tlit[a] = math.sqrt(max(1.0 - kappa * kappa, 0.0)) / (1.0 + kappa)
-            # h.t = 0 where h.n_p = h_x / da (da > 0): with nx > ny the lobe peaks there, at psi = +-psi_x,
-            # cos psi_x = h_x s / (da hyz) - two peaks, width 1 / (sqrt(nx) da hyz sin psi_x) (used below if so)
-            a_cosx[a] = cos_x
-            a_sinx[a] = sin_x
-            a_sigx[a] = 0.5 / (root_nx * da * hyz * sin_x)  # in psi / 2
+        # every across node has along nodes where c_f >= R_SINGLE: their terms in one loop, which vectorises
+        # (for a few across nodes, made one by one below)
+        ahead = c_f >= R_SINGLE and count_a >= 4
+        if ahead:
+            for a in range(count_a):
+                s, hxda, hxs, das, t_hi, t_lo, kappa, t_lit, cos_x, sin_x, sigma_x = _across_terms(
+                    xa[a], hx, hyz, cb, sb, c_f, root_nx)
+                a_s[a] = s
+                a_hxda[a] = hxda
+                a_hxs[a] = hxs
+                a_das[a] = das
+                a_thi[a] = t_hi
+                a_tlo[a] = t_lo
+                a_kappa[a] = kappa
+                a_tlit[a] = t_lit
+                a_cosx[a] = cos_x
+                a_sinx[a] = sin_x
+                a_sigx[a] = sigma_x
         n_flat = 0
         for a in range(count_a):
             mode[a] = 0
             da = xa[a]
-            s = a_s[a]
-            hxda = a_hxda[a]
-            hxs = a_hxs[a]
-            das = a_das[a]
+            if ahead:
+                s, hxda, hxs, das, t_hi, t_lo, kappa, t_lit, cos_x, sin_x, sigma_x = (
+                    a_s[a], a_hxda[a], a_hxs[a], a_das[a], a_thi[a], a_tlo[a], a_kappa[a], a_tlit[a], a_cosx[a],
+                    a_sinx[a], a_sigx[a])
+            else:
+                s = math.sqrt(1.0 - da * da)
+                hxda = hx * da
+                hxs = hx / s
+                das = da / s
             if c_f < R_SINGLE and c_f * hyz * hyz * root_ny < R_SINGLE * hz * s:
                 # one node dl = 0 (eqs. 3-4 with delta_along = 0): n_p = (da, 0, s), ao = s
                 cz = hxda + hz * s
@@ -380,13 +401,12 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
                     mode[a] = 1
                     single[a] = wa[a] * s * math.exp(e * math.log(cz))  # eq. 2: (h.n)^e, times ao (sec. 4.2.2)
                 continue
-            t_hi = a_thi[a]
-            t_lo = a_tlo[a]
-            kappa = a_kappa[a]
+            if not ahead:  # (the same values as made ahead)
+                s, hxda, hxs, das, t_hi, t_lo, kappa, t_lit, cos_x, sin_x, sigma_x = _across_terms(
+                    da, hx, hyz, cb, sb, c_f, root_nx)
             if kappa >= 1.0:
                 continue
             if kappa > -1.0:
-                t_lit = a_tlit[a]
                 t_lo = max(t_lo, -t_lit)
                 t_hi = min(t_hi, t_lit)
                 if t_hi <= t_lo:
@@ -394,10 +414,7 @@ def peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
             sigma_t = 0.5 / (hyz * root_ny)  # the lobe exp(-ny hyz^2 psi^2 / 2) in t ~ psi / 2
             t_x = 0.0  # the two peaks at +-psi_x (above): split at t = 0 where they are sharper than the range
             if nx > ny and da > 0.0 and hx > 0.0:
-                cos_x = a_cosx[a]
                 if kappa < cos_x < 1.0:
-                    sin_x = a_sinx[a]
-                    sigma_x = a_sigx[a]
                     if sin_x > 0.0 and math.asin(sin_x) > LAM_WIDTHS * sigma_x and sigma_x < sigma_t:
                         t_x = sin_x / (1.0 + cos_x)  # tan(psi_x / 2)
                         sigma_x *= 1.0 + t_x * t_x  # dt = (1 + t^2) / 2 d(psi)
