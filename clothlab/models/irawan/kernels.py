@@ -815,10 +815,10 @@ def direction_set(wi, wo, nodes, weights, on_arc, warp, weft):
     fabric-frame pairs: -wi . wo, the argument of eq. 7's lobe; whether both directions are above the surface
     (wi_z > 0 and wo_z > 0); copies of wi and wo, the direction set a model keeps to recognise it
     (:func:`same_pairs`); and, for the segment types asked for (``warp``, ``weft``; the other's rows are left
-    unset, and ok and moments have no rows when neither is asked for), the filament moments of :func:`filament_moments` (row 0 the warp's, row 1 the weft's).  The input
-    is read once and both yarn types' moments come from the same columns (the weft frame (-y, x, z) is the
-    warp's with the columns swapped and x negated), so a filament parameter set's new directions cost one
-    call instead of three (issue 27)."""
+    unset, and ok and moments have no rows when neither is asked for), the filament moments of
+    :func:`filament_moments` (row 0 the warp's, row 1 the weft's).  The input is read once and both yarn types'
+    moments come from the same columns (the weft frame (-y, x, z) is the warp's with the columns swapped and x
+    negated), so a filament parameter set's new directions cost one call instead of three (issue 27)."""
     n_dir = wi.shape[0]
     cos_x = np.empty(n_dir)
     front = np.empty(n_dir, dtype=np.bool_)
