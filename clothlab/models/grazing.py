@@ -18,7 +18,8 @@ refraction through rough surfaces", EGSR, eq. 34), separable in the two directio
 for the fabric's surface of yarn crowns seen as a rough surface of RMS slope ~ alpha (alpha = 0: G = 1).  IM
 sec. 7.1 ignores shadowing and masking; their Fig. 14 shows the darkening it causes on denim at grazing view.
 
-By default ``smith.alpha`` is 0 (no shadowing: Fresnel alone); kinds ``...+fresnel-smith`` free it.  The factor
+By default ``smith.alpha`` is 0 (no shadowing: Fresnel alone); kinds ``...+fresnel-smith`` free it, kinds
+``...+fresnel-eta`` free ``fresnel.eta`` instead.  The factor
 applied to a specular component is F(wi . h) / F0 * G(wi, wo): 1 at normal incidence on a smooth
 surface, so a coefficient keeps its meaning there (F0 taken out: the absolute scale is the coefficient's).
 Both factors are symmetric in wi, wo, so a reciprocal model stays reciprocal.
@@ -47,6 +48,8 @@ GRAZING_PARAMS = ParamTable([
 #: shadowing: smith.alpha 0); the shadowing roughness for Fresnel with shadowing-masking
 FRESNEL_FREE = ()
 FRESNEL_SMITH_FREE = ("smith.alpha",)
+#: the refractive index freed (kinds ``...+fresnel-eta``: the grazing rise's strength fitted, docs/select.md)
+FRESNEL_ETA_FREE = ("fresnel.eta",)
 
 
 def schlick_fresnel(cos_d: np.ndarray, eta: float) -> np.ndarray:

@@ -28,7 +28,9 @@ TERM_KINDS = {f"{b}+{t}": (b, t) for b in ("irawan+oren-nayar",)
 #: terms over a term kind (issue 28 session 14): the sheen with the grazing Fresnel factor, the tilt, the retro
 TERM_KINDS.update({f"irawan+oren-nayar+sheen+{t}": ("irawan+oren-nayar+sheen", t)
                    for t in ("fresnel", "tilt", "retro")})
-TERM_KINDS["irawan+oren-nayar+sheen+retro+fresnel"] = ("irawan+oren-nayar+sheen+retro", "fresnel")
+TERM_KINDS.update({f"irawan+oren-nayar+sheen+retro+{t}": ("irawan+oren-nayar+sheen+retro", t)
+                   for t in ("fresnel", "fresnel-eta")})
+TERM_KINDS["irawan+oren-nayar+sheen+fresnel-eta"] = ("irawan+oren-nayar+sheen", "fresnel-eta")
 MODEL_KINDS.update({name: ("clothlab.models.composite.terms", "term_class") for name in TERM_KINDS})
 DEFAULT_KIND = "irawan"
 #: the kinds ``clothlab select`` tries unless select.kinds says otherwise: the IM yarn highlights over an

@@ -7,7 +7,8 @@
   grazing factor F(wi . h) / F0 * G1(wi) G1(wo) of :mod:`clothlab.models.grazing` (Schlick 1994 eq. 24;
   Smith-GGX, Walter et al. 2007 eq. 34), parameters ``fresnel.eta`` (1.55) and ``smith.alpha`` (0: no
   shadowing), neither freed by default:   f_r = sum_{k specular} c_k F G B_k + sum_{k diffuse} c_k B_k.
-* ``<B>+fresnel-smith``: the same with ``smith.alpha`` (the shadowing-masking roughness) freed.
+* ``<B>+fresnel-smith``: the same with ``smith.alpha`` (the shadowing-masking roughness) freed;
+  ``<B>+fresnel-eta``: with ``fresnel.eta`` (the strength of the grazing rise) freed.
 * ``<B>+retro``: B's components plus the opposition (retro-reflection) surge of a fibre layer
   (:mod:`clothlab.models.baselines.retro`), an extra linear component ``retro`` = B(g) / pi with its width
   ``retro.h`` freed:   f_r = sum_k c_k B_k + c_retro B(g; h) / pi.
@@ -37,18 +38,19 @@ from clothlab.models.baselines.retro import RETRO_FREE, RETRO_PARAMS, retro_lobe
 from clothlab.models.baselines.sheen import SHEEN_PARAMS, sheen_lobe
 from clothlab.models.baselines.tilt import TILT_FREE, TILT_PARAMS, to_sample_frame
 from clothlab.models.composite.model import union_table
-from clothlab.models.grazing import FRESNEL_FREE, FRESNEL_SMITH_FREE, GRAZING_PARAMS, grazing_factor
+from clothlab.models.grazing import FRESNEL_ETA_FREE, FRESNEL_FREE, FRESNEL_SMITH_FREE, GRAZING_PARAMS, grazing_factor
 
 #: term name -> (its parameter declarations, its default free parameters, its added components)
 TERMS = {
     "sheen": (SHEEN_PARAMS, ("sheen.r",), ("sheen",)),
     "fresnel": (GRAZING_PARAMS, FRESNEL_FREE, ()),
     "fresnel-smith": (GRAZING_PARAMS, FRESNEL_SMITH_FREE, ()),
+    "fresnel-eta": (GRAZING_PARAMS, FRESNEL_ETA_FREE, ()),
     "tilt": (TILT_PARAMS, TILT_FREE, ()),
     "retro": (RETRO_PARAMS, RETRO_FREE, ("retro",)),
 }
 #: the terms that multiply the specular components by the grazing factor (the others add a component)
-FACTOR_TERMS = ("fresnel", "fresnel-smith")
+FACTOR_TERMS = ("fresnel", "fresnel-smith", "fresnel-eta")
 #: the terms that change the directions B is evaluated at (the tilted sample frame) and scale every component
 FRAME_TERMS = ("tilt",)
 #: a full turn: the orientation period of B with a term that is fixed in the weave's frame but not symmetric
@@ -163,6 +165,7 @@ def term_class(kind: str, base_class: type, term: str) -> type:
     meaning = {"sheen": "; sheen: scale of the fibre sheen lobe (Estevez & Kulla 2017)",
                "fresnel": "; specular coefficients at normal incidence (the Fresnel factor is 1 there)",
                "fresnel-smith": "; specular coefficients at normal incidence (the grazing factor is 1 there)",
+               "fresnel-eta": "; specular coefficients at normal incidence (the Fresnel factor is 1 there)",
                "tilt": "; of the tilted sample, in its own frame (tilt: the sample normal's tilt)",
                "retro": "; retro: scale of the opposition surge B(g) / pi (Hapke 1986)"}[term]
     frame = term in FRAME_TERMS
