@@ -262,3 +262,23 @@ def test_a_refractive_index_of_the_grazing_rise_is_recovered(tmp_path):
     result = run_fit(config)
     assert result.params["fresnel.eta"] == pytest.approx(1.4, abs=0.05)
     assert float(np.atleast_1d(result.coefficients["retro"])[0]) == pytest.approx(1.0, rel=0.15)
+
+
+def test_a_log_scaled_bound_survives_the_optimisers_coordinates(tmp_path):
+    """exp(log(b)) is an ulp above b for b = 3 and 10: the box's upper corner, and the enlarged box clipped at
+    retro.h's valid limit 10, must map back inside the box (before: 10.000000000000002, refused by the model's
+    range check in the enlarged-box refit)."""
+    from clothlab.fit.problem import FitProblem
+    from clothlab.fit.runner import build_problem
+
+    assert float(np.exp(np.log(3.0))) > 3.0 and float(np.exp(np.log(10.0))) > 10.0  # the trap is real here
+    config = _simulated(tmp_path, "irawan+oren-nayar+retro", {"retro.h": 0.2},
+                        {"kd": 0.3, "ks_warp": 0.2, "ks_weft": 0.1, "retro": 0.1}, ["retro.h"], n=40)
+    full = build_problem(config)
+    problem = FitProblem(full.model, full.measurement, ("retro.h",), full.start, {"retro.h": (0.01, 3.0)})
+    assert problem.from_unit([1.0])["retro.h"] == 3.0
+    enlarged = problem.enlarged(10.0)
+    assert enlarged.upper[0] == 10.0
+    corner = enlarged.from_unit([1.0])
+    assert corner["retro.h"] == 10.0
+    assert np.all(np.isfinite(enlarged.design(corner)))

@@ -152,13 +152,7 @@ class FitProblem:
 
     def from_unit(self, x) -> dict:
         """The full parameter dict (start values with the free ones replaced) at unit coordinates ``x``."""
-        x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-        lo, hi = self._t(self.lower), self._t(self.upper)
-        t = lo + x * (hi - lo)
-        params = dict(self.start)
-        for spec, value in zip(self.specs, t, strict=True):
-            params[spec.name] = float(np.exp(value) if spec.transform == "log" else value)
-        return params
+        return self.from_unit_many(np.asarray(x, dtype=np.float64)[None, :])[0]
 
     def from_unit_many(self, X) -> list[dict]:
         """:meth:`from_unit` for each row of ``X`` (J, k), in one array operation."""
@@ -167,6 +161,8 @@ class FitProblem:
         t = lo + X * (hi - lo)
         log = np.array([s.transform == "log" for s in self.specs], dtype=bool)
         t[:, log] = np.exp(t[:, log])
+        # exp(log(b)) can land an ulp outside the box (5.000000000000001 for a bound of 5): back inside it
+        t = np.clip(t, np.asarray(self.lower, dtype=np.float64), np.asarray(self.upper, dtype=np.float64))
         return [{**self.start, **dict(zip(self.free, row, strict=True))} for row in t.tolist()]
 
     def enlarged(self, fraction: float) -> FitProblem:
