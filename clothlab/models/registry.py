@@ -34,9 +34,10 @@ TERM_KINDS["irawan+oren-nayar+sheen+fresnel-eta"] = ("irawan+oren-nayar+sheen", 
 MODEL_KINDS.update({name: ("clothlab.models.composite.terms", "term_class") for name in TERM_KINDS})
 DEFAULT_KIND = "irawan"
 #: the kinds ``clothlab select`` tries unless select.kinds says otherwise: the IM yarn highlights over an
-#: Oren-Nayar base, without and with a fibre sheen (docs/select.md: under nested CV on both shared CUReT
-#: fabrics, with the huber loss, this pair beat irawan / irawan+oren-nayar in median and p80)
-DEFAULT_SELECT_KINDS = ("irawan+oren-nayar", "irawan+oren-nayar+sheen")
+#: Oren-Nayar base with a fibre sheen and the grazing Fresnel factor (index free), without and with an
+#: opposition surge (docs/select.md, session 14: under nested CV on both shared CUReT fabrics, with the huber
+#: loss, this pair beat irawan+oren-nayar / irawan+oren-nayar+sheen in p80 and mean on both, median on one)
+DEFAULT_SELECT_KINDS = ("irawan+oren-nayar+sheen+fresnel-eta", "irawan+oren-nayar+sheen+retro+fresnel-eta")
 #: kinds whose reflectance does not depend on the weave (fabric.yaml may leave ``model.weave`` out)
 WEAVE_FREE_KINDS = ("lambert", "oren-nayar")
 #: the weave recorded for a weave-free kind given none (the model ignores it; docs/fabric-yaml.md)
