@@ -63,15 +63,17 @@ def test_bad_select_checks_are_refused_at_their_field(tmp_path, select, field):
 
 
 def test_the_default_search_is_the_measured_one():
-    """The defaults docs/select.md measured under nested CV on the shared CUReT fabrics: IM + Oren-Nayar
-    without and with the fibre sheen, huber at 0.1; ``losses: []`` falls back to fabric.yaml's fit.loss."""
+    """The defaults docs/select.md measured under nested CV on the shared CUReT fabrics: IM + Oren-Nayar with
+    the fibre sheen and the Fresnel factor (index free), without and with the opposition surge, huber at 0.1;
+    ``losses: []`` falls back to fabric.yaml's fit.loss."""
     from clothlab.models.registry import DEFAULT_SELECT_KINDS, MODEL_KINDS
 
     d = SelectConfig()
     assert d.kinds == DEFAULT_SELECT_KINDS and set(d.kinds) <= set(MODEL_KINDS)
     assert (d.losses, d.loss_scales) == (("huber",), (0.1,))
     names = [c.name for c in sel.candidates(SelectConfig(weaves=("preset:cotton-twill",), orientation_starts=1))]
-    assert names == ["cotton-twill irawan+oren-nayar huber 0.1 #1", "cotton-twill irawan+oren-nayar+sheen huber 0.1 #1"]
+    assert names == ["cotton-twill irawan+oren-nayar+sheen+fresnel-eta huber 0.1 #1",
+                     "cotton-twill irawan+oren-nayar+sheen+retro+fresnel-eta huber 0.1 #1"]
     plain = [c.name for c in sel.candidates(SelectConfig(weaves=("preset:cotton-twill",), kinds=("irawan",),
                                                          orientation_starts=1, losses=()))]
     assert plain == ["cotton-twill irawan #1"]
