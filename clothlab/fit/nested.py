@@ -65,13 +65,16 @@ def nested_tasks(measurement, labels, candidate_list, make_task) -> list:
     return tasks
 
 
-def run_tasks(tasks, run_task, runner=None, desc="select: nested folds") -> list:
-    """Every task's result in task order (the in-process loop, or one runner task each)."""
+def run_tasks(tasks, run_task, runner=None, desc="select: nested folds", *, names=None,
+              what: str = "nested candidate fits") -> list:
+    """Every task's result in task order (the in-process loop, or one runner task each, named by ``names``:
+    by default each task's outer fold and candidate; ``what`` names the tasks in a failure's message)."""
     if runner is not None:
         from clothlab.parallel.runner import raise_failures
 
-        names = [f"outer fold {t.outer_fold + 1} {t.candidate.name}" for t in tasks]
-        return raise_failures(runner.map(run_task, tasks, names=names, desc=desc), "nested candidate fits")
+        if names is None:
+            names = [f"outer fold {t.outer_fold + 1} {t.candidate.name}" for t in tasks]
+        return raise_failures(runner.map(run_task, tasks, names=names, desc=desc), what)
     out = []
     with Progress(len(tasks), desc, unit="fit") as bar:
         for task in tasks:

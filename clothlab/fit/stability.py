@@ -115,14 +115,9 @@ def stability(measurement, repeats: int, *, seed: int, candidate_list, make_task
     started = time.perf_counter()
     masks = subsample_masks(measurement.n, repeats, seed)
     tasks = [make_task(b, c, measurement.subset(mask)) for b, mask in enumerate(masks) for c in candidate_list]
-    if runner is not None:  # one runner task each, named by its subsample (run_tasks names outer folds)
-        from clothlab.parallel.runner import raise_failures
-
-        names = [f"subsample {b + 1} {c.name}" for b in range(repeats) for c in candidate_list]
-        results = raise_failures(runner.map(run_task, tasks, names=names, desc="select: stability subsamples"),
-                                 "stability candidate fits")
-    else:
-        results = run_tasks(tasks, run_task, None, desc="select: stability subsamples")
+    names = [f"subsample {b + 1} {c.name}" for b in range(repeats) for c in candidate_list]
+    results = run_tasks(tasks, run_task, runner, desc="select: stability subsamples", names=names,
+                        what="stability candidate fits")
     per = len(candidate_list)
     winners = [rank(results[b * per:(b + 1) * per])[0].row for b in range(repeats)]
     counts = tally(winners, periods)
