@@ -167,6 +167,19 @@ def previous_peak_tile_average(h, nx, ny, c_y, c_f, gl_x, gl_w, most):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _sin_map_range(centre, lam, lo, hi):
+    """The sin map's v-range of [lo, hi] (x = centre + lam v / sqrt(1 - v^2)): (mid, half, scale) with
+    v = mid + half x_k for the Gauss-Legendre nodes x_k and scale = 2 half lam (gl_w sums to 1 over [-1, 1],
+    i.e. dv = 2 half gl_w; dx = lam q^3 dv, q = 1 / sqrt(1 - v^2))."""
+    pa = lo - centre
+    pb = hi - centre
+    va = pa / math.sqrt(lam * lam + pa * pa)
+    vb = pb / math.sqrt(lam * lam + pb * pb)
+    half = 0.5 * (vb - va)
+    return 0.5 * (vb + va), half, 2.0 * half * lam
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _mapped_rule(centre, lam, lo, hi, count, plain, tan_map, gl_x, gl_w, out_x, out_w):
     """``count`` nodes / weights (the weights integrate over [lo, hi], they do not average) of Gauss-Legendre
     after a change of variables that puts the nodes on a lobe of scale lam at ``centre`` (inside [lo, hi] or
@@ -197,13 +210,7 @@ def _mapped_rule(centre, lam, lo, hi, count, plain, tan_map, gl_x, gl_w, out_x, 
                 out_x[j] = min(max(centre + lam * t, lo), hi)
                 out_w[j] = gl_w[count, j] * 2.0 * half * lam * (1.0 + t * t)  # dx = lam sec^2 u du
         return
-    pa = lo - centre
-    pb = hi - centre
-    va = pa / math.sqrt(lam * lam + pa * pa)
-    vb = pb / math.sqrt(lam * lam + pb * pb)
-    half = 0.5 * (vb - va)
-    mid = 0.5 * (vb + va)
-    scale = 2.0 * half * lam  # gl_w sums to 1 over [-1, 1], i.e. dv = 2 half gl_w; dx = lam q^3 dv
+    mid, half, scale = _sin_map_range(centre, lam, lo, hi)
     for k in range(count):
         v = mid + half * gl_x[count, k]
         q = 1.0 / math.sqrt(1.0 - v * v)
@@ -260,13 +267,7 @@ def _sin_map_nodes(centre, lam, lo, hi, count, gl_x, gl_w, node, f):
     centre, lam, lo, hi - written to columns f, ..., f + count - 1 of ``node`` (rows 0-5); the loop of
     :func:`peak_tile_average` then forms x = clip(centre + lam v q, lo, hi) and the weight (gl_w 2 half lam) q^3,
     q = 1 / sqrt(1 - v^2), for all along nodes of a direction at once.  Returns f + count."""
-    pa = lo - centre
-    pb = hi - centre
-    va = pa / math.sqrt(lam * lam + pa * pa)
-    vb = pb / math.sqrt(lam * lam + pb * pb)
-    half = 0.5 * (vb - va)
-    mid = 0.5 * (vb + va)
-    scale = 2.0 * half * lam
+    mid, half, scale = _sin_map_range(centre, lam, lo, hi)
     for k in range(count):
         node[0, f + k] = mid + half * gl_x[count, k]
         node[1, f + k] = gl_w[count, k] * scale
